@@ -1,0 +1,55 @@
+// `nerfar bench`: the one benchmark entry every stage plugs into. A stage
+// returns named figures (time and error, e.g. fit_warm_ms, ssd_err_p95_deg);
+// the command prints them as a table with machine, threads and date, and
+// writes the same figures as JSON. Stages are listed in bench_stages.cpp.
+#pragma once
+
+#include <string>
+#include <vector>
+
+namespace nerfar {
+
+struct BenchFigure {
+  std::string name;   // snake_case with its unit as suffix: fit_warm_ms, psnr_tm_db
+  double value = 0;
+  std::string unit;   // "ms", "dB", "MB", "M/s", ...
+  std::string note;   // preset, size or condition the figure was taken under
+};
+
+struct BenchOptions {
+  bool quick = false;         // smaller sizes and fewer repeats (for smoke tests)
+  std::string scenes_dir;     // ../shared/scenes or empty when absent
+};
+
+struct BenchStage {
+  const char* name;
+  const char* summary;
+  std::vector<BenchFigure> (*run)(const BenchOptions& options);
+};
+
+const std::vector<BenchStage>& AllBenchStages();
+
+// Runs `body` repeatedly for at least min_seconds (and at least min_repeats
+// times) and returns the median time of one call in milliseconds.
+template <typename Body>
+double MedianMilliseconds(Body&& body, int min_repeats = 5, double min_seconds = 0.2);
+double MedianOf(std::vector<double> values);
+double NowSeconds();
+
+template <typename Body>
+double MedianMilliseconds(Body&& body, int min_repeats, double min_seconds) {
+  std::vector<double> times;
+  const double start = NowSeconds();
+  while (static_cast<int>(times.size()) < min_repeats || NowSeconds() - start < min_seconds) {
+    const double t0 = NowSeconds();
+    body();
+    times.push_back((NowSeconds() - t0) * 1e3);
+    if (times.size() >= 1000) break;
+  }
+  return MedianOf(times);
+}
+
+// Stage entry points (one bench_NAME.cpp each).
+std::vector<BenchFigure> BenchCore(const BenchOptions& options);
+
+}  // namespace nerfar

@@ -1,0 +1,15 @@
+#include "app/commands.h"
+
+namespace nerfar {
+
+const std::vector<Command>& AllCommands() {
+  // In pipeline order; `nerfar help` prints them as listed.
+  static const std::vector<Command> commands = {
+      {"help", "list the commands, or show one command's help", RunHelp},
+      {"version", "print the version and the libraries it was built with", RunVersion},
+      {"bench", "measure each stage's speed and accuracy; print a table and write JSON", RunBench},
+  };
+  return commands;
+}
+
+}  // namespace nerfar

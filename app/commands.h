@@ -1,0 +1,27 @@
+// The `nerfar` subcommands. Each lives in its own app/cmd_NAME.cpp and is
+// listed once in commands.cpp. A command returns its exit code: 0 ok,
+// 1 failure at run time, 2 bad usage or bad input (DESIGN.md); InputError
+// thrown from a command maps to 2, anything else to 1.
+#pragma once
+
+#include <string>
+#include <vector>
+
+namespace nerfar {
+
+using CommandArgs = std::vector<std::string>;
+
+struct Command {
+  const char* name;
+  const char* summary;
+  int (*run)(const CommandArgs& args);
+};
+
+const std::vector<Command>& AllCommands();
+
+// One declaration per subcommand.
+int RunHelp(const CommandArgs& args);
+int RunVersion(const CommandArgs& args);
+int RunBench(const CommandArgs& args);
+
+}  // namespace nerfar

@@ -1,0 +1,126 @@
+#include "calib/core/image_io.h"
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <stdexcept>
+
+#include "calib/core/atomic_file.h"
+#include "calib/core/error.h"
+
+namespace nerfar {
+
+Image8 ReadImage8(const std::string& path) {
+  std::error_code error;
+  if (!std::filesystem::is_regular_file(path, error)) ThrowInputError(path, "no such file (expected an image)");
+  cv::Mat mat;
+  try {
+    mat = cv::imread(path, cv::IMREAD_UNCHANGED);
+  } catch (const cv::Exception& e) {
+    ThrowInputError(path, std::string("cannot decode image (") + e.what() + ")");
+  }
+  if (mat.empty()) ThrowInputError(path, "cannot decode image (expected PNG, JPEG or another 8-bit format)");
+  if (mat.depth() != CV_8U) {
+    if (mat.depth() != CV_16U) ThrowInputError(path, "pixel type is not 8 or 16 bit (expected an 8-bit image)");
+    mat.convertTo(mat, CV_8U, 1.0 / 257.0);
+  }
+  if (mat.cols > kMaxImageSide || mat.rows > kMaxImageSide) ThrowInputError(path, "image too large");
+  cv::Mat converted;
+  switch (mat.channels()) {
+    case 1: converted = mat; break;
+    case 3: cv::cvtColor(mat, converted, cv::COLOR_BGR2RGB); break;
+    case 4: cv::cvtColor(mat, converted, cv::COLOR_BGRA2RGB); break;
+    default: ThrowInputError(path, std::to_string(mat.channels()) + " channels (expected 1, 3 or 4)");
+  }
+  Image8 image(converted.cols, converted.rows, converted.channels());
+  for (int y = 0; y < converted.rows; ++y)
+    std::copy_n(converted.ptr<std::uint8_t>(y), static_cast<size_t>(converted.cols) * converted.channels(),
+                image.Pixel(0, y));
+  return image;
+}
+
+void WriteImage8(const std::string& path, const Image8& image) {
+  NERFAR_CHECK(image.channels == 1 || image.channels == 3 || image.channels == 4);
+  NERFAR_CHECK_EQ(image.pixels.size(), image.PixelCount() * image.channels);
+  cv::Mat view(image.height, image.width, CV_8UC(image.channels), const_cast<std::uint8_t*>(image.pixels.data()));
+  cv::Mat bgr;
+  if (image.channels == 3) {
+    cv::cvtColor(view, bgr, cv::COLOR_RGB2BGR);
+  } else if (image.channels == 4) {
+    cv::cvtColor(view, bgr, cv::COLOR_RGBA2BGRA);
+  } else {
+    bgr = view;
+  }
+  const std::string extension = std::filesystem::path(path).extension().string();
+  std::vector<uchar> bytes;
+  if (!cv::imencode(extension.empty() ? ".png" : extension, bgr, bytes))
+    throw std::runtime_error(path + ": cannot encode image (unknown extension?)");
+  WriteFileAtomic(path, std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()));
+}
+
+float LinearToSrgb(float linear) {
+  const float x = std::clamp(linear, 0.0f, 1.0f);
+  return x <= 0.0031308f ? 12.92f * x : 1.055f * std::pow(x, 1.0f / 2.4f) - 0.055f;
+}
+
+float SrgbToLinear(float srgb) {
+  const float x = std::clamp(srgb, 0.0f, 1.0f);
+  return x <= 0.04045f ? x / 12.92f : std::pow((x + 0.055f) / 1.055f, 2.4f);
+}
+
+Image8 ToneMapToDisplay(const ImageF& linear, float exposure) {
+  NERFAR_CHECK(linear.channels >= 1);
+  const int out_channels = linear.channels >= 3 ? 3 : 1;
+  Image8 out(linear.width, linear.height, out_channels);
+  for (size_t p = 0; p < linear.PixelCount(); ++p) {
+    const float* in = linear.pixels.data() + p * linear.channels;
+    std::uint8_t* dst = out.pixels.data() + p * out_channels;
+    bool finite = true;
+    for (int c = 0; c < out_channels; ++c) finite = finite && std::isfinite(in[c]);
+    for (int c = 0; c < out_channels; ++c) {
+      if (!finite) {
+        dst[c] = c == 1 ? 0 : 255;  // magenta marks NaN/Inf
+        continue;
+      }
+      const float x = std::max(0.0f, in[c] * exposure);
+      dst[c] = static_cast<std::uint8_t>(std::lround(LinearToSrgb(x / (1.0f + x)) * 255.0f));
+    }
+  }
+  return out;
+}
+
+ImageF DisplayToLinear(const Image8& image) {
+  ImageF out(image.width, image.height, image.channels);
+  float table[256];
+  for (int i = 0; i < 256; ++i) table[i] = SrgbToLinear(static_cast<float>(i) / 255.0f);
+  for (size_t i = 0; i < image.pixels.size(); ++i) out.pixels[i] = table[image.pixels[i]];
+  return out;
+}
+
+Image8 ToGray(const Image8& rgb) {
+  if (rgb.channels == 1) return rgb;
+  NERFAR_CHECK_GE(rgb.channels, 3);
+  Image8 gray(rgb.width, rgb.height, 1);
+  for (size_t p = 0; p < rgb.PixelCount(); ++p) {
+    const std::uint8_t* px = rgb.pixels.data() + p * rgb.channels;
+    gray.pixels[p] = static_cast<std::uint8_t>((77 * px[0] + 150 * px[1] + 29 * px[2] + 128) >> 8);
+  }
+  return gray;
+}
+
+float ExposureForPercentile(const ImageF& linear, double percentile) {
+  if (linear.empty()) return 1.0f;
+  std::vector<float> luminance(linear.PixelCount());
+  for (size_t p = 0; p < luminance.size(); ++p) {
+    const float* px = linear.pixels.data() + p * linear.channels;
+    luminance[p] = linear.channels >= 3 ? 0.2126f * px[0] + 0.7152f * px[1] + 0.0722f * px[2] : px[0];
+  }
+  const size_t k = std::min(luminance.size() - 1, static_cast<size_t>(percentile * (luminance.size() - 1)));
+  std::nth_element(luminance.begin(), luminance.begin() + static_cast<ptrdiff_t>(k), luminance.end());
+  const float value = luminance[k];
+  return value > 0.0f && std::isfinite(value) ? 1.0f / value : 1.0f;
+}
+
+}  // namespace nerfar

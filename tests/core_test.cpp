@@ -1,0 +1,271 @@
+// calib/core: EXR and PNG round trips, strict JSON, atomic files, math,
+// threads, tone mapping and metrics.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <nlohmann/json.hpp>
+
+#include "calib/core/atomic_file.h"
+#include "calib/core/error.h"
+#include "calib/core/exr.h"
+#include "calib/core/image_io.h"
+#include "calib/core/json.h"
+#include "calib/core/log.h"
+#include "calib/core/math.h"
+#include "calib/core/metrics.h"
+#include "calib/core/parallel.h"
+#include "tests/support/support.h"
+
+namespace nerfar {
+namespace {
+
+using testing::TempDir;
+
+ImageF Ramp(int w, int h, int c) {
+  ImageF image(w, h, c);
+  for (size_t i = 0; i < image.pixels.size(); ++i) image.pixels[i] = 1e-3f * std::pow(1.02f, float(i % 700));
+  return image;
+}
+
+// Message of the InputError thrown by body, or "" if none was thrown.
+template <typename Body>
+std::string InputErrorOf(Body body) {
+  try {
+    body();
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(Exr, FloatRoundTripIsExact) {
+  TempDir dir;
+  const ImageF image = Ramp(17, 9, 3);
+  WriteExrRgb(dir.File("a.exr"), image, ExrPixelType::kFloat);
+  const ImageF back = ReadExrRgb(dir.File("a.exr"));
+  ASSERT_EQ(back.width, 17);
+  ASSERT_EQ(back.height, 9);
+  EXPECT_EQ(back.pixels, image.pixels);
+}
+
+TEST(Exr, HalfRoundTripKeepsThreeDigits) {
+  TempDir dir;
+  const ImageF image = Ramp(31, 7, 3);
+  WriteExrRgb(dir.File("h.exr"), image);
+  const ImageF back = ReadExrRgb(dir.File("h.exr"));
+  for (size_t i = 0; i < image.pixels.size(); ++i)
+    // half has a 10-bit mantissa: relative rounding error <= 2^-11 ≈ 4.9e-4.
+    EXPECT_NEAR(back.pixels[i], image.pixels[i], image.pixels[i] * 4.9e-4) << i;
+}
+
+TEST(Exr, AnyChannelsInRequestedOrder) {
+  TempDir dir;
+  ImageF image(4, 3, 2);
+  for (size_t i = 0; i < image.pixels.size(); ++i) image.pixels[i] = float(i);
+  WriteExr(dir.File("c.exr"), image, {"depth", "alpha"}, ExrPixelType::kFloat);
+  EXPECT_EQ(ReadExrChannelNames(dir.File("c.exr")), (std::vector<std::string>{"alpha", "depth"}));
+  const ImageF swapped = ReadExr(dir.File("c.exr"), {"alpha", "depth"});
+  EXPECT_EQ(swapped.at(1, 2, 0), image.at(1, 2, 1));
+  EXPECT_EQ(swapped.at(1, 2, 1), image.at(1, 2, 0));
+  EXPECT_EQ(ReadExrChannel(dir.File("c.exr"), "depth").at(3, 1), image.at(3, 1, 0));
+  EXPECT_NE(InputErrorOf([&] { ReadExrChannel(dir.File("c.exr")); }).find("exactly one"), std::string::npos);
+}
+
+TEST(Exr, RgbaDropsAlphaAndGreyReplicates) {
+  TempDir dir;
+  ImageF rgba(2, 2, 4, 0.5f);
+  rgba.at(1, 1, 3) = 0.25f;
+  WriteExrRgb(dir.File("rgba.exr"), rgba, ExrPixelType::kFloat);
+  EXPECT_EQ(ReadExrRgb(dir.File("rgba.exr")).channels, 3);
+  ImageF grey(2, 1, 1);
+  grey.pixels = {0.25f, 4.0f};
+  WriteExr(dir.File("y.exr"), grey, {"Y"}, ExrPixelType::kFloat);
+  const ImageF rgb = ReadExrRgb(dir.File("y.exr"));
+  EXPECT_EQ(rgb.at(1, 0, 0), 4.0f);
+  EXPECT_EQ(rgb.at(1, 0, 2), 4.0f);
+}
+
+TEST(Exr, BadFilesGiveErrorsNamingTheFile) {
+  TempDir dir;
+  WriteExrRgb(dir.File("good.exr"), Ramp(64, 64, 3));
+  const auto size = std::filesystem::file_size(dir.File("good.exr"));
+  for (size_t cut : {size_t{0}, size_t{3}, size_t{40}, size_t{200}, size / 2, size - 1}) {
+    testing::WriteTruncatedCopy(dir.File("good.exr"), dir.File("cut.exr"), cut);
+    const std::string message = InputErrorOf([&] { ReadExrRgb(dir.File("cut.exr")); });
+    EXPECT_NE(message.find("cut.exr"), std::string::npos) << "cut at " << cut << ": '" << message << "'";
+  }
+  testing::WriteText(dir.File("text.exr"), "this is not an image");
+  EXPECT_NE(InputErrorOf([&] { ReadExrRgb(dir.File("text.exr")); }).find("text.exr"), std::string::npos);
+  EXPECT_NE(InputErrorOf([&] { ReadExrRgb(dir.File("missing.exr")); }).find("no such file"), std::string::npos);
+  EXPECT_NE(InputErrorOf([&] { ReadExr(dir.File("good.exr"), {"Z"}); }).find("missing channel 'Z'"), std::string::npos);
+}
+
+TEST(Exr, NonFinitePixelsAreRejectedWithTheirPosition) {
+  TempDir dir;
+  ImageF image(5, 4, 3, 1.0f);
+  image.at(3, 2, 1) = std::numeric_limits<float>::quiet_NaN();
+  image.at(4, 3, 0) = std::numeric_limits<float>::infinity();
+  WriteExrRgb(dir.File("nan.exr"), image, ExrPixelType::kFloat);
+  const std::string message = InputErrorOf([&] { ReadExrRgb(dir.File("nan.exr")); });
+  EXPECT_NE(message.find("2 non-finite values, first at pixel (3, 2)"), std::string::npos) << message;
+}
+
+TEST(Exr, WriteNeverLeavesTemporaryFiles) {
+  TempDir dir;
+  WriteExrRgb(dir.File("x.exr"), Ramp(3, 3, 3));
+  WriteExrRgb(dir.File("x.exr"), Ramp(3, 3, 3));
+  size_t files = 0;
+  for ([[maybe_unused]] const auto& entry : std::filesystem::directory_iterator(dir.path())) ++files;
+  EXPECT_EQ(files, 1u);
+}
+
+TEST(Png, RoundTripRgbAndGrey) {
+  TempDir dir;
+  Image8 rgb(5, 3, 3);
+  for (size_t i = 0; i < rgb.pixels.size(); ++i) rgb.pixels[i] = static_cast<std::uint8_t>(i * 11);
+  WriteImage8(dir.File("a.png"), rgb);
+  EXPECT_EQ(ReadImage8(dir.File("a.png")).pixels, rgb.pixels);
+  Image8 grey(4, 4, 1, 200);
+  WriteImage8(dir.File("g.png"), grey);
+  const Image8 back = ReadImage8(dir.File("g.png"));
+  EXPECT_EQ(back.channels, 1);
+  EXPECT_EQ(back.pixels, grey.pixels);
+  testing::WriteText(dir.File("bad.png"), "\x89PNG garbage");
+  EXPECT_NE(InputErrorOf([&] { ReadImage8(dir.File("bad.png")); }).find("bad.png"), std::string::npos);
+}
+
+TEST(ToneMap, ReinhardThenSrgbMatchesHandComputedValues) {
+  ImageF image(3, 1, 1);
+  image.pixels = {0.0f, 1.0f, 3.0f};
+  const Image8 out = ToneMapToDisplay(image, 1.0f);
+  // tm(1) = 0.5 -> sRGB 0.7354 -> 187.5; tm(3) = 0.75 -> sRGB 0.8808 -> 224.6.
+  EXPECT_EQ(out.pixels[0], 0);
+  EXPECT_NEAR(out.pixels[1], 188, 1);
+  EXPECT_NEAR(out.pixels[2], 225, 1);
+  for (float v : {0.0f, 0.001f, 0.2f, 0.5f, 1.0f}) EXPECT_NEAR(SrgbToLinear(LinearToSrgb(v)), v, 1e-6f);
+}
+
+TEST(Metrics, PsnrTmOfAKnownOffset) {
+  // Truth constant 1 -> k = 1, tm = 0.5. Estimate 3 -> tm = 0.75: MSE 0.0625 = 12.04 dB.
+  ImageF truth(8, 8, 3, 1.0f), estimate(8, 8, 3, 3.0f);
+  EXPECT_NEAR(PsnrTm(estimate, truth), -10.0 * std::log10(0.0625), 1e-9);
+  EXPECT_TRUE(std::isinf(PsnrTm(truth, truth)));
+  ImageF mask(8, 8, 1, 0.0f);
+  EXPECT_TRUE(std::isnan(PsnrTm(estimate, truth, &mask)));
+  mask.at(2, 2) = 1.0f;
+  estimate.at(2, 2, 0) = estimate.at(2, 2, 1) = estimate.at(2, 2, 2) = 1.0f;
+  EXPECT_TRUE(std::isinf(PsnrTm(estimate, truth, &mask)));
+}
+
+TEST(Json, SyntaxErrorsNameLineAndColumn) {
+  const std::string message = InputErrorOf([] { ParseJson("{\n  \"a\": 1,\n  \"b\": ]\n}", "x.json"); });
+  EXPECT_NE(message.find("x.json: line 3, column"), std::string::npos) << message;
+}
+
+TEST(Json, ReaderCollectsEveryProblemWithPointers) {
+  const Json doc = ParseJson(R"({"w": 400, "h": "300", "fl": [1, 2], "tpyo": 1, "m": [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0]]})",
+                             "t.json");
+  Problems problems("t.json");
+  JsonObjectReader reader(doc, "", problems);
+  EXPECT_EQ(reader.Integer("w", 1, 100000), 400);
+  reader.Integer("h", 1, 100000);
+  reader.Numbers("fl", 3);
+  reader.Number("cx");
+  reader.Matrix4("m");
+  reader.Finish();
+  const std::string message = InputErrorOf([&] { problems.ThrowIfAny(); });
+  EXPECT_NE(message.find("t.json: /h: is string (expected an integer)"), std::string::npos) << message;
+  EXPECT_NE(message.find("/fl: is array of 2 (expected an array of 3 numbers)"), std::string::npos) << message;
+  EXPECT_NE(message.find("/cx: missing"), std::string::npos) << message;
+  EXPECT_NE(message.find("/tpyo: unknown key"), std::string::npos) << message;
+  EXPECT_NE(message.find("/m/3: is not a row of 4 numbers"), std::string::npos) << message;
+}
+
+TEST(Json, RangesAndOptionalKeys) {
+  const Json doc = ParseJson(R"({"r": 1.5, "note": "doc only"})", "o.json");
+  Problems problems("o.json");
+  JsonObjectReader reader(doc, "/obj", problems);
+  reader.Allow({"note"});
+  reader.Number("r", 0.0, 1.0);
+  EXPECT_FALSE(reader.OptionalNumber("k1").has_value());
+  reader.Finish();
+  ASSERT_EQ(problems.items().size(), 1u);
+  EXPECT_NE(problems.items()[0].find("/obj/r: is 1.5"), std::string::npos);
+}
+
+TEST(Json, WriteIsAtomicAndReadable) {
+  TempDir dir;
+  WriteJsonFile(dir.File("a.json"), Json{{"x", 1.5}});
+  EXPECT_EQ(ReadJsonFile(dir.File("a.json"))["x"].get<double>(), 1.5);
+}
+
+TEST(AtomicFile, UncommittedWritesLeaveTheTargetAlone) {
+  TempDir dir;
+  testing::WriteText(dir.File("t.txt"), "old");
+  {
+    AtomicFile file(dir.File("t.txt"));
+    testing::WriteText(file.temp_path(), "new");
+  }
+  EXPECT_EQ(testing::ReadText(dir.File("t.txt")), "old");
+  WriteFileAtomic(dir.File("t.txt"), "new");
+  EXPECT_EQ(testing::ReadText(dir.File("t.txt")), "new");
+}
+
+TEST(AtomicFile, RefusesToOverwriteAnInput) {
+  TempDir dir;
+  testing::WriteText(dir.File("in.txt"), "x");
+  EXPECT_THROW(CheckNotSameFile(dir.File("in.txt"), {dir.File("in.txt")}), InputError);
+  EXPECT_NO_THROW(CheckNotSameFile(dir.File("out.txt"), {dir.File("in.txt")}));
+  EXPECT_THROW(ReadFileBytes(dir.File("in.txt"), 0), InputError);
+}
+
+TEST(Math, AxisAngleRoundTripOverStratifiedRotations) {
+  for (int i = 0; i < 200; ++i) {
+    const double angle = kPi * (i + 0.5) / 200.0;  // up to just below pi
+    const Vec3 axis{std::cos(i * 0.7), std::sin(i * 1.3), 0.3 * std::cos(i * 2.1)};
+    const Mat3 r = RotationFromAxisAngle(axis, angle);
+    const Vec3 w = AxisAngleFromRotation(r);
+    EXPECT_NEAR(Length(w), angle, 1e-6) << i;
+    EXPECT_LT(RotationAngleBetween(r, RotationFromAxisAngle(w, Length(w))), 1e-6) << i;
+  }
+}
+
+TEST(Math, PoseComposesAndInverts) {
+  const Pose T_a_b{RotationFromAxisAngle({0, 0, 1}, 0.5), {1, 2, 3}};
+  const Pose T_b_c{RotationFromAxisAngle({1, 0, 0}, -0.25), {0.5, 0, -1}};
+  const Vec3 p_c{0.1, -0.2, 0.3};
+  const Vec3 direct = (T_a_b * T_b_c) * p_c, chained = T_a_b * (T_b_c * p_c);
+  EXPECT_NEAR(Length(direct - chained), 0.0, 1e-12);
+  EXPECT_NEAR(Length((T_a_b.Inverse() * T_a_b) * p_c - p_c), 0.0, 1e-12);
+  const Pose back = Pose::FromMatrix4(T_a_b.ToMatrix4());
+  EXPECT_NEAR(Length(back * p_c - T_a_b * p_c), 0.0, 1e-12);
+}
+
+TEST(Parallel, ChunksCoverEveryIndexOnceForAnyThreadCount) {
+  for (int threads : {1, 2}) {
+    SetThreadCount(threads);
+    std::vector<int> hits(10007, 0);
+    ParallelFor(hits.size(), [&](size_t i) { hits[i]++; }, 100);
+    for (int h : hits) ASSERT_EQ(h, 1);
+  }
+  SetThreadCount(0);
+}
+
+TEST(Checks, InvariantFailuresPrintBothValues) {
+  try {
+    NERFAR_CHECK_EQ(2 + 2, 5);
+    FAIL() << "no throw";
+  } catch (const InvariantError& e) {
+    EXPECT_NE(std::string(e.what()).find("(4 vs 5)"), std::string::npos) << e.what();
+  }
+}
+
+TEST(Log, DurationsReadNaturally) {
+  EXPECT_EQ(FormatDuration(0.25), "250ms");
+  EXPECT_EQ(FormatDuration(12.34), "12.3s");
+  EXPECT_EQ(FormatDuration(65), "1m05s");
+}
+
+}  // namespace
+}  // namespace nerfar

@@ -1,0 +1,45 @@
+// Test support shared by every test program: temporary directories, the
+// shared-scenes locator (skip with a clear message where absent), tolerance
+// helpers that state their reason, and a few file-corruption helpers.
+#pragma once
+
+#include <gtest/gtest.h>
+
+#include <string>
+
+namespace nerfar::testing {
+
+// A fresh empty directory, removed when the object goes out of scope.
+class TempDir {
+ public:
+  TempDir();
+  ~TempDir();
+  TempDir(const TempDir&) = delete;
+  TempDir& operator=(const TempDir&) = delete;
+  const std::string& path() const { return path_; }
+  std::string File(const std::string& name) const { return path_ + "/" + name; }
+
+ private:
+  std::string path_;
+};
+
+// ../shared/scenes (or $NERFAR_SCENES); empty when absent.
+std::string SharedScenesDir();
+// Absolute path of a file under tests/data.
+std::string TestDataPath(const std::string& name);
+
+void WriteText(const std::string& path, const std::string& text);
+std::string ReadText(const std::string& path);
+// Copies the first `bytes` bytes of `from` to `to` (a truncated file).
+void WriteTruncatedCopy(const std::string& from, const std::string& to, size_t bytes);
+
+}  // namespace nerfar::testing
+
+// Skips the current test, naming what is missing, when the shared scenes are absent.
+#define NERFAR_REQUIRE_SHARED_SCENES(dir_var)                                                       \
+  const std::string dir_var = ::nerfar::testing::SharedScenesDir();                               \
+  if (dir_var.empty()) GTEST_SKIP() << "../shared/scenes not found (set NERFAR_SCENES to run this test)"
+
+// EXPECT_NEAR with a stated reason, printed on failure.
+#define EXPECT_NEAR_WHY(actual, expected, tolerance, why) \
+  EXPECT_NEAR(actual, expected, tolerance) << "tolerance " << (tolerance) << ": " << (why)
