@@ -163,6 +163,12 @@ TEST(Json, SyntaxErrorsNameLineAndColumn) {
   EXPECT_NE(message.find("x.json: line 3, column"), std::string::npos) << message;
 }
 
+TEST(Json, OutOfRangeNumbersAreInputErrors) {
+  // Found by the fuzzer: 1e400 overflows double and is not a syntax error.
+  const std::string message = InputErrorOf([] { ParseJson(R"({"w": 1e400})", "big.json"); });
+  EXPECT_NE(message.find("big.json: line 1"), std::string::npos) << message;
+}
+
 TEST(Json, ReaderCollectsEveryProblemWithPointers) {
   const Json doc = ParseJson(R"({"w": 400, "h": "300", "fl": [1, 2], "tpyo": 1, "m": [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0]]})",
                              "t.json");

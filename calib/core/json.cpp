@@ -30,9 +30,13 @@ Json ParseJson(const std::string& text, const std::string& source) {
   // Locate the error by line and column ourselves: nlohmann reports a byte offset.
   try {
     return Json::parse(text, nullptr, /*allow_exceptions=*/true, /*ignore_comments=*/false);
-  } catch (const Json::parse_error& e) {
+  } catch (const Json::exception& e) {
+    // Syntax errors carry a byte offset; others (a number out of range,
+    // bad UTF-8) are reported at the end of what was read.
+    const auto* syntax = dynamic_cast<const Json::parse_error*>(&e);
+    const size_t byte = syntax != nullptr ? syntax->byte : text.size();
     size_t line = 1, column = 1;
-    for (size_t i = 0; i + 1 < e.byte && i < text.size(); ++i) {
+    for (size_t i = 0; i + 1 < byte && i < text.size(); ++i) {
       if (text[i] == '\n') {
         ++line;
         column = 1;
