@@ -13,7 +13,7 @@ packages=(
   nlohmann-json3-dev libassimp-dev
   libv4l-dev libcamera-dev
   libglfw3-dev libgl-dev libimgui-dev
-  xvfb xauth libgl1-mesa-dri ffmpeg
+  xvfb xauth xdotool libgl1-mesa-dri ffmpeg
 )
 
 missing=()
