@@ -10,15 +10,15 @@
 namespace nerfar {
 
 struct BenchFigure {
-  std::string name;   // snake_case with its unit as suffix: fit_warm_ms, psnr_tm_db
+  std::string name;  // snake_case with its unit as suffix: fit_warm_ms, psnr_tm_db
   double value = 0;
-  std::string unit;   // "ms", "dB", "MB", "M/s", ...
-  std::string note;   // preset, size or condition the figure was taken under
+  std::string unit;  // "ms", "dB", "MB", "M/s", ...
+  std::string note;  // preset, size or condition the figure was taken under
 };
 
 struct BenchOptions {
-  bool quick = false;         // smaller sizes and fewer repeats (for smoke tests)
-  std::string scenes_dir;     // ../shared/scenes or empty when absent
+  bool quick = false;      // smaller sizes and fewer repeats (for smoke tests)
+  std::string scenes_dir;  // ../shared/scenes or empty when absent
 };
 
 struct BenchStage {

@@ -31,8 +31,7 @@ void ArgParser::Flag(const std::string& name, bool* out, const std::string& help
   AddOption(std::move(entry));
 }
 
-void ArgParser::Option(const std::string& name, std::string* out, const std::string& metavar,
-                       const std::string& help) {
+void ArgParser::Option(const std::string& name, std::string* out, const std::string& metavar, const std::string& help) {
   AddOption({name, metavar, help, [out](const std::string& v) { *out = v; }});
 }
 
@@ -47,8 +46,7 @@ void ArgParser::Option(const std::string& name, int* out, const std::string& met
              }});
 }
 
-void ArgParser::Option(const std::string& name, double* out, const std::string& metavar,
-                       const std::string& help) {
+void ArgParser::Option(const std::string& name, double* out, const std::string& metavar, const std::string& help) {
   AddOption({name, metavar, help, [this, name, out](const std::string& v) {
                char* end = nullptr;
                const double value = std::strtod(v.c_str(), &end);

@@ -65,7 +65,8 @@ int RunBench(const CommandArgs& args) {
   parser.Option("--json", &json_path, "FILE", "also write the figures as JSON");
   parser.Flag("--quick", &options.quick, "small sizes and few repeats (a smoke test, not for the record)");
   std::string stage_list;
-  for (const BenchStage& stage : AllBenchStages()) stage_list += std::string("  ") + stage.name + ": " + stage.summary + "\n";
+  for (const BenchStage& stage : AllBenchStages())
+    stage_list += std::string("  ") + stage.name + ": " + stage.summary + "\n";
   parser.Epilog("stages:\n" + stage_list);
   if (!parser.Parse(args)) return 0;
   options.scenes_dir = FindSharedScenes();

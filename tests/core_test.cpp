@@ -170,8 +170,8 @@ TEST(Json, OutOfRangeNumbersAreInputErrors) {
 }
 
 TEST(Json, ReaderCollectsEveryProblemWithPointers) {
-  const Json doc = ParseJson(R"({"w": 400, "h": "300", "fl": [1, 2], "tpyo": 1, "m": [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0]]})",
-                             "t.json");
+  const Json doc = ParseJson(
+      R"({"w": 400, "h": "300", "fl": [1, 2], "tpyo": 1, "m": [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0]]})", "t.json");
   Problems problems("t.json");
   JsonObjectReader reader(doc, "", problems);
   EXPECT_EQ(reader.Integer("w", 1, 100000), 400);
@@ -252,7 +252,8 @@ TEST(Parallel, ChunksCoverEveryIndexOnceForAnyThreadCount) {
   for (int threads : {1, 2}) {
     SetThreadCount(threads);
     std::vector<int> hits(10007, 0);
-    ParallelFor(hits.size(), [&](size_t i) { hits[i]++; }, 100);
+    ParallelFor(
+        hits.size(), [&](size_t i) { hits[i]++; }, 100);
     for (int h : hits) ASSERT_EQ(h, 1);
   }
   SetThreadCount(0);

@@ -64,17 +64,17 @@ std::string DescribeComparison(const char* expr_a, const char* op, const char* e
 
 }  // namespace nerfar
 
-#define NERFAR_CHECK(cond)                                                         \
-  do {                                                                             \
+#define NERFAR_CHECK(cond)                                                                \
+  do {                                                                                    \
     if (!(cond)) ::nerfar::detail::FailCheck(__FILE__, __LINE__, "check failed: " #cond); \
   } while (0)
 
-#define NERFAR_CHECK_OP(a, op, b)                                                                   \
-  do {                                                                                              \
-    const auto& nerfar_a_ = (a);                                                                    \
-    const auto& nerfar_b_ = (b);                                                                    \
-    if (!(nerfar_a_ op nerfar_b_))                                                                  \
-      ::nerfar::detail::FailCheck(__FILE__, __LINE__,                                               \
+#define NERFAR_CHECK_OP(a, op, b)                                                                           \
+  do {                                                                                                      \
+    const auto& nerfar_a_ = (a);                                                                            \
+    const auto& nerfar_b_ = (b);                                                                            \
+    if (!(nerfar_a_ op nerfar_b_))                                                                          \
+      ::nerfar::detail::FailCheck(__FILE__, __LINE__,                                                       \
                                   ::nerfar::detail::DescribeComparison(#a, #op, #b, nerfar_a_, nerfar_b_)); \
   } while (0)
 

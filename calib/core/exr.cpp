@@ -44,8 +44,8 @@ Window CheckedWindow(const std::string& path, const Imf::Header& header) {
   const long long width = static_cast<long long>(box.max.x) - box.min.x + 1;
   const long long height = static_cast<long long>(box.max.y) - box.min.y + 1;
   if (width < 1 || height < 1 || width > kMaxImageSide || height > kMaxImageSide)
-    ThrowInputError(path, "image is " + std::to_string(width) + "x" + std::to_string(height) +
-                              " (expected 1.." + std::to_string(kMaxImageSide) + " per side)");
+    ThrowInputError(path, "image is " + std::to_string(width) + "x" + std::to_string(height) + " (expected 1.." +
+                              std::to_string(kMaxImageSide) + " per side)");
   return {box.min.x, box.min.y, static_cast<int>(width), static_cast<int>(height)};
 }
 
@@ -74,7 +74,8 @@ ImageF ReadChannels(const std::string& path, Imf::InputFile& file, const std::ve
     const ImageF unique = ReadChannels(path, file, distinct);
     ImageF image(unique.width, unique.height, static_cast<int>(channels.size()));
     for (size_t c = 0; c < channels.size(); ++c) {
-      const size_t source = static_cast<size_t>(std::find(distinct.begin(), distinct.end(), channels[c]) - distinct.begin());
+      const size_t source =
+          static_cast<size_t>(std::find(distinct.begin(), distinct.end(), channels[c]) - distinct.begin());
       for (size_t p = 0; p < image.PixelCount(); ++p)
         image.pixels[p * image.channels + c] = unique.pixels[p * unique.channels + source];
     }
@@ -142,8 +143,7 @@ ImageF ReadExrChannel(const std::string& path, const std::string& channel) {
   });
 }
 
-void WriteExr(const std::string& path, const ImageF& image, const std::vector<std::string>& names,
-              ExrPixelType type) {
+void WriteExr(const std::string& path, const ImageF& image, const std::vector<std::string>& names, ExrPixelType type) {
   NERFAR_CHECK_EQ(static_cast<size_t>(image.channels), names.size());
   NERFAR_CHECK_EQ(image.pixels.size(), image.PixelCount() * image.channels);
   NERFAR_CHECK(image.width > 0 && image.height > 0);

@@ -4,11 +4,16 @@ namespace nerfar {
 
 const char* FrameStatusName(FrameStatus status) {
   switch (status) {
-    case FrameStatus::kOk: return "ok";
-    case FrameStatus::kEndOfStream: return "end of stream";
-    case FrameStatus::kTimeout: return "timeout";
-    case FrameStatus::kCorrupt: return "corrupt frame";
-    case FrameStatus::kLost: return "device lost";
+    case FrameStatus::kOk:
+      return "ok";
+    case FrameStatus::kEndOfStream:
+      return "end of stream";
+    case FrameStatus::kTimeout:
+      return "timeout";
+    case FrameStatus::kCorrupt:
+      return "corrupt frame";
+    case FrameStatus::kLost:
+      return "device lost";
   }
   return "unknown";
 }

@@ -14,19 +14,19 @@
 namespace nerfar {
 
 struct Frame {
-  Image8 image;               // RGB or grey, as the device delivers after conversion
-  std::int64_t t_ns = 0;      // capture time stamp (monotonic clock), nanoseconds
-  std::int64_t index = 0;     // frame number from the start of the stream
-  std::string name;           // file name for file sources, empty otherwise
+  Image8 image;                             // RGB or grey, as the device delivers after conversion
+  std::int64_t t_ns = 0;                    // capture time stamp (monotonic clock), nanoseconds
+  std::int64_t index = 0;                   // frame number from the start of the stream
+  std::string name;                         // file name for file sources, empty otherwise
   std::optional<Pose> T_world_camera_true;  // known pose (synthetic sources only)
 };
 
 enum class FrameStatus {
-  kOk,          // `frame` holds a new frame
-  kEndOfStream, // a file or finite sequence is exhausted
-  kTimeout,     // no frame in time; try again
-  kCorrupt,     // this frame was unreadable; the next may be fine
-  kLost,        // the device disappeared; the source may recover
+  kOk,           // `frame` holds a new frame
+  kEndOfStream,  // a file or finite sequence is exhausted
+  kTimeout,      // no frame in time; try again
+  kCorrupt,      // this frame was unreadable; the next may be fine
+  kLost,         // the device disappeared; the source may recover
 };
 
 const char* FrameStatusName(FrameStatus status);

@@ -28,9 +28,7 @@ struct ImageT {
 
   bool empty() const { return pixels.empty(); }
   size_t PixelCount() const { return static_cast<size_t>(width) * height; }
-  size_t Index(int x, int y, int c = 0) const {
-    return (static_cast<size_t>(y) * width + x) * channels + c;
-  }
+  size_t Index(int x, int y, int c = 0) const { return (static_cast<size_t>(y) * width + x) * channels + c; }
   T& at(int x, int y, int c = 0) { return pixels[Index(x, y, c)]; }
   const T& at(int x, int y, int c = 0) const { return pixels[Index(x, y, c)]; }
   T* Pixel(int x, int y) { return pixels.data() + Index(x, y); }

@@ -29,10 +29,17 @@ Image8 ReadImage8(const std::string& path) {
   if (mat.cols > kMaxImageSide || mat.rows > kMaxImageSide) ThrowInputError(path, "image too large");
   cv::Mat converted;
   switch (mat.channels()) {
-    case 1: converted = mat; break;
-    case 3: cv::cvtColor(mat, converted, cv::COLOR_BGR2RGB); break;
-    case 4: cv::cvtColor(mat, converted, cv::COLOR_BGRA2RGB); break;
-    default: ThrowInputError(path, std::to_string(mat.channels()) + " channels (expected 1, 3 or 4)");
+    case 1:
+      converted = mat;
+      break;
+    case 3:
+      cv::cvtColor(mat, converted, cv::COLOR_BGR2RGB);
+      break;
+    case 4:
+      cv::cvtColor(mat, converted, cv::COLOR_BGRA2RGB);
+      break;
+    default:
+      ThrowInputError(path, std::to_string(mat.channels()) + " channels (expected 1, 3 or 4)");
   }
   Image8 image(converted.cols, converted.rows, converted.channels());
   for (int y = 0; y < converted.rows; ++y)

@@ -47,8 +47,8 @@ Json ParseJson(const std::string& text, const std::string& source) {
     std::string what = e.what();
     const size_t colon = what.rfind(": ");
     if (colon != std::string::npos) what = what.substr(colon + 2);
-    ThrowInputError(source, "line " + std::to_string(line) + ", column " + std::to_string(column) +
-                                ": invalid JSON (" + what + ")");
+    ThrowInputError(source, "line " + std::to_string(line) + ", column " + std::to_string(column) + ": invalid JSON (" +
+                                what + ")");
   }
 }
 
@@ -63,8 +63,7 @@ JsonObjectReader::JsonObjectReader(const Json& value, std::string pointer, Probl
   if (value.is_object()) {
     object_ = &value;
   } else {
-    problems_.Add(pointer_.empty() ? "/" : pointer_,
-                  std::string("is ") + TypeName(value) + " (expected an object)");
+    problems_.Add(pointer_.empty() ? "/" : pointer_, std::string("is ") + TypeName(value) + " (expected an object)");
   }
 }
 
@@ -163,8 +162,8 @@ std::vector<double> JsonObjectReader::Numbers(const char* key, size_t expected_s
   for (size_t i = 0; i < value->size(); ++i) {
     const Json& item = (*value)[i];
     if (!item.is_number() || !std::isfinite(item.get<double>())) {
-      problems_.Add(PointerTo(key) + "/" + std::to_string(i), std::string("is ") + TypeName(item) +
-                                                                  " (expected a finite number)");
+      problems_.Add(PointerTo(key) + "/" + std::to_string(i),
+                    std::string("is ") + TypeName(item) + " (expected a finite number)");
       numbers.push_back(0.0);
     } else {
       numbers.push_back(item.get<double>());

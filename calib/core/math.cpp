@@ -7,9 +7,9 @@ namespace nerfar {
 Mat3 RotationFromAxisAngle(const Vec3& axis, double angle_rad) {
   const Vec3 k = Normalized(axis);
   const double c = std::cos(angle_rad), s = std::sin(angle_rad), t = 1.0 - c;
-  return Mat3{{t * k.x * k.x + c, t * k.x * k.y - s * k.z, t * k.x * k.z + s * k.y,
-               t * k.x * k.y + s * k.z, t * k.y * k.y + c, t * k.y * k.z - s * k.x,
-               t * k.x * k.z - s * k.y, t * k.y * k.z + s * k.x, t * k.z * k.z + c}};
+  return Mat3{{t * k.x * k.x + c, t * k.x * k.y - s * k.z, t * k.x * k.z + s * k.y, t * k.x * k.y + s * k.z,
+               t * k.y * k.y + c, t * k.y * k.z - s * k.x, t * k.x * k.z - s * k.y, t * k.y * k.z + s * k.x,
+               t * k.z * k.z + c}};
 }
 
 Vec3 AxisAngleFromRotation(const Mat3& r) {
@@ -27,15 +27,25 @@ Vec3 AxisAngleFromRotation(const Mat3& r) {
   return Normalized(axis) * angle;
 }
 
-double RotationAngleBetween(const Mat3& a, const Mat3& b) {
-  return Length(AxisAngleFromRotation(a.Transposed() * b));
-}
+double RotationAngleBetween(const Mat3& a, const Mat3& b) { return Length(AxisAngleFromRotation(a.Transposed() * b)); }
 
 std::array<double, 16> Pose::ToMatrix4() const {
-  return {rotation(0, 0), rotation(0, 1), rotation(0, 2), translation.x,
-          rotation(1, 0), rotation(1, 1), rotation(1, 2), translation.y,
-          rotation(2, 0), rotation(2, 1), rotation(2, 2), translation.z,
-          0, 0, 0, 1};
+  return {rotation(0, 0),
+          rotation(0, 1),
+          rotation(0, 2),
+          translation.x,
+          rotation(1, 0),
+          rotation(1, 1),
+          rotation(1, 2),
+          translation.y,
+          rotation(2, 0),
+          rotation(2, 1),
+          rotation(2, 2),
+          translation.z,
+          0,
+          0,
+          0,
+          1};
 }
 
 Pose Pose::FromMatrix4(const std::array<double, 16>& m) {

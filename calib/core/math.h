@@ -16,7 +16,8 @@ struct Vec3T {
   constexpr Vec3T() = default;
   constexpr Vec3T(T x_, T y_, T z_) : x(x_), y(y_), z(z_) {}
   template <typename U>
-  constexpr explicit Vec3T(const Vec3T<U>& o) : x(static_cast<T>(o.x)), y(static_cast<T>(o.y)), z(static_cast<T>(o.z)) {}
+  constexpr explicit Vec3T(const Vec3T<U>& o)
+      : x(static_cast<T>(o.x)), y(static_cast<T>(o.y)), z(static_cast<T>(o.z)) {}
 
   constexpr T operator[](int i) const { return i == 0 ? x : (i == 1 ? y : z); }
   constexpr T& operator[](int i) { return i == 0 ? x : (i == 1 ? y : z); }
@@ -26,22 +27,43 @@ struct Vec3T {
   constexpr Vec3T operator*(T s) const { return {x * s, y * s, z * s}; }
   constexpr Vec3T operator/(T s) const { return {x / s, y / s, z / s}; }
   constexpr Vec3T operator*(const Vec3T& o) const { return {x * o.x, y * o.y, z * o.z}; }
-  Vec3T& operator+=(const Vec3T& o) { x += o.x; y += o.y; z += o.z; return *this; }
-  Vec3T& operator-=(const Vec3T& o) { x -= o.x; y -= o.y; z -= o.z; return *this; }
-  Vec3T& operator*=(T s) { x *= s; y *= s; z *= s; return *this; }
+  Vec3T& operator+=(const Vec3T& o) {
+    x += o.x;
+    y += o.y;
+    z += o.z;
+    return *this;
+  }
+  Vec3T& operator-=(const Vec3T& o) {
+    x -= o.x;
+    y -= o.y;
+    z -= o.z;
+    return *this;
+  }
+  Vec3T& operator*=(T s) {
+    x *= s;
+    y *= s;
+    z *= s;
+    return *this;
+  }
   constexpr bool operator==(const Vec3T& o) const = default;
 };
 
 template <typename T>
-constexpr Vec3T<T> operator*(T s, const Vec3T<T>& v) { return v * s; }
+constexpr Vec3T<T> operator*(T s, const Vec3T<T>& v) {
+  return v * s;
+}
 template <typename T>
-constexpr T Dot(const Vec3T<T>& a, const Vec3T<T>& b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+constexpr T Dot(const Vec3T<T>& a, const Vec3T<T>& b) {
+  return a.x * b.x + a.y * b.y + a.z * b.z;
+}
 template <typename T>
 constexpr Vec3T<T> Cross(const Vec3T<T>& a, const Vec3T<T>& b) {
   return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
 }
 template <typename T>
-T Length(const Vec3T<T>& v) { return std::sqrt(Dot(v, v)); }
+T Length(const Vec3T<T>& v) {
+  return std::sqrt(Dot(v, v));
+}
 // Unit vector; the zero vector stays zero (callers that need a direction check).
 template <typename T>
 Vec3T<T> Normalized(const Vec3T<T>& v) {

@@ -36,8 +36,8 @@ void WriteTruncatedCopy(const std::string& from, const std::string& to, size_t b
 }  // namespace nerfar::testing
 
 // Skips the current test, naming what is missing, when the shared scenes are absent.
-#define NERFAR_REQUIRE_SHARED_SCENES(dir_var)                                                       \
-  const std::string dir_var = ::nerfar::testing::SharedScenesDir();                               \
+#define NERFAR_REQUIRE_SHARED_SCENES(dir_var)                       \
+  const std::string dir_var = ::nerfar::testing::SharedScenesDir(); \
   if (dir_var.empty()) GTEST_SKIP() << "../shared/scenes not found (set NERFAR_SCENES to run this test)"
 
 // EXPECT_NEAR with a stated reason, printed on failure.
