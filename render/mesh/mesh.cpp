@@ -1,0 +1,449 @@
+#include "render/mesh/mesh.h"
+
+#include <assimp/material.h>
+#include <assimp/postprocess.h>
+#include <assimp/scene.h>
+
+#include <algorithm>
+#include <assimp/Importer.hpp>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <sstream>
+
+#include "calib/core/atomic_file.h"
+
+namespace nerfar {
+
+namespace {
+
+bool Finite(const Vec3f& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
+
+// Largest mesh file we open at all (assimp reads it whole).
+constexpr uintmax_t kMaxMeshFileBytes = uintmax_t{2} << 30;
+
+}  // namespace
+
+Bounds ComputeBounds(const TriangleMesh& mesh) {
+  Bounds bounds;
+  for (size_t i = 0; i < mesh.positions.size(); ++i) {
+    const Vec3 p(mesh.positions[i]);
+    if (i == 0) {
+      bounds.min = bounds.max = p;
+      continue;
+    }
+    for (int k = 0; k < 3; ++k) {
+      bounds.min[k] = std::min(bounds.min[k], p[k]);
+      bounds.max[k] = std::max(bounds.max[k], p[k]);
+    }
+  }
+  return bounds;
+}
+
+BoundingSphere ComputeBoundingSphere(const TriangleMesh& mesh) {
+  if (mesh.positions.empty()) return {};
+  const auto radius_about = [&mesh](const Vec3& c) {
+    double r2 = 0;
+    for (const Vec3f& pf : mesh.positions) {
+      const Vec3 d = Vec3(pf) - c;
+      r2 = std::max(r2, Dot(d, d));
+    }
+    return std::sqrt(r2);
+  };
+  const Vec3 box_center = ComputeBounds(mesh).Center();
+  BoundingSphere box{box_center, radius_about(box_center)};
+
+  // Ritter: start from the farthest pair along a sweep, grow to hold every point.
+  const Vec3 p0(mesh.positions[0]);
+  Vec3 a = p0, b = p0;
+  double best = -1;
+  for (const Vec3f& pf : mesh.positions) {
+    const double d = Length(Vec3(pf) - p0);
+    if (d > best) best = d, a = Vec3(pf);
+  }
+  best = -1;
+  for (const Vec3f& pf : mesh.positions) {
+    const double d = Length(Vec3(pf) - a);
+    if (d > best) best = d, b = Vec3(pf);
+  }
+  Vec3 c = (a + b) * 0.5;
+  double r = 0.5 * Length(b - a);
+  for (const Vec3f& pf : mesh.positions) {
+    const Vec3 p(pf);
+    const double d = Length(p - c);
+    if (d > r) {
+      const double new_r = 0.5 * (r + d);
+      c = c + (p - c) * ((new_r - r) / d);
+      r = new_r;
+    }
+  }
+  BoundingSphere ritter{c, radius_about(c)};  // re-measure: no rounding can leave a point outside
+  return ritter.radius < box.radius ? ritter : box;
+}
+
+Problems ValidateMesh(const TriangleMesh& mesh, const std::string& source) {
+  Problems problems(source);
+  if (mesh.triangles.empty()) problems.Add("", "mesh has no triangles (expected at least one)");
+  if (mesh.positions.size() > kMaxMeshVertices)
+    problems.Add("", std::to_string(mesh.positions.size()) + " vertices (expected at most " +
+                         std::to_string(kMaxMeshVertices) + ")");
+  if (mesh.triangles.size() > kMaxMeshTriangles)
+    problems.Add("", std::to_string(mesh.triangles.size()) + " triangles (expected at most " +
+                         std::to_string(kMaxMeshTriangles) + ")");
+  if (!mesh.normals.empty() && mesh.normals.size() != mesh.positions.size())
+    problems.Add("", std::to_string(mesh.normals.size()) + " normals for " + std::to_string(mesh.positions.size()) +
+                         " vertices (expected one per vertex)");
+  if (!mesh.uvs.empty() && mesh.uvs.size() != mesh.positions.size())
+    problems.Add("", std::to_string(mesh.uvs.size()) + " texture coordinates for " +
+                         std::to_string(mesh.positions.size()) + " vertices (expected one per vertex)");
+  size_t reported = 0;
+  const auto add_limited = [&](const std::string& where, const std::string& what) {
+    if (reported++ < 5) problems.Add(where, what);
+  };
+  for (size_t i = 0; i < mesh.positions.size(); ++i)
+    if (!Finite(mesh.positions[i]))
+      add_limited("vertex " + std::to_string(i), "position is NaN or infinite (expected finite)");
+  for (size_t i = 0; i < mesh.normals.size(); ++i)
+    if (!Finite(mesh.normals[i]))
+      add_limited("vertex " + std::to_string(i), "normal is NaN or infinite (expected finite)");
+  for (size_t t = 0; t < mesh.triangles.size(); ++t)
+    for (uint32_t index : mesh.triangles[t])
+      if (index >= mesh.positions.size())
+        add_limited("triangle " + std::to_string(t), "vertex index " + std::to_string(index) +
+                                                         " out of range (expected < " +
+                                                         std::to_string(mesh.positions.size()) + ")");
+  if (reported > 5) problems.Add("", std::to_string(reported - 5) + " more bad vertices or triangles not listed");
+  return problems;
+}
+
+TriangleMesh TransformMesh(const TriangleMesh& mesh, const Pose& T_world_object, double scale) {
+  TriangleMesh out = mesh;
+  for (Vec3f& p : out.positions) p = Vec3f(T_world_object * (Vec3(p) * scale));
+  for (Vec3f& n : out.normals) n = Vec3f(Normalized(T_world_object.Rotate(Vec3(n))));
+  return out;
+}
+
+void ComputeVertexNormals(TriangleMesh& mesh) {
+  std::vector<Vec3> sum(mesh.positions.size());
+  for (const auto& t : mesh.triangles) {
+    const Vec3 a(mesh.positions[t[0]]), b(mesh.positions[t[1]]), c(mesh.positions[t[2]]);
+    const Vec3 n = Cross(b - a, c - a);  // length = twice the area: area weighting
+    for (uint32_t i : t) sum[i] += n;
+  }
+  mesh.normals.resize(mesh.positions.size());
+  for (size_t i = 0; i < sum.size(); ++i) {
+    const Vec3 n = Normalized(sum[i]);
+    mesh.normals[i] = Length(n) > 0 ? Vec3f(n) : Vec3f(0, 0, 1);  // isolated vertex: any unit vector
+  }
+}
+
+namespace {
+
+// A texture reference of an assimp material, resolved against the mesh folder.
+std::string TextureReference(const aiMaterial& material, aiTextureType type, const std::string& mesh_path) {
+  aiString name;
+  if (material.GetTextureCount(type) == 0 || material.GetTexture(type, 0, &name) != AI_SUCCESS) return "";
+  const std::string reference = name.C_Str();
+  if (reference.empty()) return "";
+  if (reference[0] == '*') return mesh_path + "#" + reference.substr(1);  // embedded (glb)
+  const std::filesystem::path p(reference);
+  if (p.is_absolute()) return reference;
+  return (std::filesystem::path(mesh_path).parent_path() / p).lexically_normal().string();
+}
+
+std::optional<Material> ConvertMaterial(const aiMaterial& in, const std::string& path) {
+  aiString name;
+  in.Get(AI_MATKEY_NAME, name);
+  if (std::string(name.C_Str()) == AI_DEFAULT_MATERIAL_NAME) return std::nullopt;  // the file had none
+  Material m;
+  aiColor4D colour;
+  if (in.Get(AI_MATKEY_BASE_COLOR, colour) == AI_SUCCESS || in.Get(AI_MATKEY_COLOR_DIFFUSE, colour) == AI_SUCCESS)
+    m.albedo = {colour.r, colour.g, colour.b};
+  float value = 0;
+  if (in.Get(AI_MATKEY_ROUGHNESS_FACTOR, value) == AI_SUCCESS) m.roughness = value;
+  if (in.Get(AI_MATKEY_METALLIC_FACTOR, value) == AI_SUCCESS) m.metallic = value;
+  m.mesh = path;
+  m.albedo_texture = TextureReference(in, aiTextureType_BASE_COLOR, path);
+  if (m.albedo_texture.empty()) m.albedo_texture = TextureReference(in, aiTextureType_DIFFUSE, path);
+  // glTF packs roughness (G) and metallic (B) into one image, which assimp
+  // files as AI_MATKEY_GLTF_PBRMETALLICROUGHNESS_METALLICROUGHNESS_TEXTURE (UNKNOWN, 0).
+  const std::string packed = TextureReference(in, aiTextureType_UNKNOWN, path);
+  m.roughness_texture = TextureReference(in, aiTextureType_DIFFUSE_ROUGHNESS, path);
+  m.metallic_texture = TextureReference(in, aiTextureType_METALNESS, path);
+  if (m.roughness_texture.empty()) m.roughness_texture = packed;
+  if (m.metallic_texture.empty()) m.metallic_texture = packed;
+  return m;
+}
+
+// A PLY header announces its element counts before any data; reject absurd
+// ones before the importer allocates for them (a 4e9-vertex header in a
+// 100-byte file must not take gigabytes).
+void CheckPlyHeader(const std::string& path, uintmax_t file_bytes) {
+  std::ifstream in(path, std::ios::binary);
+  std::string line;
+  bool ascii = false;
+  for (int lines = 0; lines < 1000 && std::getline(in, line); ++lines) {
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    if (line.rfind("format ascii", 0) == 0) ascii = true;
+    if (line == "end_header") return;
+    std::istringstream words(line);
+    std::string keyword, name;
+    long double count = -1;
+    if (!(words >> keyword) || keyword != "element") continue;
+    if (!(words >> name >> count) || count < 0)
+      ThrowInputError(path, "bad PLY element line '" + line + "' (expected 'element NAME COUNT')");
+    const size_t limit = name == "face" ? kMaxMeshTriangles : kMaxMeshVertices;
+    // Each element takes at least 1 byte in binary and 2 ('0\n') in ASCII.
+    const long double min_bytes = count * (ascii ? 2 : 1);
+    if (count > static_cast<long double>(limit) || min_bytes > static_cast<long double>(file_bytes))
+      ThrowInputError(path, "PLY header announces " + std::to_string(static_cast<unsigned long long>(count)) + " " +
+                                name + " elements in a " + std::to_string(file_bytes) +
+                                "-byte file (expected at most " + std::to_string(limit) +
+                                " and a file large enough to hold them)");
+  }
+}
+
+}  // namespace
+
+TriangleMesh ReadMesh(const std::string& path) {
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec))
+    ThrowInputError(path, "no such mesh file (expected OBJ, PLY, glTF or GLB)");
+  const uintmax_t bytes = std::filesystem::file_size(path, ec);
+  if (ec) ThrowInputError(path, "cannot read the file size (" + ec.message() + ")");
+  if (bytes == 0) ThrowInputError(path, "file is empty (expected a mesh)");
+  if (bytes > kMaxMeshFileBytes)
+    ThrowInputError(path, "file is " + std::to_string(bytes) + " bytes (expected at most 2 GiB)");
+  std::string extension = std::filesystem::path(path).extension().string();
+  std::transform(extension.begin(), extension.end(), extension.begin(),
+                 [](unsigned char c) { return std::tolower(c); });
+  if (extension != ".obj" && extension != ".ply" && extension != ".gltf" && extension != ".glb")
+    ThrowInputError(path, "unknown mesh extension '" + extension + "' (expected .obj, .ply, .gltf or .glb)");
+
+  if (extension == ".ply") CheckPlyHeader(path, bytes);
+
+  Assimp::Importer importer;
+  // Drop lines and points so that Triangulate leaves triangles only.
+  importer.SetPropertyInteger(AI_CONFIG_PP_SBP_REMOVE, aiPrimitiveType_LINE | aiPrimitiveType_POINT);
+  const unsigned flags = aiProcess_Triangulate | aiProcess_JoinIdenticalVertices | aiProcess_PreTransformVertices |
+                         aiProcess_SortByPType | aiProcess_ValidateDataStructure;
+  const aiScene* scene = importer.ReadFile(path, flags);
+  if (scene == nullptr) {
+    std::string why = importer.GetErrorString();
+    if (why.empty()) why = "unknown reason";
+    ThrowInputError(path, "cannot read the mesh: " + why + " (expected a valid OBJ, PLY or glTF 2.0 file)");
+  }
+  if (scene->mNumMeshes == 0) ThrowInputError(path, "the file holds no mesh (expected at least one triangle)");
+
+  size_t total_vertices = 0, total_faces = 0;
+  for (unsigned m = 0; m < scene->mNumMeshes; ++m) {
+    total_vertices += scene->mMeshes[m]->mNumVertices;
+    total_faces += scene->mMeshes[m]->mNumFaces;
+  }
+  if (total_vertices > kMaxMeshVertices || total_faces > kMaxMeshTriangles)
+    ThrowInputError(path, std::to_string(total_vertices) + " vertices and " + std::to_string(total_faces) +
+                              " faces (expected at most " + std::to_string(kMaxMeshVertices) + " and " +
+                              std::to_string(kMaxMeshTriangles) + ")");
+
+  TriangleMesh mesh;
+  mesh.source = path;
+  mesh.positions.reserve(total_vertices);
+  mesh.triangles.reserve(total_faces);
+  bool all_normals = true, all_uvs = true;
+  for (unsigned m = 0; m < scene->mNumMeshes; ++m) {
+    const aiMesh& part = *scene->mMeshes[m];
+    if (!(part.mPrimitiveTypes & aiPrimitiveType_TRIANGLE)) continue;
+    all_normals = all_normals && part.HasNormals();
+    all_uvs = all_uvs && part.HasTextureCoords(0);
+  }
+  unsigned largest = 0, largest_faces = 0;
+  Problems problems(path);
+  for (unsigned m = 0; m < scene->mNumMeshes; ++m) {
+    const aiMesh& part = *scene->mMeshes[m];
+    if (!(part.mPrimitiveTypes & aiPrimitiveType_TRIANGLE)) continue;
+    const auto base = static_cast<uint32_t>(mesh.positions.size());
+    for (unsigned v = 0; v < part.mNumVertices; ++v) {
+      const aiVector3D& p = part.mVertices[v];
+      mesh.positions.emplace_back(p.x, p.y, p.z);
+      if (all_normals) mesh.normals.emplace_back(part.mNormals[v].x, part.mNormals[v].y, part.mNormals[v].z);
+      if (all_uvs) mesh.uvs.push_back({part.mTextureCoords[0][v].x, part.mTextureCoords[0][v].y});
+    }
+    unsigned faces = 0;
+    for (unsigned f = 0; f < part.mNumFaces; ++f) {
+      const aiFace& face = part.mFaces[f];
+      if (face.mNumIndices != 3) continue;  // points and lines of a mixed part
+      mesh.triangles.push_back({base + face.mIndices[0], base + face.mIndices[1], base + face.mIndices[2]});
+      ++faces;
+    }
+    if (faces > largest_faces) largest_faces = faces, largest = m;
+  }
+  if (!mesh.triangles.empty() && scene->mMeshes[largest]->mMaterialIndex < scene->mNumMaterials)
+    mesh.material = ConvertMaterial(*scene->mMaterials[scene->mMeshes[largest]->mMaterialIndex], path);
+
+  // Normals: recompute where missing or degenerate (zero-area corners give NaN).
+  bool normals_ok = !mesh.normals.empty();
+  for (const Vec3f& n : mesh.normals) normals_ok = normals_ok && Finite(n) && Length(n) > 0.5f;
+  Problems checked = ValidateMesh(mesh, path);
+  checked.ThrowIfAny();
+  if (!normals_ok) ComputeVertexNormals(mesh);
+  for (Vec3f& n : mesh.normals) n = Normalized(n);
+  return mesh;
+}
+
+void WriteMeshObj(const std::string& path, const TriangleMesh& mesh) {
+  ValidateMesh(mesh, path).ThrowIfAny();
+  std::ostringstream out;
+  out.imbue(std::locale::classic());
+  out.precision(9);
+  out << "# nerfar mesh: " << mesh.positions.size() << " vertices, " << mesh.triangles.size() << " triangles\n";
+  for (const Vec3f& p : mesh.positions) out << "v " << p.x << ' ' << p.y << ' ' << p.z << '\n';
+  for (const Vec3f& n : mesh.normals) out << "vn " << n.x << ' ' << n.y << ' ' << n.z << '\n';
+  for (const auto& uv : mesh.uvs) out << "vt " << uv[0] << ' ' << uv[1] << '\n';
+  const bool n = !mesh.normals.empty(), t = !mesh.uvs.empty();
+  for (const auto& tri : mesh.triangles) {
+    out << 'f';
+    for (uint32_t i : tri) {
+      const uint32_t k = i + 1;
+      out << ' ' << k;
+      if (t) out << '/' << k;
+      if (n) out << (t ? "/" : "//") << k;
+    }
+    out << '\n';
+  }
+  WriteFileAtomic(path, out.str());
+}
+
+// ------------------------------------------------------------ procedural shapes
+
+TriangleMesh MakeUvSphere(double radius, int segments, int rings) {
+  NERFAR_CHECK(radius > 0);
+  NERFAR_CHECK_GE(segments, 3);
+  NERFAR_CHECK_GE(rings, 2);
+  TriangleMesh mesh;
+  // (segments + 1) columns so that the seam has its own UVs; poles repeated per column.
+  for (int j = 0; j <= rings; ++j) {
+    // Poles and the seam column get bit-identical positions (a watertight surface).
+    const double theta = kPi * j / rings;
+    const double sin_theta = (j == 0 || j == rings) ? 0.0 : std::sin(theta);
+    const double cos_theta = j == 0 ? 1.0 : (j == rings ? -1.0 : std::cos(theta));
+    for (int i = 0; i <= segments; ++i) {
+      const double phi = 2 * kPi * (i % segments) / segments;
+      const Vec3 n(sin_theta * std::cos(phi), sin_theta * std::sin(phi), cos_theta);
+      mesh.positions.push_back(Vec3f(n * radius));
+      mesh.normals.push_back(Vec3f(n));
+      mesh.uvs.push_back({static_cast<float>(i) / segments, 1.0f - static_cast<float>(j) / rings});
+    }
+  }
+  const auto index = [segments](int i, int j) { return static_cast<uint32_t>(j * (segments + 1) + i); };
+  for (int j = 0; j < rings; ++j) {
+    for (int i = 0; i < segments; ++i) {
+      const uint32_t a = index(i, j), b = index(i + 1, j), c = index(i + 1, j + 1), d = index(i, j + 1);
+      // Outward (counter-clockwise seen from outside): theta grows downwards, phi eastwards.
+      if (j != 0) mesh.triangles.push_back({a, d, b});
+      if (j != rings - 1) mesh.triangles.push_back({b, d, c});
+    }
+  }
+  return mesh;
+}
+
+TriangleMesh MakeBox(const Vec3& h) {
+  NERFAR_CHECK(h.x > 0 && h.y > 0 && h.z > 0);
+  TriangleMesh mesh;
+  for (int axis = 0; axis < 3; ++axis) {
+    for (int sign = -1; sign <= 1; sign += 2) {
+      Vec3 n;
+      n[axis] = sign;
+      // u, v span the face with u x v = n.
+      Vec3 u, v;
+      u[(axis + 1) % 3] = 1;
+      v[(axis + 2) % 3] = 1;
+      if (sign < 0) std::swap(u, v);
+      const auto base = static_cast<uint32_t>(mesh.positions.size());
+      const double corners[4][2] = {{-1, -1}, {1, -1}, {1, 1}, {-1, 1}};
+      for (const auto& c : corners) {
+        const Vec3 p = n + u * c[0] + v * c[1];
+        mesh.positions.push_back(Vec3f(p * h));
+        mesh.normals.push_back(Vec3f(n));
+        mesh.uvs.push_back({static_cast<float>(0.5 * (c[0] + 1)), static_cast<float>(0.5 * (c[1] + 1))});
+      }
+      mesh.triangles.push_back({base, base + 1, base + 2});
+      mesh.triangles.push_back({base, base + 2, base + 3});
+    }
+  }
+  return mesh;
+}
+
+TriangleMesh MakeTorus(double major, double minor, int major_segments, int minor_segments) {
+  NERFAR_CHECK(minor > 0 && major > minor);
+  NERFAR_CHECK_GE(major_segments, 3);
+  NERFAR_CHECK_GE(minor_segments, 3);
+  TriangleMesh mesh;
+  for (int i = 0; i <= major_segments; ++i) {
+    const double u = 2 * kPi * (i % major_segments) / major_segments;  // seams bit-identical
+    const Vec3 radial(std::cos(u), std::sin(u), 0);
+    for (int j = 0; j <= minor_segments; ++j) {
+      const double v = 2 * kPi * (j % minor_segments) / minor_segments;
+      const Vec3 n = radial * std::cos(v) + Vec3(0, 0, std::sin(v));
+      mesh.positions.push_back(Vec3f(radial * major + n * minor));
+      mesh.normals.push_back(Vec3f(n));
+      mesh.uvs.push_back({static_cast<float>(i) / major_segments, static_cast<float>(j) / minor_segments});
+    }
+  }
+  const auto index = [minor_segments](int i, int j) { return static_cast<uint32_t>(i * (minor_segments + 1) + j); };
+  for (int i = 0; i < major_segments; ++i) {
+    for (int j = 0; j < minor_segments; ++j) {
+      const uint32_t a = index(i, j), b = index(i + 1, j), c = index(i + 1, j + 1), d = index(i, j + 1);
+      mesh.triangles.push_back({a, b, c});
+      mesh.triangles.push_back({a, c, d});
+    }
+  }
+  return mesh;
+}
+
+TriangleMesh MakeCylinder(double radius, double half_height, int segments) {
+  NERFAR_CHECK(radius > 0 && half_height > 0);
+  NERFAR_CHECK_GE(segments, 3);
+  TriangleMesh mesh;
+  const auto add = [&mesh](const Vec3& p, const Vec3& n, float u, float v) {
+    mesh.positions.push_back(Vec3f(p));
+    mesh.normals.push_back(Vec3f(n));
+    mesh.uvs.push_back({u, v});
+    return static_cast<uint32_t>(mesh.positions.size() - 1);
+  };
+  // Side: two rings with radial normals.
+  std::vector<uint32_t> bottom, top;
+  for (int i = 0; i <= segments; ++i) {
+    const double phi = 2 * kPi * (i % segments) / segments;  // seam bit-identical
+    const Vec3 n(std::cos(phi), std::sin(phi), 0);
+    const float u = static_cast<float>(i) / segments;
+    bottom.push_back(add(n * radius + Vec3(0, 0, -half_height), n, u, 0));
+    top.push_back(add(n * radius + Vec3(0, 0, half_height), n, u, 1));
+  }
+  for (int i = 0; i < segments; ++i) {
+    mesh.triangles.push_back({bottom[i], bottom[i + 1], top[i + 1]});
+    mesh.triangles.push_back({bottom[i], top[i + 1], top[i]});
+  }
+  // Caps: a centre vertex and a fan, flat normals.
+  for (int sign = -1; sign <= 1; sign += 2) {
+    const Vec3 n(0, 0, sign);
+    const uint32_t centre = add(Vec3(0, 0, sign * half_height), n, 0.5f, 0.5f);
+    std::vector<uint32_t> rim;
+    for (int i = 0; i < segments; ++i) {
+      const double phi = 2 * kPi * i / segments;
+      rim.push_back(add(Vec3(radius * std::cos(phi), radius * std::sin(phi), sign * half_height), n,
+                        static_cast<float>(0.5 + 0.5 * std::cos(phi)), static_cast<float>(0.5 + 0.5 * std::sin(phi))));
+    }
+    for (int i = 0; i < segments; ++i) {
+      const uint32_t a = rim[i], b = rim[(i + 1) % segments];
+      if (sign > 0)
+        mesh.triangles.push_back({centre, a, b});
+      else
+        mesh.triangles.push_back({centre, b, a});
+    }
+  }
+  return mesh;
+}
+
+}  // namespace nerfar
