@@ -5,6 +5,7 @@
 #include <cmath>
 #include <filesystem>
 #include <nlohmann/json.hpp>
+#include <opencv2/videoio.hpp>
 
 #include "calib/core/atomic_file.h"
 #include "calib/core/error.h"
@@ -13,6 +14,7 @@
 #include "calib/core/json.h"
 #include "calib/core/log.h"
 #include "calib/core/math.h"
+#include "calib/core/media.h"
 #include "calib/core/metrics.h"
 #include "calib/core/parallel.h"
 #include "tests/support/support.h"
@@ -144,6 +146,41 @@ TEST(ToneMap, ReinhardThenSrgbMatchesHandComputedValues) {
   EXPECT_NEAR(out.pixels[1], 188, 1);
   EXPECT_NEAR(out.pixels[2], 225, 1);
   for (float v : {0.0f, 0.001f, 0.2f, 0.5f, 1.0f}) EXPECT_NEAR(SrgbToLinear(LinearToSrgb(v)), v, 1e-6f);
+}
+
+TEST(Media, ContactSheetPlacesTilesInAGrid) {
+  std::vector<Image8> tiles;
+  for (std::uint8_t v : {50, 100, 150}) tiles.emplace_back(40, 20, 3, v);
+  const Image8 sheet = ContactSheet(tiles, 2, 20);
+  // 2 columns of 20 px + 3 gutters of 4 px; 2 rows of 10 px + 3 gutters.
+  ASSERT_EQ(sheet.width, 52);
+  ASSERT_EQ(sheet.height, 32);
+  EXPECT_EQ(sheet.at(4 + 10, 4 + 5, 0), 50);
+  EXPECT_EQ(sheet.at(28 + 10, 4 + 5, 0), 100);
+  EXPECT_EQ(sheet.at(4 + 10, 18 + 5, 0), 150);
+  EXPECT_EQ(sheet.at(28 + 10, 18 + 5, 0), 24);  // empty cell shows the background
+}
+
+TEST(Media, VideoFileHasEveryFrame) {
+  TempDir dir;
+  {
+    VideoWriter video(dir.File("v.avi"), 64, 48, 10.0);
+    for (int f = 0; f < 7; ++f) video.Write(Image8(64, 48, 3, static_cast<std::uint8_t>(30 * f)));
+    video.Close();
+    EXPECT_EQ(video.frames_written(), 7);
+  }
+  ASSERT_TRUE(std::filesystem::exists(dir.File("v.avi")));
+  // Read back with OpenCV's decoder (independent of our writer).
+  cv::VideoCapture capture(dir.File("v.avi"));
+  ASSERT_TRUE(capture.isOpened());
+  int frames = 0;
+  cv::Mat frame;
+  while (capture.read(frame)) {
+    // MJPG is lossy: a flat grey frame decodes within a few levels.
+    EXPECT_NEAR(frame.at<cv::Vec3b>(24, 32)[1], 30 * frames, 4) << frames;
+    ++frames;
+  }
+  EXPECT_EQ(frames, 7);
 }
 
 TEST(Metrics, PsnrTmOfAKnownOffset) {
