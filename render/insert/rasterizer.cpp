@@ -1,0 +1,246 @@
+#include "render/insert/rasterizer.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "calib/core/error.h"
+#include "calib/core/parallel.h"
+
+namespace nerfar {
+
+PixelRect Union(const PixelRect& a, const PixelRect& b) {
+  if (a.empty()) return b;
+  if (b.empty()) return a;
+  return {std::min(a.x0, b.x0), std::min(a.y0, b.y0), std::max(a.x1, b.x1), std::max(a.y1, b.y1)};
+}
+
+PixelRect ClipToImage(const PixelRect& r, int width, int height) {
+  PixelRect c{std::max(r.x0, 0), std::max(r.y0, 0), std::min(r.x1, width), std::min(r.y1, height)};
+  if (c.empty()) return {};
+  return c;
+}
+
+Vec3f CameraRayDirection(const CameraIntrinsics& camera, const Pose& T_world_camera, int x, int y) {
+  const Vec3 d_camera{(x + 0.5 - camera.cx) / camera.fx, (y + 0.5 - camera.cy) / camera.fy, 1.0};
+  return Vec3f(Normalized(T_world_camera.Rotate(d_camera)));
+}
+
+PixelRect ProjectBall(const CameraIntrinsics& camera, const Pose& T_world_camera, const Vec3& center, double radius) {
+  const PixelRect full{0, 0, camera.width, camera.height};
+  const Vec3 c = T_world_camera.Inverse() * center;
+  if (!std::isfinite(c.x) || !std::isfinite(c.y) || !std::isfinite(c.z) || !std::isfinite(radius)) return {};
+  if (c.z + radius <= 0.0) return {};     // wholly behind the camera
+  if (c.z - radius <= 1e-3) return full;  // reaches the camera plane: anything may be covered
+  // The ball's bounding box lies in front of the camera, so the hull of its
+  // projected corners holds the ball's projection.
+  double x_min = std::numeric_limits<double>::infinity(), y_min = x_min;
+  double x_max = -x_min, y_max = -x_min;
+  for (int i = 0; i < 8; ++i) {
+    const Vec3 p{c.x + ((i & 1) ? radius : -radius), c.y + ((i & 2) ? radius : -radius),
+                 c.z + ((i & 4) ? radius : -radius)};
+    const double u = camera.fx * p.x / p.z + camera.cx, v = camera.fy * p.y / p.z + camera.cy;
+    x_min = std::min(x_min, u);
+    x_max = std::max(x_max, u);
+    y_min = std::min(y_min, v);
+    y_max = std::max(y_max, v);
+  }
+  const double big = 4.0 * (camera.width + camera.height);
+  const auto to_int = [big](double v) { return static_cast<int>(std::clamp(v, -big, big)); };
+  PixelRect r{to_int(std::floor(x_min)), to_int(std::floor(y_min)), to_int(std::ceil(x_max)) + 1,
+              to_int(std::ceil(y_max)) + 1};
+  return ClipToImage(r, camera.width, camera.height);
+}
+
+namespace {
+
+// A vertex of a near-clipped triangle: camera-frame position and its
+// barycentric coordinates in the original triangle (for attributes).
+struct ClipVertex {
+  Vec3 p;
+  Vec3 bary;
+};
+
+// A screen triangle ready to scan: projected corners, 1/z, and the original
+// barycentrics of each corner.
+struct ScreenTriangle {
+  double sx[3], sy[3], inv_z[3];
+  Vec3 bary[3];
+  int32_t object;
+  uint32_t triangle;
+  PixelRect box;
+};
+
+// Sutherland-Hodgman against z >= z_near; up to 4 vertices out.
+int ClipNear(const ClipVertex in[3], double z_near, ClipVertex out[4]) {
+  int n = 0;
+  for (int i = 0; i < 3; ++i) {
+    const ClipVertex& a = in[i];
+    const ClipVertex& b = in[(i + 1) % 3];
+    const bool a_in = a.p.z >= z_near, b_in = b.p.z >= z_near;
+    if (a_in) out[n++] = a;
+    if (a_in != b_in) {
+      const double s = (z_near - a.p.z) / (b.p.z - a.p.z);
+      out[n++] = {a.p + (b.p - a.p) * s, a.bary + (b.bary - a.bary) * s};
+    }
+  }
+  return n;
+}
+
+}  // namespace
+
+ObjectGBuffer Rasterize(const CameraIntrinsics& camera, const Pose& T_world_camera,
+                        const std::vector<RasterObject>& objects, const RasterOptions& options) {
+  ObjectGBuffer g;
+  const Pose T_camera_world = T_world_camera.Inverse();
+  const PixelRect image{0, 0, camera.width, camera.height};
+
+  // Set-up: near-clip and project every triangle; their boxes give the rect.
+  std::vector<ScreenTriangle> tris;
+  std::vector<std::vector<Vec3>> camera_positions(objects.size());
+  for (size_t o = 0; o < objects.size(); ++o) {
+    const TriangleMesh* mesh = objects[o].mesh;
+    if (mesh == nullptr) continue;
+    const Pose T_camera_object = T_camera_world * objects[o].T_world_object;
+    auto& pc = camera_positions[o];
+    pc.resize(mesh->positions.size());
+    for (size_t v = 0; v < pc.size(); ++v) pc[v] = T_camera_object * (Vec3(mesh->positions[v]) * objects[o].scale);
+    for (uint32_t t = 0; t < mesh->triangles.size(); ++t) {
+      const auto& idx = mesh->triangles[t];
+      if (idx[0] >= pc.size() || idx[1] >= pc.size() || idx[2] >= pc.size()) continue;
+      ClipVertex in[3] = {{pc[idx[0]], {1, 0, 0}}, {pc[idx[1]], {0, 1, 0}}, {pc[idx[2]], {0, 0, 1}}};
+      bool finite = true;
+      for (const auto& v : in) finite = finite && std::isfinite(v.p.x) && std::isfinite(v.p.y) && std::isfinite(v.p.z);
+      if (!finite) continue;
+      if (in[0].p.z < options.z_near_m && in[1].p.z < options.z_near_m && in[2].p.z < options.z_near_m) continue;
+      ClipVertex poly[4];
+      const int n = ClipNear(in, options.z_near_m, poly);
+      for (int k = 1; k + 1 < n; ++k) {
+        const ClipVertex* corner[3] = {&poly[0], &poly[k], &poly[k + 1]};
+        ScreenTriangle s;
+        s.object = static_cast<int32_t>(o);
+        s.triangle = t;
+        double x_min = std::numeric_limits<double>::infinity(), y_min = x_min, x_max = -x_min, y_max = -x_min;
+        for (int c = 0; c < 3; ++c) {
+          const Vec3& p = corner[c]->p;
+          s.inv_z[c] = 1.0 / p.z;
+          s.sx[c] = camera.fx * p.x * s.inv_z[c] + camera.cx;
+          s.sy[c] = camera.fy * p.y * s.inv_z[c] + camera.cy;
+          s.bary[c] = corner[c]->bary;
+          x_min = std::min(x_min, s.sx[c]);
+          x_max = std::max(x_max, s.sx[c]);
+          y_min = std::min(y_min, s.sy[c]);
+          y_max = std::max(y_max, s.sy[c]);
+        }
+        const double area = (s.sx[1] - s.sx[0]) * (s.sy[2] - s.sy[0]) - (s.sx[2] - s.sx[0]) * (s.sy[1] - s.sy[0]);
+        if (!(std::abs(area) > 1e-12) || !std::isfinite(area)) continue;
+        // Pixels whose centre (i + 0.5) can fall inside [min, max].
+        const double big = 4.0 * (camera.width + camera.height);
+        const auto clampi = [big](double v) { return static_cast<int>(std::clamp(v, -big, big)); };
+        s.box = ClipToImage({clampi(std::ceil(x_min - 0.5)), clampi(std::ceil(y_min - 0.5)),
+                             clampi(std::floor(x_max - 0.5)) + 1, clampi(std::floor(y_max - 0.5)) + 1},
+                            image.x1, image.y1);
+        if (s.box.empty()) continue;
+        g.rect = Union(g.rect, s.box);
+        tris.push_back(s);
+      }
+    }
+  }
+  if (g.rect.empty()) return g;
+
+  const size_t area = g.rect.area();
+  g.object.assign(area, -1);
+  g.t.assign(area, 0.0f);
+  g.position.assign(area, Vec3f{});
+  g.normal.assign(area, Vec3f{});
+  g.uv.assign(area, {0.0f, 0.0f});
+  std::vector<float> z_buffer(area, std::numeric_limits<float>::infinity());
+  std::vector<uint32_t> tri_id(area, 0);
+  std::vector<std::array<float, 2>> bary12(area, {0.0f, 0.0f});  // original barycentrics b1, b2
+
+  // Scan in bands of rows so that threads never share a pixel.
+  constexpr int kBand = 8;
+  const int bands = (g.rect.height() + kBand - 1) / kBand;
+  ParallelFor(
+      static_cast<size_t>(bands),
+      [&](size_t band) {
+        const int y_begin = g.rect.y0 + static_cast<int>(band) * kBand;
+        const int y_end = std::min(g.rect.y1, y_begin + kBand);
+        for (const ScreenTriangle& s : tris) {
+          if (s.box.y1 <= y_begin || s.box.y0 >= y_end) continue;
+          const double area2 = (s.sx[1] - s.sx[0]) * (s.sy[2] - s.sy[0]) - (s.sx[2] - s.sx[0]) * (s.sy[1] - s.sy[0]);
+          const double inv_area = 1.0 / area2;
+          const int y0 = std::max(y_begin, s.box.y0), y1 = std::min(y_end, s.box.y1);
+          for (int y = y0; y < y1; ++y) {
+            const double py = y + 0.5;
+            for (int x = s.box.x0; x < s.box.x1; ++x) {
+              const double px = x + 0.5;
+              // Screen-space barycentrics (edge functions over the signed area).
+              const double l0 = ((s.sx[1] - px) * (s.sy[2] - py) - (s.sx[2] - px) * (s.sy[1] - py)) * inv_area;
+              const double l1 = ((s.sx[2] - px) * (s.sy[0] - py) - (s.sx[0] - px) * (s.sy[2] - py)) * inv_area;
+              const double l2 = 1.0 - l0 - l1;
+              if (l0 < 0.0 || l1 < 0.0 || l2 < 0.0) continue;
+              const double inv_z = l0 * s.inv_z[0] + l1 * s.inv_z[1] + l2 * s.inv_z[2];
+              if (!(inv_z > 0.0)) continue;
+              const float z = static_cast<float>(1.0 / inv_z);
+              const size_t i = g.Index(x, y);
+              if (!(z < z_buffer[i])) continue;
+              // Perspective-correct weights of the clipped corners, then of the original triangle.
+              const double w0 = l0 * s.inv_z[0] / inv_z, w1 = l1 * s.inv_z[1] / inv_z, w2 = l2 * s.inv_z[2] / inv_z;
+              const Vec3 b = s.bary[0] * w0 + s.bary[1] * w1 + s.bary[2] * w2;
+              z_buffer[i] = z;
+              g.object[i] = s.object;
+              tri_id[i] = s.triangle;
+              bary12[i] = {static_cast<float>(b.y), static_cast<float>(b.z)};
+            }
+          }
+        }
+      },
+      1);
+
+  // Resolve: attributes once per covered pixel.
+  std::vector<size_t> covered_per_row(static_cast<size_t>(g.rect.height()), 0);
+  ParallelFor(
+      static_cast<size_t>(g.rect.height()),
+      [&](size_t row) {
+        const int y = g.rect.y0 + static_cast<int>(row);
+        for (int x = g.rect.x0; x < g.rect.x1; ++x) {
+          const size_t i = g.Index(x, y);
+          const int32_t o = g.object[i];
+          if (o < 0) continue;
+          ++covered_per_row[row];
+          const TriangleMesh& mesh = *objects[o].mesh;
+          const RasterObject& obj = objects[o];
+          const auto& idx = mesh.triangles[tri_id[i]];
+          const float b1 = bary12[i][0], b2 = bary12[i][1], b0 = 1.0f - b1 - b2;
+          const Vec3 p_local =
+              Vec3(mesh.positions[idx[0]] * b0 + mesh.positions[idx[1]] * b1 + mesh.positions[idx[2]] * b2) * obj.scale;
+          g.position[i] = Vec3f(obj.T_world_object * p_local);
+          const Vec3f ray = CameraRayDirection(camera, T_world_camera, x, y);
+          const float z = z_buffer[i];
+          // t = z / cos(angle to the optical axis) = z · |(u, v, 1)|.
+          const double u = (x + 0.5 - camera.cx) / camera.fx, v = (y + 0.5 - camera.cy) / camera.fy;
+          g.t[i] = static_cast<float>(z * std::sqrt(u * u + v * v + 1.0));
+          Vec3 n;
+          if (mesh.normals.size() == mesh.positions.size()) {
+            n = Vec3(mesh.normals[idx[0]] * b0 + mesh.normals[idx[1]] * b1 + mesh.normals[idx[2]] * b2);
+          }
+          const Vec3 face = Cross(Vec3(mesh.positions[idx[1]] - mesh.positions[idx[0]]),
+                                  Vec3(mesh.positions[idx[2]] - mesh.positions[idx[0]]));
+          if (!(Dot(n, n) > 1e-20)) n = face;
+          Vec3 n_world = Normalized(obj.T_world_object.Rotate(n));
+          // A back face seen (open meshes, inner faces): shade the side the camera sees.
+          if (Dot(obj.T_world_object.Rotate(face), Vec3(ray)) > 0.0) n_world = -n_world;
+          g.normal[i] = Vec3f(n_world);
+          if (mesh.uvs.size() == mesh.positions.size()) {
+            for (int c = 0; c < 2; ++c)
+              g.uv[i][c] = mesh.uvs[idx[0]][c] * b0 + mesh.uvs[idx[1]][c] * b1 + mesh.uvs[idx[2]][c] * b2;
+          }
+        }
+      },
+      4);
+  for (size_t c : covered_per_row) g.covered += c;
+  return g;
+}
+
+}  // namespace nerfar

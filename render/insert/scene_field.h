@@ -1,0 +1,96 @@
+// What per-frame insertion asks of the captured scene: volume rendering of
+// rays over a given [t_near, t_far] each (colour, opacity, depth), and the
+// surface normal at a point. The HDR NeRF implements it (nerf_scene.h); an
+// analytic stand-in (a plane, an opaque sphere and a ball of constant density)
+// gives exact answers for tests. World frame, metres; directions are unit;
+// colour is linear HDR radiance already weighted by opacity (Ĉ = Σ T α c, so
+// a half-transparent ray returns half the colour it would behind glass).
+#pragma once
+
+#include <cstddef>
+#include <optional>
+#include <vector>
+
+#include "calib/core/math.h"
+#include "calib/dataset.h"
+
+namespace nerfar {
+
+// Entry and exit distances of the ray o + t·d (d need not be unit; t in units
+// of |d|) through the box, clipped to t >= 0. Nothing when the ray misses it
+// (or only touches it behind the origin). (The NeRF module has the float twin
+// for its own rays; this one serves scene fields of every kind.)
+std::optional<std::pair<double, double>> IntersectBox(const Aabb& box, const Vec3& origin, const Vec3& direction);
+
+// A batch of rays for one RenderRays call. Sizes are equal; directions unit.
+struct SceneRays {
+  std::vector<Vec3f> origins;
+  std::vector<Vec3f> directions;
+  std::vector<float> t_near, t_far;  // integration range per ray, t_near <= t_far (empty range: equal)
+
+  size_t size() const { return origins.size(); }
+  void Reserve(size_t n);
+  void Add(const Vec3f& origin, const Vec3f& direction, float t0, float t1);
+  void Clear();
+};
+
+// Results of RenderRays, one entry per ray.
+struct SceneSamples {
+  std::vector<Vec3f> colour;   // Ĉ = Σ T_k α_k c_k over the range (opacity-weighted radiance)
+  std::vector<float> opacity;  // Ô = Σ T_k α_k in [0, 1]
+  std::vector<float> depth;    // Σ T_k α_k t_k / Ô: expected hit distance along the ray (0 where Ô = 0);
+                               // the paper's unnormalised D̂ is Ô·depth (the NeRF's convention too)
+
+  void Resize(size_t n);
+};
+
+class SceneField {
+ public:
+  virtual ~SceneField() = default;
+  // The box holding everything of the scene.
+  virtual Aabb Box() const = 0;
+  // Volume renders every ray over its own [t_near, t_far]; out is resized.
+  // Must be callable from several threads at once (const, no shared scratch).
+  virtual void RenderRays(const SceneRays& rays, SceneSamples& out) const = 0;
+  // Unit outward normal of the scene surface at each point (the direction of
+  // −∇σ for a NeRF); the zero vector where it is undefined (empty space).
+  virtual void Normals(const std::vector<Vec3f>& points, std::vector<Vec3f>& normals) const = 0;
+};
+
+// An exact scene for tests and benchmarks: an opaque horizontal plane z = 0
+// (Lambertian-looking checker radiance, bounded by the box), an opaque sphere
+// and a ball of constant density σ (an absorbing and emitting medium, as a
+// NeRF models glass or smoke). Rendering integrates in closed form.
+struct AnalyticSceneParams {
+  Aabb box{{-0.6, -0.4, -0.05}, {0.6, 0.4, 0.6}};
+  Vec3f plane_radiance{0.5f, 0.45f, 0.4f};  // mean radiance of the table (checker ±20%)
+  float checker_size_m = 0.05f;             // 0: plain
+  bool has_sphere = true;
+  Vec3 sphere_center{-0.2, 0.1, 0.08};
+  double sphere_radius = 0.08;
+  Vec3f sphere_radiance{0.2f, 0.3f, 0.6f};
+  bool has_medium = true;
+  Vec3 medium_center{0.2, -0.1, 0.1};
+  double medium_radius = 0.07;
+  double medium_density = 20.0;  // σ, 1/m
+  Vec3f medium_radiance{0.9f, 0.9f, 0.9f};
+};
+
+class AnalyticScene final : public SceneField {
+ public:
+  explicit AnalyticScene(AnalyticSceneParams params = {}) : params_(params) {}
+  Aabb Box() const override { return params_.box; }
+  void RenderRays(const SceneRays& rays, SceneSamples& out) const override;
+  void Normals(const std::vector<Vec3f>& points, std::vector<Vec3f>& normals) const override;
+  const AnalyticSceneParams& params() const { return params_; }
+
+  // One ray, double precision; depth here is the unnormalised D̂ = Σ T α t.
+  void RenderOne(const Vec3& origin, const Vec3& direction, double t0, double t1, Vec3& colour, double& opacity,
+                 double& depth) const;
+
+ private:
+  Vec3f PlaneRadiance(const Vec3& point) const;
+  AnalyticSceneParams params_;
+};
+
+}  // namespace nerfar
