@@ -67,14 +67,21 @@ std::string ReadCameraKeys(JsonObjectReader& reader, CameraIntrinsics& camera) {
       reader.problems().Add(reader.PointerTo("camera_model"), "is \"" + *m + "\" (expected \"OPENCV\" or \"PINHOLE\")");
     }
   }
+  size_t before = reader.problems().items().size();
   camera.width = static_cast<int>(reader.Integer("w", 1, kMaxImageSide));
+  const bool width_ok = reader.problems().items().size() == before;
+  before = reader.problems().items().size();
   camera.height = static_cast<int>(reader.Integer("h", 1, kMaxImageSide));
-  camera.fx = ReadFocal(reader, "fl_x", "camera_angle_x", camera.width, std::nullopt);
-  camera.fy = ReadFocal(reader, "fl_y", "camera_angle_y", camera.height,
-                        camera.fx > 0 ? std::optional<double>(camera.fx) : std::nullopt);
-  // The principal point lies inside the image for every real camera.
-  camera.cx = reader.Number("cx", 0.0, camera.width);
-  camera.cy = reader.Number("cy", 0.0, camera.height);
+  const bool height_ok = reader.problems().items().size() == before;
+  camera.fx = ReadFocal(reader, "fl_x", "camera_angle_x", width_ok ? camera.width : 0, std::nullopt);
+  // fl_y defaults to fl_x; when fl_x itself is bad that was reported already.
+  const bool have_x = reader.Has("fl_x") || reader.Has("camera_angle_x");
+  camera.fy = ReadFocal(reader, "fl_y", "camera_angle_y", height_ok ? camera.height : 0,
+                        have_x ? std::optional<double>(camera.fx) : std::nullopt);
+  // The principal point lies inside the image for every real camera (checked
+  // only against a valid size, so one bad "w" is one problem).
+  camera.cx = reader.Number("cx", 0.0, width_ok ? camera.width : kMaxImageSide);
+  camera.cy = reader.Number("cy", 0.0, height_ok ? camera.height : kMaxImageSide);
   const char* keys[] = {"k1", "k2", "p1", "p2", "k3"};
   double* values[] = {&camera.k1, &camera.k2, &camera.p1, &camera.p2, &camera.k3};
   for (int i = 0; i < 5; ++i) {

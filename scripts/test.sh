@@ -11,7 +11,7 @@ cmake -S . -B build-fuzz -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
   -DCMAKE_C_COMPILER=clang-14 -DCMAKE_CXX_COMPILER=clang++-14 \
   -DNERFAR_FUZZ=ON -DNERFAR_READERS_ONLY=ON -DNERFAR_BENCHMARKS=OFF \
   -DNERFAR_FUZZ_SECONDS="${NERFAR_FUZZ_SECONDS:-20}" >/dev/null
-cmake --build build-fuzz --parallel "$(nproc)" --target fuzz_json fuzz_exr
+cmake --build build-fuzz --parallel "$(nproc)" --target fuzz_json fuzz_exr fuzz_dataset
 ctest --test-dir build-fuzz -L fuzz --output-on-failure
 
 echo "== tests"

@@ -103,8 +103,10 @@ double JsonObjectReader::Number(const char* key) {
 
 double JsonObjectReader::Number(const char* key, double min, double max) {
   const bool present = Has(key);
+  const size_t problems_before = problems_.items().size();
   const double number = Number(key);
-  if (present && (number < min || number > max))
+  // A mistyped value is reported once, not again as out of range.
+  if (present && problems_.items().size() == problems_before && (number < min || number > max))
     problems_.Add(PointerTo(key), "is " + std::to_string(number) + " (expected " + std::to_string(min) + " to " +
                                       std::to_string(max) + ")");
   return number;
