@@ -1,0 +1,866 @@
+#include "render/lighting/env_estimate.h"
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <numeric>
+
+#include "calib/core/error.h"
+#include "calib/core/json.h"
+#include "calib/core/log.h"
+#include "calib/core/parallel.h"
+#include "render/lighting/view_quality.h"
+#include "render/sg/sphere.h"
+#include "render/sg/visibility.h"
+
+namespace nerfar {
+namespace {
+
+// ----------------------------------------------------------------- randomness
+// Counter-based: a number is fixed by (seed, stream, item, k), so results do
+// not depend on the order or the thread that draws them.
+uint64_t Mix64(uint64_t x) {
+  x += 0x9e3779b97f4a7c15ull;
+  x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ull;
+  x = (x ^ (x >> 27)) * 0x94d049bb133111ebull;
+  return x ^ (x >> 31);
+}
+double Uniform(uint64_t seed, uint64_t stream, uint64_t item, uint64_t k) {
+  const uint64_t h = Mix64(Mix64(Mix64(Mix64(seed) ^ stream) ^ item) ^ k);
+  return static_cast<double>(h >> 11) * 0x1.0p-53;
+}
+enum Stream : uint64_t { kViewDir = 1, kPixelPick = 2, kRayTurn = 3 };
+
+double Y(const Vec3& rgb) { return LuminanceOf(rgb); }
+Vec3 ToD(const Vec3f& v) { return Vec3(v); }
+
+void OrthonormalBasis(const Vec3& n, Vec3& t, Vec3& b) {
+  const Vec3 helper = std::fabs(n.z) < 0.9 ? Vec3{0, 0, 1} : Vec3{1, 0, 0};
+  t = Normalized(Cross(helper, n));
+  b = Cross(n, t);
+}
+
+// R cosine-distributed directions about +z: a Fibonacci spiral on the unit
+// disk lifted to the hemisphere (Malley), each standing for π/R of ∫cos dω.
+std::vector<Vec3> CosineHemisphere(int count) {
+  std::vector<Vec3> dirs(count);
+  const double golden = kPi * (3.0 - std::sqrt(5.0));
+  for (int j = 0; j < count; ++j) {
+    const double r = std::sqrt((j + 0.5) / count), phi = golden * j;
+    dirs[j] = {r * std::cos(phi), r * std::sin(phi), std::sqrt(std::max(0.0, 1.0 - r * r))};
+  }
+  return dirs;
+}
+
+// ------------------------------------------------------------------- options
+struct OptionField {
+  const char* name;
+  enum Kind { kInt, kDouble, kBool, kFloat, kU64 } kind;
+  void* ptr;
+};
+std::vector<OptionField> Fields(EnvEstimateOptions& o) {
+  using F = OptionField;
+  return {{"views", F::kInt, &o.views},
+          {"pixels_per_view", F::kInt, &o.pixels_per_view},
+          {"view_width", F::kInt, &o.view_width},
+          {"view_height", F::kInt, &o.view_height},
+          {"view_fov_deg", F::kDouble, &o.view_fov_deg},
+          {"view_distance_scale", F::kDouble, &o.view_distance_scale},
+          {"min_view_elevation_deg", F::kDouble, &o.min_view_elevation_deg},
+          {"brisque_max", F::kDouble, &o.brisque_max},
+          {"max_view_attempts", F::kInt, &o.max_view_attempts},
+          {"min_pixel_opacity", F::kDouble, &o.min_pixel_opacity},
+          {"rays_per_point", F::kInt, &o.rays_per_point},
+          {"ray_offset_voxels", F::kDouble, &o.ray_offset_voxels},
+          {"near_field_pool_m", F::kDouble, &o.near_field_pool_m},
+          {"step_voxels", F::kFloat, &o.render.step_voxels},
+          {"min_transmittance", F::kFloat, &o.render.min_transmittance},
+          {"ignore_near_field", F::kBool, &o.ignore_near_field},
+          {"lobes", F::kInt, &o.lobes},
+          {"dictionary_levels", F::kInt, &o.dictionary_levels},
+          {"dictionary_base", F::kInt, &o.dictionary_base},
+          {"dictionary_sharpness", F::kDouble, &o.dictionary_sharpness},
+          {"iterations", F::kInt, &o.iterations},
+          {"albedo_cell_m", F::kDouble, &o.albedo_cell_m},
+          {"albedo_prior", F::kDouble, &o.albedo_prior},
+          {"albedo_prior_weight", F::kDouble, &o.albedo_prior_weight},
+          {"loss_epsilon", F::kDouble, &o.loss_epsilon},
+          {"robust_scale", F::kDouble, &o.robust_scale},
+          {"light_energy_weight", F::kDouble, &o.light_energy_weight},
+          {"negligible_ratio", F::kDouble, &o.negligible_ratio},
+          {"seed", F::kU64, &o.seed}};
+}
+
+}  // namespace
+
+EnvEstimateOptions EnvEstimateOptions::Preset(const std::string& name) {
+  EnvEstimateOptions o;
+  if (name == "balanced") return o;
+  if (name == "fast") {
+    o.views = 50;
+    o.pixels_per_view = 48;
+    o.rays_per_point = 128;
+    o.dictionary_levels = 2;
+    o.iterations = 8;
+    o.max_view_attempts = 200;
+    return o;
+  }
+  if (name == "accurate") {
+    o.pixels_per_view = 128;
+    o.rays_per_point = 512;
+    o.iterations = 20;
+    o.view_width = 160;
+    o.view_height = 120;
+    return o;
+  }
+  ThrowInputError("--preset", "is \"" + name + "\" (expected fast, balanced or accurate)");
+}
+
+std::vector<std::string> EnvEstimateOptions::Validate() const {
+  std::vector<std::string> p;
+  auto range = [&p](const char* name, double v, double lo, double hi) {
+    if (!(v >= lo && v <= hi))
+      p.push_back(std::string(name) + ": is " + std::to_string(v) + " (expected " + std::to_string(lo) + " to " +
+                  std::to_string(hi) + ")");
+  };
+  range("views", views, 1, 10000);
+  range("pixels_per_view", pixels_per_view, 1, 100000);
+  range("view_width", view_width, 16, 4096);
+  range("view_height", view_height, 16, 4096);
+  range("view_fov_deg", view_fov_deg, 1, 170);
+  range("view_distance_scale", view_distance_scale, 0.1, 100);
+  range("min_view_elevation_deg", min_view_elevation_deg, -90, 89);
+  range("brisque_max", brisque_max, 0, 1e9);
+  range("max_view_attempts", max_view_attempts, views, 1e6);
+  range("min_pixel_opacity", min_pixel_opacity, 0, 1);
+  range("rays_per_point", rays_per_point, 8, 65536);
+  range("ray_offset_voxels", ray_offset_voxels, 0, 100);
+  range("near_field_pool_m", near_field_pool_m, 0, 10);
+  range("step_voxels", render.step_voxels, 0.01, 10);
+  range("min_transmittance", render.min_transmittance, 0, 1);
+  range("lobes", lobes, 1, kMaxSgLobes);
+  range("dictionary_levels", dictionary_levels, 1, 5);
+  range("dictionary_base", dictionary_base, 4, 4096);
+  range("dictionary_sharpness", dictionary_sharpness, 1e-2, 1e3);
+  if (dictionary_levels >= 1 && dictionary_base >= 1 &&
+      dictionary_base * ((std::pow(4.0, dictionary_levels) - 1) / 3) > 8192)
+    p.push_back("dictionary_base: gives more than 8192 dictionary lobes (expected fewer levels or a smaller base)");
+  range("iterations", iterations, 1, 1000);
+  range("albedo_cell_m", albedo_cell_m, 0, 100);
+  range("albedo_prior", albedo_prior, 0.01, 1);
+  range("albedo_prior_weight", albedo_prior_weight, 0, 1e6);
+  range("loss_epsilon", loss_epsilon, 1e-6, 1e3);
+  range("robust_scale", robust_scale, 1e-3, 1e6);
+  range("light_energy_weight", light_energy_weight, 0, 1e3);
+  range("negligible_ratio", negligible_ratio, 0, 1);
+  return p;
+}
+
+std::string EnvEstimateOptions::ToJson() const {
+  Json doc = Json::object();
+  EnvEstimateOptions copy = *this;
+  for (const OptionField& f : Fields(copy)) {
+    switch (f.kind) {
+      case OptionField::kInt:
+        doc[f.name] = *static_cast<int*>(f.ptr);
+        break;
+      case OptionField::kDouble:
+        doc[f.name] = *static_cast<double*>(f.ptr);
+        break;
+      case OptionField::kFloat:
+        doc[f.name] = *static_cast<float*>(f.ptr);
+        break;
+      case OptionField::kBool:
+        doc[f.name] = *static_cast<bool*>(f.ptr);
+        break;
+      case OptionField::kU64:
+        doc[f.name] = *static_cast<uint64_t*>(f.ptr);
+        break;
+    }
+  }
+  return DumpJson(doc, -1);
+}
+
+void EnvEstimateOptions::Set(const std::string& key_value) {
+  const size_t eq = key_value.find('=');
+  if (eq == std::string::npos) ThrowInputError("--set " + key_value, "has no '=' (expected key=value)");
+  const std::string key = key_value.substr(0, eq), value = key_value.substr(eq + 1);
+  for (const OptionField& f : Fields(*this)) {
+    if (key != f.name) continue;
+    try {
+      size_t used = 0;
+      switch (f.kind) {
+        case OptionField::kInt:
+          *static_cast<int*>(f.ptr) = std::stoi(value, &used);
+          break;
+        case OptionField::kDouble:
+          *static_cast<double*>(f.ptr) = std::stod(value, &used);
+          break;
+        case OptionField::kFloat:
+          *static_cast<float*>(f.ptr) = std::stof(value, &used);
+          break;
+        case OptionField::kU64:
+          *static_cast<uint64_t*>(f.ptr) = std::stoull(value, &used);
+          break;
+        case OptionField::kBool:
+          if (value != "true" && value != "false") throw std::invalid_argument("bool");
+          *static_cast<bool*>(f.ptr) = value == "true";
+          used = value.size();
+          break;
+      }
+      if (used != value.size()) throw std::invalid_argument("trailing");
+    } catch (const std::exception&) {
+      ThrowInputError(
+          "--set " + key_value,
+          "has a bad value (expected a " + std::string(f.kind == OptionField::kBool ? "true/false" : "number") + ")");
+    }
+    return;
+  }
+  ThrowInputError("--set " + key_value, "names no option (expected one of the keys of the logged options)");
+}
+
+// -------------------------------------------------------------- view sampling
+namespace {
+
+struct ViewPick {
+  double score = -1;
+  std::vector<Vec3f> positions, normals, radiance;
+};
+
+Pose LookAt(const Vec3& eye, const Vec3& target) {
+  const Vec3 forward = Normalized(target - eye);
+  Vec3 up{0, 0, 1};
+  if (std::fabs(Dot(forward, up)) > 0.999) up = {0, 1, 0};
+  const Vec3 right = Normalized(Cross(forward, up));
+  const Vec3 down = Cross(forward, right);
+  return {Mat3::FromColumns(right, down, forward), eye};  // OpenCV: x right, y down, z forward
+}
+
+}  // namespace
+
+EnvSurfaceSamples SampleSurfaces(const NerfField& field, const EnvEstimateOptions& options, EnvViewReport* report,
+                                 const EnvProgress& progress) {
+  const std::vector<std::string> problems = options.Validate();
+  if (!problems.empty()) ThrowInputError("env options", problems.front());
+  NERFAR_CHECK(!field.empty());
+  const Vec3 centre = (field.aabb.min + field.aabb.max) * 0.5;
+  const double radius = options.view_distance_scale * 0.5 * Length(field.aabb.max - field.aabb.min);
+  CameraIntrinsics camera;
+  camera.width = options.view_width;
+  camera.height = options.view_height;
+  camera.fx = camera.fy = 0.5 * camera.width / std::tan(0.5 * options.view_fov_deg * kPi / 180);
+  camera.cx = 0.5 * camera.width;
+  camera.cy = 0.5 * camera.height;
+  const bool use_brisque = options.brisque_max < 100;
+  std::unique_ptr<BrisqueScorer> scorer;
+  if (use_brisque) scorer = std::make_unique<BrisqueScorer>();
+  const double z_min = std::sin(options.min_view_elevation_deg * kPi / 180);
+
+  std::vector<ViewPick> views;
+  EnvViewReport local;
+  int accepted = 0;
+  for (int a = 0; a < options.max_view_attempts && accepted < options.views; ++a) {
+    const double z = z_min + (1 - z_min) * Uniform(options.seed, kViewDir, a, 0);
+    const double phi = 2 * kPi * Uniform(options.seed, kViewDir, a, 1);
+    const double r = std::sqrt(std::max(0.0, 1 - z * z));
+    const Vec3 eye = centre + Vec3{r * std::cos(phi), r * std::sin(phi), z} * radius;
+    const Pose pose = LookAt(eye, centre);
+    const std::vector<NerfRay> rays = CameraRays(camera, pose, field.aabb);
+    std::vector<NerfRayResult> results(rays.size());
+    field.RenderRays(rays.data(), rays.size(), results.data(), options.render);
+
+    ViewPick pick;
+    if (use_brisque) {
+      ImageF color(camera.width, camera.height, 3);
+      for (size_t i = 0; i < results.size(); ++i)
+        for (int c = 0; c < 3; ++c) color.pixels[i * 3 + c] = results[i].color[c];
+      pick.score = scorer->ScoreLinear(color);
+    }
+    std::vector<uint32_t> eligible;
+    for (size_t i = 0; i < results.size(); ++i)
+      if (results[i].opacity > options.min_pixel_opacity && rays[i].t_far > rays[i].t_near)
+        eligible.push_back(static_cast<uint32_t>(i));
+    // Partial Fisher-Yates with counter-based draws: the first P of a random order.
+    for (size_t k = 0; k < eligible.size() && pick.positions.size() < static_cast<size_t>(options.pixels_per_view);
+         ++k) {
+      const size_t j = k + static_cast<size_t>(Uniform(options.seed, kPixelPick, a, k) * (eligible.size() - k));
+      std::swap(eligible[k], eligible[std::min(j, eligible.size() - 1)]);
+      const NerfRay& ray = rays[eligible[k]];
+      const NerfRayResult& res = results[eligible[k]];
+      const Vec3f x = ray.origin + ray.dir * res.depth;
+      Vec3f g = field.DensityGradient(x);
+      const float g_len = Length(g);
+      if (!(g_len > 1e-6f) || !std::isfinite(g_len)) continue;
+      Vec3f n = g * (-1.0f / g_len);
+      if (Dot(n, ray.dir) > 0) n = -n;  // the camera sees the surface: face it
+      const Vec3f radiance = res.color * (1.0f / res.opacity);
+      if (!std::isfinite(radiance.x + radiance.y + radiance.z)) continue;
+      pick.positions.push_back(x);
+      pick.normals.push_back(n);
+      pick.radiance.push_back(radiance);
+    }
+    const bool ok = !use_brisque || pick.score <= options.brisque_max;
+    local.scores.push_back(pick.score);
+    local.kept.push_back(ok);
+    if (ok) ++accepted;
+    views.push_back(std::move(pick));
+    if (progress) progress("views", static_cast<size_t>(accepted), static_cast<size_t>(options.views));
+  }
+  local.rendered = static_cast<int>(views.size());
+  if (accepted < options.views) {
+    // Too few views passed: take the best-scoring of the rest (the paper repeats
+    // until 100 pass; a bounded budget must end).
+    std::vector<size_t> rest;
+    for (size_t v = 0; v < views.size(); ++v)
+      if (!local.kept[v]) rest.push_back(v);
+    std::stable_sort(rest.begin(), rest.end(), [&](size_t a, size_t b) { return views[a].score < views[b].score; });
+    for (size_t i = 0; i < rest.size() && accepted < options.views; ++i, ++accepted) local.kept[rest[i]] = true;
+    LogWarning("env: only " +
+               std::to_string(std::count(local.kept.begin(), local.kept.end(), true) -
+                              (accepted - static_cast<int>(std::count(local.kept.begin(), local.kept.end(), true)))) +
+               " views scored <= " + std::to_string(options.brisque_max) +
+               " by BRISQUE; the best-scoring others were kept");
+  }
+  local.accepted = accepted;
+  EnvSurfaceSamples samples;
+  for (size_t v = 0; v < views.size(); ++v) {
+    if (!local.kept[v]) continue;
+    samples.positions.insert(samples.positions.end(), views[v].positions.begin(), views[v].positions.end());
+    samples.normals.insert(samples.normals.end(), views[v].normals.begin(), views[v].normals.end());
+    samples.radiance.insert(samples.radiance.end(), views[v].radiance.begin(), views[v].radiance.end());
+  }
+  if (report) *report = std::move(local);
+  return samples;
+}
+
+// ---------------------------------------------------------------- near field
+void ComputeNearField(const NerfField& field, const EnvEstimateOptions& options, EnvSurfaceSamples& samples,
+                      const EnvProgress& progress) {
+  const int R = options.rays_per_point;
+  const size_t n = samples.size();
+  const std::vector<Vec3> local = CosineHemisphere(R);
+  samples.rays_per_point = R;
+  samples.ray_dirs.assign(n * R, Vec3f{});
+  samples.opacity.assign(n * R, 0.0f);
+  samples.e_nerf.assign(n, Vec3f{});
+  const float offset = static_cast<float>(options.ray_offset_voxels) * field.voxel_m;
+  const size_t chunk = 64;
+  for (size_t begin = 0; begin < n; begin += chunk) {
+    const size_t end = std::min(n, begin + chunk);
+    ParallelFor(
+        end - begin,
+        [&](size_t k) {
+          const size_t i = begin + k;
+          const Vec3 normal = ToD(samples.normals[i]);
+          Vec3 t, b;
+          OrthonormalBasis(normal, t, b);
+          const double turn = 2 * kPi * Uniform(options.seed, kRayTurn, i, 0);
+          const double ct = std::cos(turn), st = std::sin(turn);
+          const Vec3f origin = samples.positions[i] + samples.normals[i] * offset;
+          Vec3 sum;
+          for (int j = 0; j < R; ++j) {
+            const Vec3& l = local[j];
+            const double lx = ct * l.x - st * l.y, ly = st * l.x + ct * l.y;
+            const Vec3f dir(Normalized(t * lx + b * ly + normal * l.z));
+            samples.ray_dirs[i * R + j] = dir;
+            if (options.ignore_near_field) continue;
+            NerfRay ray{origin, dir, 0, 0};
+            if (!IntersectAabb(field.aabb, origin, dir, ray.t_near, ray.t_far)) continue;
+            const NerfRayResult res = field.RenderRay(ray, options.render);
+            samples.opacity[i * R + j] = std::clamp(res.opacity, 0.0f, 1.0f);
+            sum += ToD(res.color);
+          }
+          samples.e_nerf[i] = Vec3f(sum * (kPi / R));
+        },
+        1);
+    if (progress) progress("rays", end, n);
+  }
+  // Pool E_nerf over nearby samples facing the same way: a small bright
+  // source is hit by few of a point's R rays, so one point's estimate is
+  // quantised noise, which the fit would fill with environment light; the
+  // pooled estimate uses the rays of all neighbours (bias only across shadow
+  // edges narrower than the radius). Visibility stays per point.
+  const double radius = options.near_field_pool_m;
+  if (radius > 0 && !options.ignore_near_field) {
+    std::vector<Vec3f> pooled(n);
+    ParallelFor(
+        n,
+        [&](size_t i) {
+          Vec3 sum;
+          double count = 0;
+          for (size_t j = 0; j < n; ++j) {
+            const Vec3f d = samples.positions[j] - samples.positions[i];
+            if (Dot(d, d) > radius * radius || Dot(samples.normals[i], samples.normals[j]) < 0.95f) continue;
+            sum += ToD(samples.e_nerf[j]);
+            count += 1;
+          }
+          pooled[i] = Vec3f(sum / count);
+        },
+        16);
+    samples.e_nerf = std::move(pooled);
+  }
+}
+
+// ----------------------------------------------------------------------- fit
+namespace {
+
+constexpr float kOccludedMin = 1e-3f;  // directions with less opacity are treated as open
+
+struct Dictionary {
+  std::vector<Vec3> axes;
+  std::vector<double> sharpness;
+  size_t size() const { return axes.size(); }
+};
+
+Dictionary MakeDictionary(const EnvEstimateOptions& o) {
+  Dictionary d;
+  int count = o.dictionary_base;
+  double lambda = o.dictionary_sharpness;
+  for (int l = 0; l < o.dictionary_levels; ++l, count *= 4, lambda *= 4) {
+    for (const Vec3& p : FibonacciSphere(count)) {
+      d.axes.push_back(p);
+      d.sharpness.push_back(lambda);
+    }
+  }
+  return d;
+}
+
+// A(i, k): irradiance at sample i from unit-amplitude lobe k through the
+// NeRF's visibility: the exact unoccluded irradiance U(p·n, λ) times the
+// lobe's open fraction over the cached directions,
+//   V_k = Σ_j (1 − Ô_j) G_k(d_j) / Σ_j G_k(d_j)
+// (the directions are cosine distributed, so this is the cosine-weighted
+// visibility of the lobe). A ratio rather than U − Σ Ô G: exactly 0 for a
+// lobe hidden behind the NeRF and exactly U for an open one, even when the
+// lobe is sharper than the spacing of the cached directions (weights are
+// normalised by their largest term, so nothing underflows).
+Eigen::MatrixXd LobeIrradianceMatrix(const EnvSurfaceSamples& s, const std::vector<Vec3>& axes,
+                                     const std::vector<double>& sharpness) {
+  const size_t n = s.size(), d = axes.size();
+  const int R = s.rays_per_point;
+  std::vector<SgTableRow> rows(d);
+  for (size_t k = 0; k < d; ++k) rows[k] = PrepareIrradiance(sharpness[k]);
+  Eigen::MatrixXd A(n, d);
+  ParallelFor(
+      n,
+      [&](size_t i) {
+        const Vec3 normal = ToD(s.normals[i]);
+        bool any_occluded = false;
+        for (int j = 0; j < R && !any_occluded; ++j) any_occluded = s.opacity[i * R + j] > kOccludedMin;
+        std::vector<double> exponent(R);
+        for (size_t k = 0; k < d; ++k) {
+          const double open = UnitIrradiancePrepared(rows[k], static_cast<float>(Dot(axes[k], normal)));
+          double visible = 1;
+          if (any_occluded) {
+            double top = -1e300;
+            for (int j = 0; j < R; ++j) {
+              const Vec3 dir = ToD(s.ray_dirs[i * R + j]);
+              exponent[j] = -0.5 * sharpness[k] * Dot(dir - axes[k], dir - axes[k]);  // λ(d·p − 1)
+              top = std::max(top, exponent[j]);
+            }
+            double num = 0, den = 0;
+            for (int j = 0; j < R; ++j) {
+              const double g = std::exp(exponent[j] - top);
+              den += g;
+              num += g * (1.0 - s.opacity[i * R + j]);
+            }
+            visible = den > 0 ? num / den : 1.0;
+          }
+          A(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(k)) = std::max(0.0, open * visible);
+        }
+      },
+      16);
+  return A;
+}
+
+// min ‖Bx − y‖² s.t. x ≥ 0 from the normal equations G = BᵀB, h = Bᵀy
+// (Lawson-Hanson active set).
+Eigen::VectorXd Nnls(const Eigen::MatrixXd& G, const Eigen::VectorXd& h) {
+  const Eigen::Index d = G.rows();
+  Eigen::VectorXd x = Eigen::VectorXd::Zero(d);
+  std::vector<bool> passive(d, false);
+  const double tol = 1e-12 * std::max(1.0, G.diagonal().maxCoeff());
+  for (int outer = 0; outer < 3 * d + 10; ++outer) {
+    const Eigen::VectorXd w = h - G * x;
+    Eigen::Index best = -1;
+    double best_w = tol;
+    for (Eigen::Index k = 0; k < d; ++k)
+      if (!passive[k] && w[k] > best_w) best_w = w[k], best = k;
+    if (best < 0) break;
+    passive[best] = true;
+    for (int inner = 0; inner < 3 * d + 10; ++inner) {
+      std::vector<Eigen::Index> idx;
+      for (Eigen::Index k = 0; k < d; ++k)
+        if (passive[k]) idx.push_back(k);
+      const Eigen::Index m = static_cast<Eigen::Index>(idx.size());
+      Eigen::MatrixXd Gp(m, m);
+      Eigen::VectorXd hp(m);
+      for (Eigen::Index a = 0; a < m; ++a) {
+        hp[a] = h[idx[a]];
+        for (Eigen::Index b = 0; b < m; ++b) Gp(a, b) = G(idx[a], idx[b]);
+      }
+      Gp.diagonal().array() += 1e-12 * std::max(1.0, Gp.diagonal().maxCoeff());
+      const Eigen::VectorXd z = Gp.ldlt().solve(hp);
+      bool feasible = true;
+      for (Eigen::Index a = 0; a < m; ++a) feasible = feasible && z[a] > 0;
+      if (feasible) {
+        x.setZero();
+        for (Eigen::Index a = 0; a < m; ++a) x[idx[a]] = z[a];
+        break;
+      }
+      double alpha = 1;
+      for (Eigen::Index a = 0; a < m; ++a)
+        if (z[a] <= 0) alpha = std::min(alpha, x[idx[a]] / std::max(1e-300, x[idx[a]] - z[a]));
+      for (Eigen::Index a = 0; a < m; ++a) {
+        x[idx[a]] += alpha * (z[a] - x[idx[a]]);
+        if (x[idx[a]] <= 1e-15) {
+          x[idx[a]] = 0;
+          passive[idx[a]] = false;
+        }
+      }
+    }
+  }
+  return x;
+}
+
+struct FitState {
+  const EnvSurfaceSamples* s = nullptr;
+  Eigen::MatrixXd A;            // n × D
+  Eigen::MatrixXd mu;           // D × 3
+  std::vector<int> cell;        // per sample
+  std::vector<Vec3> albedo;     // per cell
+  std::vector<double> robust;   // per sample IRLS weight
+  std::vector<Vec3> inv_scale;  // per sample and channel 1/(L + ε)
+  double prior = 0.5, prior_weight = 0, robust_scale = 0.3;
+  double energy_weight = 0, typical_irradiance = 1;
+  Vec3 eps;                           // loss floor per channel
+  std::vector<double> lobe_integral;  // ∫ G_k over the sphere per unit amplitude
+};
+
+double Channel(const Vec3f& v, int c) { return v[c]; }
+
+// Model shading S_ic = E_nerf + A μ (without albedo).
+Eigen::MatrixXd Shading(const FitState& st) {
+  Eigen::MatrixXd S = st.A * st.mu;
+  for (size_t i = 0; i < st.s->size(); ++i)
+    for (int c = 0; c < 3; ++c) S(i, c) += Channel(st.s->e_nerf[i], c);
+  return S;
+}
+
+double Loss(const FitState& st, const Eigen::MatrixXd& S, bool update_robust, FitState* mutable_st) {
+  double total = 0;
+  const size_t n = st.s->size();
+  for (size_t i = 0; i < n; ++i) {
+    double r2 = 0;
+    for (int c = 0; c < 3; ++c) {
+      // Log residual for the robust weight: an emitter (L far above any
+      // a/π·E) is as far out as it is, while a relative residual would saturate at −1.
+      const double eps = st.eps[c];
+      const double model = st.albedo[st.cell[i]][c] / kPi * S(i, c);
+      const double r = std::log((std::max(0.0, model) + eps) / (std::max(0.0, Channel(st.s->radiance[i], c)) + eps));
+      r2 += r * r / 3;
+    }
+    const double q = r2 / (st.robust_scale * st.robust_scale);
+    total += std::log1p(q);  // Cauchy
+    if (update_robust) mutable_st->robust[i] = 1.0 / (1.0 + q);
+  }
+  return total * st.robust_scale * st.robust_scale / std::max<size_t>(n, 1);
+}
+
+void SolveLight(FitState& st) {
+  const size_t n = st.s->size();
+  const Eigen::Index d = st.A.cols();
+  for (int c = 0; c < 3; ++c) {
+    Eigen::MatrixXd B(n, d);
+    Eigen::VectorXd y(n);
+    for (size_t i = 0; i < n; ++i) {
+      const double w = std::sqrt(st.robust[i]) * st.inv_scale[i][c];
+      const double a = st.albedo[st.cell[i]][c] / kPi;
+      B.row(i) = st.A.row(i) * (w * a);
+      y[i] = w * (Channel(st.s->radiance[i], c) - a * Channel(st.s->e_nerf[i], c));
+    }
+    const Eigen::MatrixXd G = B.transpose() * B;
+    Eigen::VectorXd h = B.transpose() * y;
+    // Minimum-energy prior: + 2β Σ_k μ_k ∫G_k, so light the data cannot see
+    // (below the floor, behind walls) stays dark instead of growing freely.
+    // β relative to the data: w_e · |y|² per unit of typical irradiance.
+    const double beta = st.energy_weight * y.squaredNorm() / std::max(1e-30, st.typical_irradiance);
+    for (Eigen::Index k = 0; k < d; ++k) h[k] -= beta * st.lobe_integral[k];
+    st.mu.col(c) = Nnls(G, h);
+  }
+}
+
+void SolveAlbedo(FitState& st, const Eigen::MatrixXd& S) {
+  const size_t cells = st.albedo.size();
+  std::vector<Vec3> num(cells), den(cells);
+  std::vector<double> weight(cells, 0);
+  for (size_t i = 0; i < st.s->size(); ++i)
+    for (int c = 0; c < 3; ++c) {
+      const double w = st.robust[i] * st.inv_scale[i][c] * st.inv_scale[i][c];
+      const double s = S(i, c) / kPi;
+      num[st.cell[i]][c] += w * s * Channel(st.s->radiance[i], c);
+      den[st.cell[i]][c] += w * s * s;
+      weight[st.cell[i]] += st.robust[i] / 3;
+    }
+  for (size_t k = 0; k < cells; ++k)
+    for (int c = 0; c < 3; ++c) {
+      // Prior weight relative to the cell's data: γ (a − a0)² with γ = weight·den/count.
+      const double gamma = st.prior_weight * den[k][c] / std::max(1.0, weight[k]) + 1e-30;
+      st.albedo[k][c] = std::clamp((num[k][c] + gamma * st.prior) / (den[k][c] + gamma), 0.005, 1.0);
+    }
+}
+
+// The global scale that the data leaves free when the near field is weak:
+// a → a·t, μ → μ/t keeps a·Aμ and scales a·E_nerf by t. Both the data and the
+// prior are quadratic in t: solved exactly.
+void SolveScale(FitState& st) {
+  const Eigen::MatrixXd Amu = st.A * st.mu;
+  double qa = 0, qb = 0;  // minimise qa t² − 2 qb t
+  for (size_t i = 0; i < st.s->size(); ++i)
+    for (int c = 0; c < 3; ++c) {
+      const double w = st.robust[i] * st.inv_scale[i][c] * st.inv_scale[i][c];
+      const double a = st.albedo[st.cell[i]][c] / kPi;
+      const double e = a * Channel(st.s->e_nerf[i], c), rest = Channel(st.s->radiance[i], c) - a * Amu(i, c);
+      qa += w * e * e;
+      qb += w * e * rest;
+    }
+  // Prior Σ γ (a t − a0)², γ per cell relative to the samples' mean weight.
+  double mean_w = 0;
+  for (size_t i = 0; i < st.s->size(); ++i)
+    for (int c = 0; c < 3; ++c) mean_w += st.robust[i] * st.inv_scale[i][c] * st.inv_scale[i][c];
+  mean_w /= std::max<size_t>(1, 3 * st.s->size());
+  const double typical = mean_w * std::pow(st.prior / kPi, 2) * 1.0;
+  std::vector<double> count(st.albedo.size(), 0);
+  for (size_t i = 0; i < st.s->size(); ++i) count[st.cell[i]] += 1;
+  for (size_t k = 0; k < st.albedo.size(); ++k)
+    for (int c = 0; c < 3; ++c) {
+      const double gamma = st.prior_weight * count[k] * typical * 1e2;
+      qa += gamma * st.albedo[k][c] * st.albedo[k][c];
+      qb += gamma * st.albedo[k][c] * st.prior;
+    }
+  if (!(qa > 0)) return;
+  double t = qb / qa;
+  if (!(t > 0) || !std::isfinite(t)) return;
+  // Keep albedos ≤ 1: a larger t would clip them.
+  double a_max = 0;
+  for (const Vec3& a : st.albedo) a_max = std::max({a_max, a.x, a.y, a.z});
+  if (a_max > 0) t = std::min(t, 1.0 / a_max);
+  t = std::clamp(t, 0.1, 10.0);  // one step at most a decade: the alternation does the rest
+  for (Vec3& a : st.albedo) a = a * t;
+  st.mu /= t;
+}
+
+std::vector<int> AlbedoCells(const EnvSurfaceSamples& s, const Aabb& aabb, double cell_m, size_t* count) {
+  const Vec3 ext = aabb.max - aabb.min;
+  const double h = cell_m > 0 ? cell_m : std::max({ext.x, ext.y, ext.z}) / 8;
+  std::map<std::array<int, 3>, int> ids;
+  std::vector<int> cell(s.size());
+  for (size_t i = 0; i < s.size(); ++i) {
+    const Vec3 p = (ToD(s.positions[i]) - aabb.min) / h;
+    const std::array<int, 3> key{static_cast<int>(std::floor(p.x)), static_cast<int>(std::floor(p.y)),
+                                 static_cast<int>(std::floor(p.z))};
+    const auto it = ids.emplace(key, static_cast<int>(ids.size())).first;
+    cell[i] = it->second;
+  }
+  *count = ids.size();
+  return cell;
+}
+
+}  // namespace
+
+SgMixture FitEnvironment(const EnvSurfaceSamples& samples, const Aabb& aabb, const EnvEstimateOptions& options,
+                         EnvFitReport* report, const EnvProgress& progress) {
+  const std::vector<std::string> problems = options.Validate();
+  if (!problems.empty()) ThrowInputError("env options", problems.front());
+  NERFAR_CHECK_EQ(samples.e_nerf.size(), samples.size());
+  NERFAR_CHECK_EQ(samples.opacity.size(), samples.size() * samples.rays_per_point);
+  EnvFitReport local;
+  if (samples.size() == 0) {
+    if (report) *report = local;
+    return {};
+  }
+  const Dictionary dict = MakeDictionary(options);
+  local.dictionary_size = static_cast<int>(dict.size());
+  FitState st;
+  st.s = &samples;
+  st.prior = options.albedo_prior;
+  st.prior_weight = options.albedo_prior_weight;
+  st.robust_scale = options.robust_scale;
+  size_t cells = 0;
+  st.cell = AlbedoCells(samples, aabb, options.albedo_cell_m, &cells);
+  st.albedo.assign(cells, Vec3{1, 1, 1} * options.albedo_prior);
+  st.robust.assign(samples.size(), 1.0);
+  double mean_y = 0;
+  for (const Vec3f& l : samples.radiance) mean_y += Y(ToD(l));
+  mean_y /= samples.size();
+  const double eps = options.loss_epsilon * std::max(mean_y, 1e-12);
+  st.eps = Vec3{eps, eps, eps};
+  st.inv_scale.resize(samples.size());
+  for (size_t i = 0; i < samples.size(); ++i)
+    for (int c = 0; c < 3; ++c) st.inv_scale[i][c] = 1.0 / (std::max(0.0, Channel(samples.radiance[i], c)) + eps);
+
+  st.A = LobeIrradianceMatrix(samples, dict.axes, dict.sharpness);
+  st.energy_weight = options.light_energy_weight;
+  st.typical_irradiance = kPi * mean_y / options.albedo_prior;
+  for (size_t k = 0; k < dict.size(); ++k) st.lobe_integral.push_back(SgUnitIntegral(dict.sharpness[k]));
+  st.mu = Eigen::MatrixXd::Zero(st.A.cols(), 3);
+  const int total_steps = options.iterations + std::max(3, options.iterations / 2);
+  // Start: albedo at the prior, robust weights from the near field alone.
+  local.initial_loss = Loss(st, Shading(st), true, &st);
+  int step = 0;
+  auto iterate = [&](int count) {
+    for (int it = 0; it < count; ++it, ++step) {
+      SolveLight(st);
+      SolveAlbedo(st, Shading(st));
+      SolveScale(st);
+      const double loss = Loss(st, Shading(st), true, &st);
+      double albedo = 0, light = 0;
+      for (size_t i = 0; i < samples.size(); ++i) albedo += Y(st.albedo[st.cell[i]]) / samples.size();
+      for (Eigen::Index k = 0; k < st.mu.rows(); ++k)
+        light += st.mu(k, 1) * SgUnitIntegral(k < static_cast<Eigen::Index>(dict.size()) ? dict.sharpness[k] : 1.0);
+      LogVerbose("env fit: step " + std::to_string(step) + " loss " + std::to_string(loss) + " mean albedo " +
+                 std::to_string(albedo) + " light green integral " + std::to_string(light));
+      if (progress) progress("fit", static_cast<size_t>(step + 1), static_cast<size_t>(total_steps));
+    }
+  };
+  iterate(options.iterations);
+
+  // Keep the M lobes carrying the most energy and re-solve with them only.
+  std::vector<Eigen::Index> order(st.A.cols());
+  std::iota(order.begin(), order.end(), 0);
+  std::vector<double> energy(st.A.cols());
+  for (Eigen::Index k = 0; k < st.A.cols(); ++k)
+    energy[k] = Y(Vec3{st.mu(k, 0), st.mu(k, 1), st.mu(k, 2)}) * SgUnitIntegral(dict.sharpness[k]);
+  std::stable_sort(order.begin(), order.end(), [&](Eigen::Index a, Eigen::Index b) { return energy[a] > energy[b]; });
+  order.resize(std::min<size_t>(order.size(), static_cast<size_t>(options.lobes)));
+  std::sort(order.begin(), order.end());
+  Eigen::MatrixXd A_kept(st.A.rows(), static_cast<Eigen::Index>(order.size()));
+  Eigen::MatrixXd mu_kept(static_cast<Eigen::Index>(order.size()), 3);
+  std::vector<double> kept_integral;
+  for (size_t k = 0; k < order.size(); ++k) {
+    kept_integral.push_back(st.lobe_integral[order[k]]);
+    A_kept.col(k) = st.A.col(order[k]);
+    mu_kept.row(k) = st.mu.row(order[k]);
+  }
+  st.A = std::move(A_kept);
+  st.mu = std::move(mu_kept);
+  st.lobe_integral = kept_integral;
+  iterate(total_steps - options.iterations);
+
+  SgMixture result;
+  for (size_t k = 0; k < order.size(); ++k) {
+    const Vec3 mu{st.mu(k, 0), st.mu(k, 1), st.mu(k, 2)};
+    if (!(mu.x > 0 || mu.y > 0 || mu.z > 0)) continue;
+    result.push_back({dict.axes[order[k]], dict.sharpness[order[k]], mu});
+  }
+  const Eigen::MatrixXd S = Shading(st);
+  local.final_loss = Loss(st, S, false, nullptr);
+  local.active_lobes = static_cast<int>(result.size());
+  double albedo_sum = 0, err2 = 0, ref2 = 0;
+  for (size_t i = 0; i < samples.size(); ++i) {
+    const Vec3& a = st.albedo[st.cell[i]];
+    albedo_sum += Y(a);
+    const Vec3 model{a.x / kPi * S(i, 0), a.y / kPi * S(i, 1), a.z / kPi * S(i, 2)};
+    const double obs = Y(ToD(samples.radiance[i]));
+    err2 += std::pow(Y(model) - obs, 2);
+    ref2 += obs * obs;
+  }
+  local.mean_albedo = albedo_sum / samples.size();
+  local.relative_rms = ref2 > 0 ? std::sqrt(err2 / ref2) : 0;
+  if (report) *report = local;
+  return result;
+}
+
+std::vector<Vec3> EnvironmentIrradiance(const EnvSurfaceSamples& samples, const SgMixture& light) {
+  std::vector<Vec3> axes;
+  std::vector<double> sharpness;
+  for (const Sg& g : light) {
+    axes.push_back(g.axis);
+    sharpness.push_back(g.sharpness);
+  }
+  const Eigen::MatrixXd A = LobeIrradianceMatrix(samples, axes, sharpness);
+  std::vector<Vec3> e(samples.size());
+  for (size_t i = 0; i < samples.size(); ++i)
+    for (size_t k = 0; k < light.size(); ++k) e[i] += light[k].amplitude * A(i, k);
+  return e;
+}
+
+double EnvToNearRatioAt(const NerfField& field, const SgMixture& light, const Vec3& point, int directions, int normals,
+                        const NerfRenderOptions& render) {
+  std::vector<Vec3f> dirs;
+  for (const Vec3& d : FibonacciSphere(directions)) dirs.push_back(Vec3f(d));
+  const std::vector<NerfRay> rays = PointRays(Vec3f(point), dirs, field.aabb);
+  std::vector<NerfRayResult> res(rays.size());
+  field.RenderRays(rays.data(), rays.size(), res.data(), render);
+  double env = 0, nerf = 0;
+  const double w = 4 * kPi / directions;
+  for (const Vec3& n : FibonacciSphere(normals)) {
+    Vec3 e_env, e_nerf;
+    for (size_t j = 0; j < dirs.size(); ++j) {
+      const Vec3 d = ToD(dirs[j]);
+      const double cosine = Dot(n, d);
+      if (cosine <= 0) continue;
+      const float o = rays[j].t_far > rays[j].t_near ? std::clamp(res[j].opacity, 0.0f, 1.0f) : 0.0f;
+      e_env += Evaluate(light, d) * ((1 - o) * cosine * w);
+      e_nerf += ToD(res[j].color) * (cosine * w);
+    }
+    env += Y(e_env);
+    nerf += Y(e_nerf);
+  }
+  if (nerf > 0) return env / nerf;
+  return env > 0 ? std::numeric_limits<double>::infinity() : 0.0;
+}
+
+EnvLight EstimateEnvironment(const NerfField& field, const EnvEstimateOptions& options, EnvEstimateReport* report,
+                             const EnvProgress& progress) {
+  const std::vector<std::string> problems = options.Validate();
+  if (!problems.empty()) {
+    Problems list("env options");
+    for (const std::string& p : problems) list.Add("", p);
+    list.ThrowIfAny();
+  }
+  EnvEstimateReport local;
+  Progress timer("env", 0);
+  double t0 = timer.ElapsedSeconds();
+  EnvSurfaceSamples samples = SampleSurfaces(field, options, &local.views, progress);
+  local.seconds_views = timer.ElapsedSeconds() - t0;
+  local.samples = samples.size();
+  t0 = timer.ElapsedSeconds();
+  ComputeNearField(field, options, samples, progress);
+  local.seconds_near_field = timer.ElapsedSeconds() - t0;
+  t0 = timer.ElapsedSeconds();
+  EnvLight env;
+  env.lobes = FitEnvironment(samples, field.aabb, options, &local.fit, progress);
+  local.seconds_fit = timer.ElapsedSeconds() - t0;
+  timer.Finish();
+
+  const std::vector<Vec3> e_env = EnvironmentIrradiance(samples, env.lobes);
+  double sum_env = 0, sum_nerf = 0;
+  for (size_t i = 0; i < samples.size(); ++i) {
+    sum_env += Y(e_env[i]);
+    sum_nerf += Y(ToD(samples.e_nerf[i]));
+  }
+  env.env_to_near_surface = sum_nerf > 0 ? sum_env / sum_nerf : (sum_env > 0 ? 1e30 : 0.0);
+  const double centre_ratio =
+      EnvToNearRatioAt(field, env.lobes, (field.aabb.min + field.aabb.max) * 0.5, 1024, 64, options.render);
+  env.env_to_near_center = std::isfinite(centre_ratio) ? std::min(centre_ratio, 1e30) : 1e30;
+  env.threshold = options.negligible_ratio;
+  env.negligible = env.env_to_near_surface < env.threshold && env.env_to_near_center < env.threshold;
+  env.options_json = options.ToJson();
+  if (report) *report = std::move(local);
+  return env;
+}
+
+double RelativeIrradianceRms(const std::vector<Vec3>& estimate, const std::vector<Vec3>& reference) {
+  NERFAR_CHECK_EQ(estimate.size(), reference.size());
+  double err = 0, ref = 0;
+  for (size_t i = 0; i < estimate.size(); ++i) {
+    err += std::pow(Y(estimate[i]) - Y(reference[i]), 2);
+    ref += std::pow(Y(reference[i]), 2);
+  }
+  return ref > 0 ? std::sqrt(err / ref) : (err > 0 ? std::numeric_limits<double>::infinity() : 0.0);
+}
+
+}  // namespace nerfar

@@ -1,0 +1,159 @@
+// Estimating the distant environment light from an HDR NeRF by inverse
+// rendering (paper §4.2). Views are sampled on a sphere around the NeRF
+// volume's centre and looking at it; views whose rendering BRISQUE scores
+// above a limit are rejected. Pixels through the NeRF give surface points
+// x = o + D·d with normals −∇σ/|∇σ| and observed radiance L_o. At each point R
+// rays leave in cosine-distributed directions over the normal's hemisphere
+// (a Fibonacci disk lifted to the hemisphere, randomly turned about n per
+// point): they give the near-field irradiance E_nerf = π/R Σ Ĉ_j (paper
+// §4.2, computed once) and the NeRF opacity Ô_j towards each direction, kept
+// as the per-point visibility cache. The environment's irradiance is
+//   E_env(x) = ∫ (1 − Ô) L_env max(n·d, 0) dd
+//            ≈ Σ_k μ_k U(p_k·n, λ_k) · Σ_j (1 − Ô_j) G_k(d_j) / Σ_j G_k(d_j),
+// the unoccluded irradiance exact (render/sg UnitIrradiance tables, right for
+// sharp lobes) times the lobe's open fraction by the deterministic quadrature over the
+// cached directions (noise free; points with no occluded direction cost nothing).
+// The model L_o = a(x)/π (E_nerf + E_env) (paper eq. 3) is fitted with a
+// piecewise-constant albedo on a coarse grid (a smooth albedo, as the paper's
+// MLP, solved in closed form per cell) and the lobes chosen from a
+// multi-scale dictionary of SGs by non-negative least squares, alternating,
+// under a robust relative (HDR) loss; the best 32 lobes are then re-solved.
+// World frame, metres, linear RGB radiance.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "calib/core/math.h"
+#include "render/lighting/env_light.h"
+#include "render/nerf/nerf_field.h"
+#include "render/sg/sg.h"
+
+namespace nerfar {
+
+struct EnvEstimateOptions {
+  // --- view sampling (paper: 100 views, 64 pixels each)
+  int views = 100;           // accepted views to collect
+  int pixels_per_view = 64;  // surface samples drawn per accepted view
+  int view_width = 128;      // rendering size of a sampled view (BRISQUE and pixel picking)
+  int view_height = 96;
+  double view_fov_deg = 60;  // horizontal field of view of the sampled views
+  // Camera distance from the volume's centre, in units of half the aabb
+  // diagonal (1: on the sphere around the box; the paper's "half the grid size").
+  double view_distance_scale = 1.0;
+  // Views below this elevation (degrees, seen from the centre) are not drawn.
+  // −90 draws the whole sphere and leaves poor views to BRISQUE.
+  double min_view_elevation_deg = -90;
+  double brisque_max = 50;          // views scoring above are rejected (paper: 50); ≥ 100 disables BRISQUE
+  int max_view_attempts = 400;      // views rendered at most; the best-scoring are kept when too few pass
+  double min_pixel_opacity = 0.95;  // a pixel passes through the NeRF when its opacity exceeds this
+  // --- near field
+  int rays_per_point = 256;        // R: rays per surface point (near-field irradiance and visibility cache)
+  double ray_offset_voxels = 2.0;  // rays start this far along the normal (in voxels) to leave the surface
+  // E_nerf is averaged over samples within this distance (metres) whose normals
+  // agree (cos > 0.95): R rays per point see a small bright source only a few
+  // times. 0 keeps each point's own estimate.
+  double near_field_pool_m = 0.03;
+  NerfRenderOptions render;        // sample spacing etc. of every NeRF ray
+  bool ignore_near_field = false;  // baseline: E_nerf = 0 and Ô = 0 (environment explains everything, PhySG-like)
+  // --- fit
+  int lobes = 32;  // M: lobes in the result (paper: 32)
+  // Dictionary levels: level l has dictionary_base·4^l lobes on a Fibonacci
+  // sphere with sharpness dictionary_sharpness·4^l (same relative overlap).
+  int dictionary_levels = 3;
+  int dictionary_base = 24;
+  double dictionary_sharpness = 3.0;
+  int iterations = 12;                // alternations of the albedo and light solves
+  double albedo_cell_m = 0;           // albedo grid cell (metres); 0: 1/8 of the aabb's largest side
+  double albedo_prior = 0.5;          // grey-world prior that fixes the scale when the near field does not
+  double albedo_prior_weight = 1e-3;  // its weight, per cell, relative to one sample
+  double loss_epsilon = 0.05;         // relative loss floor in units of the mean observed luminance
+  double robust_scale = 0.3;
+  // Minimum-energy prior on the light (relative to the data term): light that
+  // no sample sees stays dark. 0 disables it.
+  double light_energy_weight = 1e-3;  // Cauchy scale of the relative residual (outliers: emitters, tags, bad normals)
+  // The estimate is negligible when E_env / E_nerf (luminance) is below this
+  // both over the surface samples and at the volume's centre.
+  double negligible_ratio = 0.05;
+  uint64_t seed = 1;  // views, pixels and ray rotations
+
+  // "fast", "balanced" (the defaults), "accurate"; InputError otherwise.
+  static EnvEstimateOptions Preset(const std::string& name);
+  // Every problem as "field: what is wrong (what was expected)".
+  std::vector<std::string> Validate() const;
+  std::string ToJson() const;
+  // Sets one field from "key=value" (the CLI's --set); InputError if unknown or bad.
+  void Set(const std::string& key_value);
+};
+
+// The surface samples and their near-field cache.
+struct EnvSurfaceSamples {
+  std::vector<Vec3f> positions;  // x_surf, world
+  std::vector<Vec3f> normals;    // unit
+  std::vector<Vec3f> radiance;   // observed L_o (linear RGB)
+  // Filled by ComputeNearField:
+  std::vector<Vec3f> e_nerf;    // near-field irradiance
+  int rays_per_point = 0;       // R
+  std::vector<Vec3f> ray_dirs;  // R per point (world, unit, cosine-distributed about the normal)
+  std::vector<float> opacity;   // R per point: Ô towards ray_dirs
+  size_t size() const { return positions.size(); }
+};
+
+struct EnvViewReport {
+  int rendered = 0, accepted = 0;
+  std::vector<double> scores;  // BRISQUE score per rendered view (−1: BRISQUE disabled)
+  std::vector<bool> kept;      // per rendered view
+};
+
+// Progress: stage name, done, total (called from the calling thread).
+using EnvProgress = std::function<void(const std::string& stage, size_t done, size_t total)>;
+
+// Views, BRISQUE rejection, surface points, normals and observed radiance.
+EnvSurfaceSamples SampleSurfaces(const NerfField& field, const EnvEstimateOptions& options,
+                                 EnvViewReport* report = nullptr, const EnvProgress& progress = nullptr);
+
+// E_nerf and the visibility cache for every sample (ray casting through the field).
+void ComputeNearField(const NerfField& field, const EnvEstimateOptions& options, EnvSurfaceSamples& samples,
+                      const EnvProgress& progress = nullptr);
+
+struct EnvFitReport {
+  double initial_loss = 0, final_loss = 0;  // robust loss per sample
+  int dictionary_size = 0;
+  int active_lobes = 0;     // lobes with non-zero amplitude at the end
+  double mean_albedo = 0;   // luminance of the fitted albedo, mean over samples
+  double relative_rms = 0;  // RMS of (model − L_o)/L_o over samples (luminance)
+};
+
+// Fits the environment (lobes only; the ratios and flag are set by EstimateEnvironment).
+// `aabb` sets the albedo grid. InputError for invalid options.
+SgMixture FitEnvironment(const EnvSurfaceSamples& samples, const Aabb& aabb, const EnvEstimateOptions& options,
+                         EnvFitReport* report = nullptr, const EnvProgress& progress = nullptr);
+
+// Irradiance E_env(x) = ∫ (1 − Ô) L_env max(n·d, 0) dd of each sample from its cache (as the fit uses it).
+std::vector<Vec3> EnvironmentIrradiance(const EnvSurfaceSamples& samples, const SgMixture& light);
+
+// E_env / E_nerf (luminance) at a point: rays in `directions` Fibonacci
+// directions from `point`, both irradiances averaged over `normals` normals
+// spread over the sphere. +inf when the near field is black and the
+// environment is not, 0 when both are.
+double EnvToNearRatioAt(const NerfField& field, const SgMixture& light, const Vec3& point, int directions = 1024,
+                        int normals = 64, const NerfRenderOptions& render = {});
+
+struct EnvEstimateReport {
+  EnvViewReport views;
+  EnvFitReport fit;
+  size_t samples = 0;
+  double seconds_views = 0, seconds_near_field = 0, seconds_fit = 0;
+};
+
+// The whole estimate: samples, near field, fit, energy ratios and the negligible flag.
+EnvLight EstimateEnvironment(const NerfField& field, const EnvEstimateOptions& options,
+                             EnvEstimateReport* report = nullptr, const EnvProgress& progress = nullptr);
+
+// Relative RMS of irradiance (luminance) between two lights over the unit
+// normals given: sqrt(Σ (E_a − E_b)²) / sqrt(Σ E_b²), b the reference.
+double RelativeIrradianceRms(const std::vector<Vec3>& estimate, const std::vector<Vec3>& reference);
+
+}  // namespace nerfar

@@ -1,0 +1,143 @@
+#include "render/lighting/env_light.h"
+
+#include <cmath>
+#include <nlohmann/json.hpp>
+
+#include "calib/core/atomic_file.h"
+#include "calib/core/error.h"
+#include "calib/core/exr.h"
+#include "calib/core/json.h"
+#include "render/sg/sphere.h"
+
+namespace nerfar {
+namespace {
+
+constexpr double kMinSharpness = 1e-4, kMaxSharpness = 1e4;  // DESIGN.md range
+constexpr double kMaxAmplitude = 1e7;                        // a sun is 1e6; more is a broken file
+constexpr double kAxisTolerance = 1e-3;                      // |p| − 1 accepted (printed with 6+ digits)
+
+Json ToJson(const Vec3& v) { return Json::array({v.x, v.y, v.z}); }
+
+void CheckLobe(const Sg& lobe, const std::string& where, Problems& problems) {
+  const double n = Length(lobe.axis);
+  if (!std::isfinite(n) || std::fabs(n - 1.0) > kAxisTolerance)
+    problems.Add(where + "/axis", "has length " + std::to_string(n) + " (expected a unit vector)");
+  if (!(lobe.sharpness >= kMinSharpness && lobe.sharpness <= kMaxSharpness))
+    problems.Add(where + "/sharpness", "is " + std::to_string(lobe.sharpness) + " (expected 1e-4 to 1e4)");
+  for (int c = 0; c < 3; ++c)
+    if (!(lobe.amplitude[c] >= 0 && lobe.amplitude[c] <= kMaxAmplitude))
+      problems.Add(where + "/amplitude/" + std::to_string(c),
+                   "is " + std::to_string(lobe.amplitude[c]) + " (expected 0 to 1e7)");
+}
+
+void CheckRatio(double value, const char* name, Problems& problems) {
+  if (!(value >= 0 && std::isfinite(value)))
+    problems.Add(std::string("/energy/") + name, "is " + std::to_string(value) + " (expected a finite number >= 0)");
+}
+
+void Check(const EnvLight& env, Problems& problems) {
+  if (env.lobes.size() > static_cast<size_t>(kMaxSgLobes))
+    problems.Add("/lobes", "has " + std::to_string(env.lobes.size()) + " lobes (expected at most " +
+                               std::to_string(kMaxSgLobes) + ")");
+  for (size_t k = 0; k < env.lobes.size(); ++k) CheckLobe(env.lobes[k], "/lobes/" + std::to_string(k), problems);
+  CheckRatio(env.env_to_near_surface, "env_to_near_surface", problems);
+  CheckRatio(env.env_to_near_center, "env_to_near_center", problems);
+  if (!(env.threshold >= 0 && env.threshold <= 1))
+    problems.Add("/energy/threshold", "is " + std::to_string(env.threshold) + " (expected 0 to 1)");
+}
+
+}  // namespace
+
+std::vector<std::string> ValidateEnvLight(const EnvLight& env) {
+  Problems problems("env");
+  Check(env, problems);
+  return problems.items();
+}
+
+std::string SerializeEnvLight(const EnvLight& env) {
+  Problems problems("env light to write");
+  Check(env, problems);
+  NERFAR_CHECK(problems.empty());  // the estimator only produces valid lights
+  Json doc = Json::object();
+  doc["format"] = "nerfar-env";
+  doc["version"] = kEnvFileVersion;
+  Json lobes = Json::array();
+  for (const Sg& lobe : env.lobes) {
+    Json item = Json::object();
+    item["axis"] = ToJson(Normalized(lobe.axis));
+    item["sharpness"] = lobe.sharpness;
+    item["amplitude"] = ToJson(lobe.amplitude);
+    lobes.push_back(item);
+  }
+  doc["lobes"] = lobes;
+  doc["negligible"] = env.negligible;
+  doc["energy"] = {{"env_to_near_surface", env.env_to_near_surface},
+                   {"env_to_near_center", env.env_to_near_center},
+                   {"threshold", env.threshold}};
+  if (!env.source.empty()) doc["source"] = env.source;
+  if (!env.options_json.empty()) doc["options"] = ParseJson(env.options_json, "env options");
+  return DumpJson(doc) + "\n";
+}
+
+EnvLight ParseEnvLight(const std::string& text, const std::string& source) {
+  const Json doc = ParseJson(text, source);
+  Problems problems(source);
+  EnvLight env;
+  JsonObjectReader root(doc, "", problems);
+  root.Allow({"source", "options", "note"});
+  if (root.valid()) {
+    const std::string format = root.String("format");
+    if (root.Has("format") && format != "nerfar-env")
+      problems.Add("/format", "is \"" + format + "\" (expected \"nerfar-env\")");
+    root.Integer("version", kEnvFileVersion, kEnvFileVersion);
+    if (const Json* lobes = root.Array("lobes")) {
+      if (lobes->size() > static_cast<size_t>(kMaxSgLobes))
+        problems.Add("/lobes", "has " + std::to_string(lobes->size()) + " lobes (expected at most " +
+                                   std::to_string(kMaxSgLobes) + ")");
+      else
+        for (size_t k = 0; k < lobes->size(); ++k) {
+          JsonObjectReader item((*lobes)[k], "/lobes/" + std::to_string(k), problems);
+          if (!item.valid()) continue;
+          const auto axis = item.Vec3("axis");
+          const auto amplitude = item.Vec3("amplitude");
+          Sg lobe;
+          lobe.axis = {axis[0], axis[1], axis[2]};
+          lobe.sharpness = item.Number("sharpness");
+          lobe.amplitude = {amplitude[0], amplitude[1], amplitude[2]};
+          item.Finish();
+          CheckLobe(lobe, "/lobes/" + std::to_string(k), problems);
+          lobe.axis = Normalized(lobe.axis);
+          env.lobes.push_back(lobe);
+        }
+    }
+    env.negligible = root.Bool("negligible");
+    if (const Json* energy = root.Object("energy")) {
+      JsonObjectReader e(*energy, "/energy", problems);
+      env.env_to_near_surface = e.Number("env_to_near_surface", 0, 1e30);
+      env.env_to_near_center = e.Number("env_to_near_center", 0, 1e30);
+      env.threshold = e.Number("threshold", 0, 1);
+      e.Finish();
+    }
+    if (root.Has("source")) env.source = root.OptionalString("source").value_or("");
+    if (root.Has("options")) {
+      const Json* options = root.Object("options");
+      if (options != nullptr) {
+        env.options_json = DumpJson(*options, -1);
+        while (!env.options_json.empty() && env.options_json.back() == '\n') env.options_json.pop_back();
+      }
+    }
+    root.Finish();
+  }
+  problems.ThrowIfAny();
+  return env;
+}
+
+void WriteEnvLight(const std::string& path, const EnvLight& env) { WriteFileAtomic(path, SerializeEnvLight(env)); }
+
+EnvLight ReadEnvLight(const std::string& path) { return ParseEnvLight(ReadFileBytes(path, kMaxJsonBytes), path); }
+
+void WriteEnvPreview(const std::string& path, const EnvLight& env, int width, int height) {
+  WriteExrRgb(path, RenderEquirect(env.lobes, width, height), ExrPixelType::kFloat);
+}
+
+}  // namespace nerfar

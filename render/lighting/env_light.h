@@ -1,0 +1,54 @@
+// The distant environment light estimated by `nerfar env` (paper §4.2, eq. 2)
+// and its file, env.json, which insertion reads. The light is a sum of SG
+// lobes (render/sg: axis unit vector in the world frame, z up; sharpness λ;
+// linear RGB amplitude μ in image radiance units). `negligible` says the
+// estimate is small against the NeRF's own near-field light (all light is
+// inside the NeRF): insertion then drops the environment term.
+//
+// env.json (strict: unknown keys are errors):
+//   { "format": "nerfar-env", "version": 1,
+//     "lobes": [ {"axis": [x, y, z], "sharpness": λ, "amplitude": [r, g, b]}, ... ],
+//     "negligible": false,
+//     "energy": { "env_to_near_surface": r1, "env_to_near_center": r2, "threshold": t },
+//     "source": "...", "options": {...} }        (the last two: documentation only)
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "render/sg/sg.h"
+
+namespace nerfar {
+
+inline constexpr int kEnvFileVersion = 1;
+
+struct EnvLight {
+  SgMixture lobes;          // L_env(d) = Σ_k G(d; p_k, λ_k, μ_k); at most kMaxSgLobes
+  bool negligible = false;  // true: insertion drops the environment term
+  // Luminance of the environment's irradiance over that of the NeRF near
+  // field, summed over the surface samples the estimate used (E_env with NeRF
+  // visibility, E_nerf by ray casting).
+  double env_to_near_surface = 0;
+  // The same at the NeRF volume's centre, averaged over normals spread over the sphere.
+  double env_to_near_center = 0;
+  // `negligible` was set because both ratios were below this.
+  double threshold = 0.05;
+  std::string source;        // the .nerf it came from (documentation)
+  std::string options_json;  // the estimator's options as compact JSON ("" or an object; documentation)
+};
+
+// Every problem with the values as "field: what (expected)"; empty when valid.
+std::vector<std::string> ValidateEnvLight(const EnvLight& env);
+
+std::string SerializeEnvLight(const EnvLight& env);
+// InputError "source: /json/pointer: what (expected)" listing every problem.
+EnvLight ParseEnvLight(const std::string& text, const std::string& source);
+
+void WriteEnvLight(const std::string& path, const EnvLight& env);  // atomic
+EnvLight ReadEnvLight(const std::string& path);
+
+// The lobes as a 3-channel float panorama (scenes/README.md equirect
+// convention), e.g. 256 x 128 for the preview EXR.
+void WriteEnvPreview(const std::string& path, const EnvLight& env, int width = 256, int height = 128);
+
+}  // namespace nerfar
