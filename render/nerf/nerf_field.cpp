@@ -1,0 +1,296 @@
+#include "render/nerf/nerf_field.h"
+
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+
+#include "calib/core/error.h"
+#include "calib/core/parallel.h"
+#include "render/nerf/nerf_internal.h"
+
+namespace nerfar {
+
+using nerf_detail::Corners;
+
+NerfField NerfField::Dense(const Aabb& box, double voxel, float density_raw, const Vec3f& log_color) {
+  NERFAR_CHECK(voxel > 0);
+  NerfField f;
+  f.aabb = box;
+  f.origin = Vec3f(box.min);
+  f.voxel_m = float(voxel);
+  const Vec3 extent = box.max - box.min;
+  for (int a = 0; a < 3; ++a) {
+    NERFAR_CHECK(extent[a] > 0);
+    f.res[a] = std::max(2, int(std::ceil(extent[a] / voxel - 1e-6)) + 1);
+    f.bricks[a] = (f.res[a] + kNerfBrickSide - 1) / kNerfBrickSide;
+  }
+  f.brick_table.assign(size_t(f.bricks[0]) * f.bricks[1] * f.bricks[2], -1);
+  for (int bz = 0; bz < f.bricks[2]; ++bz)
+    for (int by = 0; by < f.bricks[1]; ++by)
+      for (int bx = 0; bx < f.bricks[0]; ++bx) f.AllocateBrick(bx, by, bz);
+  std::fill(f.density.begin(), f.density.end(), density_raw);
+  for (size_t s = 0; s < f.SlotCount(); ++s) {
+    float* q = &f.color[s * kNerfColorCoeffs];
+    q[0] = log_color.x, q[4] = log_color.y, q[8] = log_color.z;
+  }
+  f.occupancy.assign(f.BrickCount(), ~uint64_t{0});
+  return f;
+}
+
+int32_t NerfField::Slot(int i, int j, int k) const {
+  if (i < 0 || j < 0 || k < 0 || i >= res[0] || j >= res[1] || k >= res[2]) return -1;
+  const int32_t b = brick_table[(size_t(k >> 2) * bricks[1] + (j >> 2)) * bricks[0] + (i >> 2)];
+  if (b < 0) return -1;
+  return b * kNerfBrickSlots + ((k & 3) * 4 + (j & 3)) * 4 + (i & 3);
+}
+
+int32_t NerfField::AllocateBrick(int bx, int by, int bz) {
+  int32_t& entry = brick_table[(size_t(bz) * bricks[1] + by) * bricks[0] + bx];
+  if (entry >= 0) return entry;
+  entry = int32_t(BrickCount());
+  brick_coords.insert(brick_coords.end(), {bx, by, bz});
+  density.resize(density.size() + kNerfBrickSlots, kNerfEmptyDensityRaw);
+  color.resize(color.size() + size_t(kNerfBrickSlots) * kNerfColorCoeffs, 0.0f);
+  occupancy.push_back(0);
+  return entry;
+}
+
+void NerfField::UpdateOccupancy(float sigma_threshold) {
+  occupancy_sigma = sigma_threshold;
+  const float raw_threshold = std::log(std::max(sigma_threshold, 1e-30f));
+  occupancy.assign(BrickCount(), 0);
+  ParallelFor(
+      BrickCount(),
+      [&](size_t b) {
+        const int bx = brick_coords[3 * b], by = brick_coords[3 * b + 1], bz = brick_coords[3 * b + 2];
+        uint64_t bits = 0;
+        for (int k = 0; k < 4; ++k)
+          for (int j = 0; j < 4; ++j)
+            for (int i = 0; i < 4; ++i) {
+              const int vi = bx * 4 + i, vj = by * 4 + j, vk = bz * 4 + k;
+              if (vi >= res[0] - 1 || vj >= res[1] - 1 || vk >= res[2] - 1) continue;  // not a cell
+              float max_raw = kNerfEmptyDensityRaw;
+              for (int n = 0; n < 8; ++n) {
+                const int32_t s = Slot(vi + (n & 1), vj + ((n >> 1) & 1), vk + (n >> 2));
+                if (s >= 0) max_raw = std::max(max_raw, density[s]);
+              }
+              if (max_raw > raw_threshold) bits |= uint64_t{1} << ((k * 4 + j) * 4 + i);
+            }
+        occupancy[b] = bits;
+      },
+      16);
+}
+
+double NerfField::OccupiedFraction() const {
+  size_t bits = 0;
+  for (uint64_t o : occupancy) bits += size_t(__builtin_popcountll(o));
+  const double cells = double(res[0] - 1) * (res[1] - 1) * (res[2] - 1);
+  return cells > 0 ? double(bits) / cells : 0.0;
+}
+
+std::vector<std::string> NerfField::Validate() const {
+  std::vector<std::string> problems;
+  auto add = [&](const std::string& s) { problems.push_back(s); };
+  if (!(voxel_m > 0) || !std::isfinite(voxel_m)) add("voxel size " + std::to_string(voxel_m) + " (expected > 0)");
+  for (int a = 0; a < 3; ++a) {
+    if (res[a] < 2 || res[a] > 8192) add("resolution " + std::to_string(res[a]) + " (expected 2..8192)");
+    if (bricks[a] != (res[a] + 3) / 4) add("brick table size does not match the resolution");
+    if (!std::isfinite(aabb.min[a]) || !std::isfinite(aabb.max[a]) || !(aabb.max[a] > aabb.min[a]))
+      add("aabb is empty or not finite");
+  }
+  if (!problems.empty()) return problems;
+  const size_t table = size_t(bricks[0]) * bricks[1] * bricks[2];
+  const size_t n = BrickCount();
+  if (brick_table.size() != table)
+    add("brick table has " + std::to_string(brick_table.size()) + " entries (expected " + std::to_string(table) + ")");
+  if (brick_coords.size() % 3 != 0) add("brick coordinates are not triples");
+  if (density.size() != n * kNerfBrickSlots) add("density array size does not match the brick count");
+  if (color.size() != n * kNerfBrickSlots * kNerfColorCoeffs) add("colour array size does not match the brick count");
+  if (occupancy.size() != n) add("occupancy size does not match the brick count");
+  if (!problems.empty()) return problems;
+  for (size_t b = 0; b < n; ++b) {
+    const int bx = brick_coords[3 * b], by = brick_coords[3 * b + 1], bz = brick_coords[3 * b + 2];
+    if (bx < 0 || by < 0 || bz < 0 || bx >= bricks[0] || by >= bricks[1] || bz >= bricks[2] ||
+        brick_table[(size_t(bz) * bricks[1] + by) * bricks[0] + bx] != int32_t(b)) {
+      add("brick " + std::to_string(b) + " has coordinates that disagree with the brick table");
+      break;
+    }
+  }
+  size_t referenced = 0;
+  for (int32_t e : brick_table) {
+    if (e >= int64_t(n) || e < -1) {
+      add("brick table entry " + std::to_string(e) + " out of range");
+      break;
+    }
+    referenced += e >= 0;
+  }
+  if (referenced != n)
+    add("brick table references " + std::to_string(referenced) + " bricks (expected " + std::to_string(n) + ")");
+  for (float v : density)
+    if (!std::isfinite(v)) {
+      add("density holds a non-finite value");
+      break;
+    }
+  for (float v : color)
+    if (!std::isfinite(v)) {
+      add("colour holds a non-finite value");
+      break;
+    }
+  return problems;
+}
+
+float NerfField::Density(const Vec3f& p) const {
+  Corners c;
+  if (empty() || !nerf_detail::LocateGrid(*this, ToGrid(p), c)) return 0.0f;
+  return std::exp(nerf_detail::RawDensity(*this, c));
+}
+
+Vec3f NerfField::Radiance(const Vec3f& p, const Vec3f& dir) const {
+  Corners c;
+  if (empty() || !nerf_detail::LocateGrid(*this, ToGrid(p), c)) return {};
+  float q[kNerfColorCoeffs];
+  nerf_detail::ColorCoeffs(*this, c, q);
+  return nerf_detail::ColorFromCoeffs(q, dir);
+}
+
+Vec3f NerfField::DensityGradient(const Vec3f& p) const {
+  Corners c;
+  const Vec3f g = ToGrid(p);
+  if (empty() || !nerf_detail::LocateGrid(*this, g, c)) return {};
+  const float sigma = std::exp(nerf_detail::RawDensity(*this, c));
+  // ∂s/∂g from the trilinear form: differences of the corner values along each axis.
+  const int i = std::min(int(g.x), res[0] - 2), j = std::min(int(g.y), res[1] - 2), k = std::min(int(g.z), res[2] - 2);
+  const float fr[3] = {g.x - float(i), g.y - float(j), g.z - float(k)};
+  float v[8];
+  for (int n = 0; n < 8; ++n) v[n] = c.slot[n] >= 0 ? density[c.slot[n]] : kNerfEmptyDensityRaw;
+  float grad[3] = {0, 0, 0};
+  for (int n = 0; n < 8; ++n) {
+    const int bit[3] = {n & 1, (n >> 1) & 1, n >> 2};
+    for (int a = 0; a < 3; ++a) {
+      float w = bit[a] ? 1.0f : -1.0f;
+      for (int o = 0; o < 3; ++o)
+        if (o != a) w *= bit[o] ? fr[o] : 1.0f - fr[o];
+      grad[a] += w * v[n];
+    }
+  }
+  const float scale = sigma / voxel_m;  // ∇σ = σ ∇s, and ∂g/∂p = 1/h
+  return {grad[0] * scale, grad[1] * scale, grad[2] * scale};
+}
+
+void NerfField::QueryDensity(const Vec3f* points, size_t count, float* sigma) const {
+  ParallelFor(
+      count, [&](size_t n) { sigma[n] = Density(points[n]); }, 4096);
+}
+
+void NerfField::QueryRadiance(const Vec3f* points, const Vec3f* dirs, size_t count, Vec3f* radiance) const {
+  ParallelFor(
+      count, [&](size_t n) { radiance[n] = Radiance(points[n], dirs[n]); }, 2048);
+}
+
+void NerfField::QueryDensityGradient(const Vec3f* points, size_t count, Vec3f* gradient) const {
+  ParallelFor(
+      count, [&](size_t n) { gradient[n] = DensityGradient(points[n]); }, 2048);
+}
+
+NerfRayResult NerfField::RenderRay(const NerfRay& ray, const NerfRenderOptions& options) const {
+  NerfRayResult result;
+  float transmittance = 1.0f;
+  float depth_sum = 0.0f;
+  const float step = options.step_voxels * voxel_m;
+  nerf_detail::MarchRay(*this, ray, step, 0.5f, [&](float t, float dt, const Corners& c) {
+    const float sigma = std::exp(nerf_detail::RawDensity(*this, c));
+    const float alpha = -std::expm1(-sigma * dt);
+    if (alpha < options.min_alpha) return true;
+    const float w = transmittance * alpha;
+    float q[kNerfColorCoeffs];
+    nerf_detail::ColorCoeffs(*this, c, q);
+    result.color += nerf_detail::ColorFromCoeffs(q, ray.dir) * w;
+    depth_sum += w * t;
+    transmittance *= 1.0f - alpha;
+    return transmittance >= options.min_transmittance;
+  });
+  result.opacity = 1.0f - transmittance;
+  result.depth = result.opacity > 0.0f ? depth_sum / result.opacity : 0.0f;
+  return result;
+}
+
+void NerfField::RenderRays(const NerfRay* rays, size_t count, NerfRayResult* results,
+                           const NerfRenderOptions& options) const {
+  ParallelFor(
+      count, [&](size_t n) { results[n] = RenderRay(rays[n], options); }, 256);
+}
+
+bool IntersectAabb(const Aabb& box, const Vec3f& origin, const Vec3f& dir, float& t_near, float& t_far) {
+  float t0 = 0.0f, t1 = 3.0e38f;
+  for (int a = 0; a < 3; ++a) {
+    const float lo = float(box.min[a]), hi = float(box.max[a]);
+    if (dir[a] == 0.0f) {
+      if (origin[a] < lo || origin[a] > hi) return false;
+      continue;
+    }
+    const float inv = 1.0f / dir[a];
+    float ta = (lo - origin[a]) * inv, tb = (hi - origin[a]) * inv;
+    if (ta > tb) std::swap(ta, tb);
+    t0 = std::max(t0, ta);
+    t1 = std::min(t1, tb);
+  }
+  if (!(t1 > t0)) return false;
+  t_near = t0;
+  t_far = t1;
+  return true;
+}
+
+std::vector<NerfRay> CameraRays(const CameraIntrinsics& camera, const Pose& T_world_camera, const Aabb& aabb) {
+  const int w = camera.width, h = camera.height;
+  std::vector<NerfRay> rays(size_t(w) * h);
+  const Vec3f origin(T_world_camera.translation);
+  ParallelFor(
+      size_t(h),
+      [&](size_t y) {
+        for (int x = 0; x < w; ++x) {
+          Vec3 dir_c;
+          if (camera.HasDistortion()) {
+            dir_c = Unproject(camera, {x + 0.5, double(y) + 0.5});
+          } else {
+            dir_c = Normalized(Vec3((x + 0.5 - camera.cx) / camera.fx, (double(y) + 0.5 - camera.cy) / camera.fy, 1.0));
+          }
+          NerfRay& r = rays[y * w + x];
+          r.origin = origin;
+          r.dir = Vec3f(T_world_camera.Rotate(dir_c));
+          if (!IntersectAabb(aabb, r.origin, r.dir, r.t_near, r.t_far)) r.t_near = r.t_far = 0.0f;
+        }
+      },
+      8);
+  return rays;
+}
+
+std::vector<NerfRay> PointRays(const Vec3f& origin, const std::vector<Vec3f>& dirs, const Aabb& aabb) {
+  std::vector<NerfRay> rays(dirs.size());
+  for (size_t n = 0; n < dirs.size(); ++n) {
+    NerfRay& r = rays[n];
+    r.origin = origin;
+    r.dir = dirs[n];
+    if (!IntersectAabb(aabb, r.origin, r.dir, r.t_near, r.t_far)) r.t_near = r.t_far = 0.0f;
+  }
+  return rays;
+}
+
+NerfImages RenderView(const NerfField& field, const CameraIntrinsics& camera, const Pose& T_world_camera,
+                      const NerfRenderOptions& options) {
+  const std::vector<NerfRay> rays = CameraRays(camera, T_world_camera, field.aabb);
+  std::vector<NerfRayResult> results(rays.size());
+  field.RenderRays(rays.data(), rays.size(), results.data(), options);
+  NerfImages out{ImageF(camera.width, camera.height, 3), ImageF(camera.width, camera.height, 1),
+                 ImageF(camera.width, camera.height, 1)};
+  const Vec3f forward(T_world_camera.rotation.Column(2));
+  for (size_t n = 0; n < rays.size(); ++n) {
+    out.color.pixels[3 * n] = results[n].color.x;
+    out.color.pixels[3 * n + 1] = results[n].color.y;
+    out.color.pixels[3 * n + 2] = results[n].color.z;
+    out.opacity.pixels[n] = results[n].opacity;
+    out.depth.pixels[n] = results[n].opacity > 0.0f ? results[n].depth * Dot(rays[n].dir, forward) : 0.0f;
+  }
+  return out;
+}
+
+}  // namespace nerfar

@@ -1,0 +1,137 @@
+// The HDR radiance field: a sparse explicit voxel grid over the dataset's aabb.
+// Each grid vertex holds a raw log-density s (σ = exp(s), 1/m) and a log-linear
+// colour per channel, log L_c(d) = a_c + b_c·d (d the unit ray direction, world
+// frame), so radiance is positive and spans 1e-6..1e5 without saturating. Both
+// are interpolated trilinearly and then exponentiated. Vertices come in bricks
+// of 4x4x4; unallocated bricks are empty space. A per-cell occupancy bitfield
+// (cell occupied when any corner's σ exceeds the threshold) lets rays skip
+// empty bricks and cells; the trained grid is the query form (no baking).
+// Distances in metres, world frame (z up); radiance linear HDR RGB.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "calib/camera.h"
+#include "calib/core/image.h"
+#include "calib/core/math.h"
+#include "calib/dataset.h"
+
+namespace nerfar {
+
+inline constexpr int kNerfBrickSide = 4;                                                  // vertices per brick side
+inline constexpr int kNerfBrickSlots = kNerfBrickSide * kNerfBrickSide * kNerfBrickSide;  // 64
+inline constexpr int kNerfColorCoeffs = 12;  // per vertex: 3 channels x (a, bx, by, bz)
+// Raw log-density of vertices in unallocated bricks (σ ≈ 1e-13 / m).
+inline constexpr float kNerfEmptyDensityRaw = -30.0f;
+// Raw values are clamped to these ranges by the trainer and the file reader.
+inline constexpr float kNerfDensityRawMin = -30.0f, kNerfDensityRawMax = 14.0f;  // σ up to 1.2e6 / m
+inline constexpr float kNerfLogColorMin = -20.0f, kNerfLogColorMax = 14.0f;      // radiance 2e-9 .. 1.2e6
+
+// A ray x(t) = origin + t·dir (dir unit) integrated over [t_near, t_far].
+struct NerfRay {
+  Vec3f origin;
+  Vec3f dir;
+  float t_near = 0, t_far = 0;
+};
+
+// Volume rendering of one ray (paper §3): colour C = Σ T_k α_k c_k, opacity
+// O = Σ T_k α_k, depth = Σ T_k α_k t_k / O (the expected termination distance
+// along the ray, 0 when O = 0; the paper's unnormalised D is O·depth).
+struct NerfRayResult {
+  Vec3f color;
+  float opacity = 0;
+  float depth = 0;
+};
+
+struct NerfRenderOptions {
+  // Sample spacing along rays in voxels; smaller is more accurate and slower.
+  float step_voxels = 0.5f;
+  // A ray stops once its transmittance falls below this (the rest counts as opaque).
+  float min_transmittance = 1e-3f;
+  // Samples with α below this skip the colour evaluation (their colour weight is negligible).
+  float min_alpha = 1e-5f;
+};
+
+// The grid and its storage layout (public: the trainer and the file reader fill it).
+class NerfField {
+ public:
+  NerfField() = default;
+  // A grid over `aabb` with cubic voxels of side voxel_m and every brick
+  // allocated, each vertex set to the given raw density and log colour.
+  static NerfField Dense(const Aabb& aabb, double voxel_m, float density_raw, const Vec3f& log_color);
+
+  // --- layout
+  Aabb aabb;                          // the box rays are clipped to (metres, world)
+  Vec3f origin;                       // world position of vertex (0,0,0) (= aabb.min)
+  float voxel_m = 0;                  // vertex spacing
+  int res[3] = {0, 0, 0};             // vertices per axis (covers the aabb)
+  int bricks[3] = {0, 0, 0};          // brick table size: ceil(res / 4)
+  float occupancy_sigma = 0;          // σ threshold (1/m) of the occupancy bitfield
+  std::vector<int32_t> brick_table;   // bricks[0]*bricks[1]*bricks[2] (x fastest): -1 or brick index
+  std::vector<int32_t> brick_coords;  // 3 per allocated brick
+  std::vector<float> density;         // raw log-density, 64 per brick (slot = brick*64 + (k*4+j)*4+i)
+  std::vector<float> color;           // 12 per slot
+  std::vector<uint64_t> occupancy;    // per brick: bit (k*4+j)*4+i for the cell at local vertex (i,j,k)
+
+  size_t BrickCount() const { return brick_coords.size() / 3; }
+  size_t SlotCount() const { return density.size(); }
+  bool empty() const { return density.empty(); }
+  // Slot of vertex (i,j,k), or -1 when outside the grid or unallocated.
+  int32_t Slot(int i, int j, int k) const;
+  // Allocates a brick (zero-filled is not done: density kNerfEmptyDensityRaw, colour 0) and returns its index.
+  int32_t AllocateBrick(int bx, int by, int bz);
+  // Recomputes the occupancy bitfield: a cell is occupied when σ at any of its corners > sigma_threshold.
+  void UpdateOccupancy(float sigma_threshold);
+  // Fraction of the grid's cells that are occupied.
+  double OccupiedFraction() const;
+  // Every problem with the layout (sizes, indices, finiteness); empty when consistent.
+  std::vector<std::string> Validate() const;
+
+  // --- point queries (single point; the batched forms below run them in parallel)
+  float Density(const Vec3f& p) const;                     // σ(p), 1/m; 0 outside the grid
+  Vec3f Radiance(const Vec3f& p, const Vec3f& dir) const;  // c(p, d), dir unit; 0 outside the grid
+  Vec3f DensityGradient(const Vec3f& p) const;             // ∇σ (normals: -∇σ/|∇σ|); 0 outside
+
+  // --- batched, multi-threaded queries (results do not depend on the thread count)
+  void QueryDensity(const Vec3f* points, size_t count, float* sigma) const;
+  void QueryRadiance(const Vec3f* points, const Vec3f* dirs, size_t count, Vec3f* radiance) const;
+  void QueryDensityGradient(const Vec3f* points, size_t count, Vec3f* gradient) const;
+
+  // --- volume rendering
+  NerfRayResult RenderRay(const NerfRay& ray, const NerfRenderOptions& options = {}) const;
+  void RenderRays(const NerfRay* rays, size_t count, NerfRayResult* results,
+                  const NerfRenderOptions& options = {}) const;
+
+  // Grid coordinates (units of voxels from the origin) of a world point.
+  Vec3f ToGrid(const Vec3f& p) const { return (p - origin) * (1.0f / voxel_m); }
+};
+
+// [t_near, t_far] of a ray against a box; false (range untouched) if it misses
+// or the box lies behind the origin. t_near >= 0.
+bool IntersectAabb(const Aabb& box, const Vec3f& origin, const Vec3f& dir, float& t_near, float& t_far);
+
+// The compositing rule (paper §4.4): a ray whose pixel shows a virtual object
+// at distance d integrates over [min(d, t_n), min(d, t_f)].
+inline void ClipRayToDepth(NerfRay& ray, float d) {
+  ray.t_near = ray.t_near < d ? ray.t_near : d;
+  ray.t_far = ray.t_far < d ? ray.t_far : d;
+}
+
+// Camera rays through pixel centres (row-major, width*height), clipped to the
+// aabb (rays that miss get an empty range t_near = t_far = 0).
+std::vector<NerfRay> CameraRays(const CameraIntrinsics& camera, const Pose& T_world_camera, const Aabb& aabb);
+// Rays leaving `origin` in the given unit directions, clipped to the aabb.
+std::vector<NerfRay> PointRays(const Vec3f& origin, const std::vector<Vec3f>& dirs, const Aabb& aabb);
+
+// A rendered view: colour (RGB), opacity (1 channel) and depth along the
+// camera's viewing axis (1 channel, metres; 0 where opacity is 0), the
+// convention of the scenes' depth maps.
+struct NerfImages {
+  ImageF color, opacity, depth;
+};
+NerfImages RenderView(const NerfField& field, const CameraIntrinsics& camera, const Pose& T_world_camera,
+                      const NerfRenderOptions& options = {});
+
+}  // namespace nerfar

@@ -1,0 +1,760 @@
+#include "render/nerf/nerf_train.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "calib/core/atomic_file.h"
+#include "calib/core/error.h"
+#include "calib/core/exr.h"
+#include "calib/core/image_io.h"
+#include "calib/core/json.h"
+#include "calib/core/metrics.h"
+#include "calib/core/parallel.h"
+#include "render/nerf/nerf_internal.h"
+
+namespace nerfar {
+
+using nerf_detail::Corners;
+
+// ------------------------------------------------------------------ data
+
+NerfTrainData ReadNerfTrainData(const std::string& dataset_dir) {
+  NerfTrainData data;
+  const Dataset train = ReadDataset(DatasetSplitPath(dataset_dir, "train"));
+  if (!train.aabb) ThrowInputError(train.path, "no aabb (expected the NeRF box, [[min], [max]] in metres)");
+  data.aabb = *train.aabb;
+  data.source = train.path;
+  std::optional<Dataset> test;
+  const std::string test_path = DatasetSplitPath(dataset_dir, "test");
+  std::error_code error;
+  if (std::filesystem::is_regular_file(test_path, error)) test = ReadDataset(test_path);
+  auto load = [](const Dataset& set, std::vector<NerfView>& views) {
+    views.resize(set.frames.size());
+    ParallelFor(
+        set.frames.size(),
+        [&](size_t n) {
+          const DatasetFrame& frame = set.frames[n];
+          NerfView& v = views[n];
+          v.name = std::filesystem::path(frame.file_path).stem().string();
+          v.image_path = frame.image_path;
+          v.camera = set.camera;
+          v.T_world_camera = frame.T_world_camera;
+          v.rgb = ReadExrRgb(frame.image_path);
+          if (v.rgb.width != set.camera.width || v.rgb.height != set.camera.height)
+            ThrowInputError(frame.image_path, "image is " + std::to_string(v.rgb.width) + "x" +
+                                                  std::to_string(v.rgb.height) + " (expected " +
+                                                  std::to_string(set.camera.width) + "x" +
+                                                  std::to_string(set.camera.height) + " from the transforms file)");
+          for (float& x : v.rgb.pixels) x = std::max(x, 0.0f);  // radiance is non-negative
+        },
+        1);
+  };
+  load(train, data.train);
+  if (test) load(*test, data.held_out);
+  if (data.train.empty()) ThrowInputError(train.path, "no training frames (expected at least one)");
+  return data;
+}
+
+// --------------------------------------------------------------- options
+
+NerfTrainOptions NerfTrainOptions::Preset(const std::string& name) {
+  NerfTrainOptions o;
+  if (name == "fast") {
+    o.steps = 700;
+    o.rays_per_step = 4096;
+    o.coarse_voxel_m = 0.01;
+    o.levels = 2;
+    o.last_level_start = 0.35;
+  } else if (name == "balanced") {
+    o.steps = 2500;
+    o.rays_per_step = 8192;
+    o.coarse_voxel_m = 0.01;
+    o.levels = 3;
+    o.last_level_start = 0.45;
+  } else if (name == "accurate") {
+    o.steps = 5000;
+    o.rays_per_step = 8192;
+    o.coarse_voxel_m = 0.01;
+    o.levels = 3;
+    o.last_level_start = 0.4;
+    o.step_voxels = 0.4;
+  } else {
+    throw InputError("preset '" + name + "' (expected fast, balanced or accurate)");
+  }
+  return o;
+}
+
+std::vector<std::string> NerfTrainOptions::Validate() const {
+  std::vector<std::string> p;
+  auto check = [&](bool ok, const std::string& what) {
+    if (!ok) p.push_back(what);
+  };
+  check(steps >= 1 && steps <= 10000000, "steps: " + std::to_string(steps) + " (expected 1..1e7)");
+  check(rays_per_step >= 1 && rays_per_step <= (1 << 22),
+        "rays_per_step: " + std::to_string(rays_per_step) + " (expected 1..4194304)");
+  check(coarse_voxel_m > 1e-4 && coarse_voxel_m < 1.0,
+        "coarse_voxel_m: " + std::to_string(coarse_voxel_m) + " (expected 1e-4..1 m)");
+  check(levels >= 1 && levels <= 6, "levels: " + std::to_string(levels) + " (expected 1..6)");
+  check(last_level_start >= 0 && last_level_start < 1, "last_level_start: (expected 0 <= x < 1)");
+  check(step_voxels > 0.05 && step_voxels <= 2, "step_voxels: (expected 0.05..2)");
+  check(lr_density > 0 && lr_density < 10 && lr_color > 0 && lr_color < 10, "lr_density, lr_color: (expected 0..10)");
+  check(lr_final_factor > 0 && lr_final_factor <= 1, "lr_final_factor: (expected 0 < x <= 1)");
+  check(tv_density >= 0 && tv_color >= 0, "tv_density, tv_color: (expected >= 0)");
+  check(background_weight >= 0, "background_weight: (expected >= 0)");
+  check(loss_epsilon > 0, "loss_epsilon: (expected > 0)");
+  check(occupancy_every >= 1, "occupancy_every: (expected >= 1)");
+  check(occupancy_alpha >= 0 && occupancy_alpha < 0.5, "occupancy_alpha: (expected 0..0.5)");
+  check(initial_sigma > 0 && initial_sigma < 1e4, "initial_sigma: (expected 0..1e4 per metre)");
+  check(max_seconds >= 0, "max_seconds: (expected >= 0)");
+  check(eval_views >= 0, "eval_views: (expected >= 0)");
+  return p;
+}
+
+namespace {
+// One table of the options' fields so ToJson and Set never drift apart.
+template <typename Visit>
+void VisitFields(NerfTrainOptions& o, Visit&& visit) {
+  visit("steps", o.steps);
+  visit("rays_per_step", o.rays_per_step);
+  visit("coarse_voxel_m", o.coarse_voxel_m);
+  visit("levels", o.levels);
+  visit("last_level_start", o.last_level_start);
+  visit("step_voxels", o.step_voxels);
+  visit("lr_density", o.lr_density);
+  visit("lr_color", o.lr_color);
+  visit("lr_final_factor", o.lr_final_factor);
+  visit("tv_density", o.tv_density);
+  visit("tv_color", o.tv_color);
+  visit("background_weight", o.background_weight);
+  visit("loss_epsilon", o.loss_epsilon);
+  visit("occupancy_every", o.occupancy_every);
+  visit("occupancy_alpha", o.occupancy_alpha);
+  visit("initial_sigma", o.initial_sigma);
+  visit("seed", o.seed);
+  visit("max_seconds", o.max_seconds);
+  visit("eval_views", o.eval_views);
+}
+}  // namespace
+
+std::string NerfTrainOptions::ToJson() const {
+  Json j = Json::object();
+  NerfTrainOptions copy = *this;
+  VisitFields(copy, [&](const char* key, auto& value) { j[key] = value; });
+  return j.dump();
+}
+
+void NerfTrainOptions::Set(const std::string& key_value) {
+  const size_t eq = key_value.find('=');
+  if (eq == std::string::npos) throw InputError("--set '" + key_value + "' (expected key=value)");
+  const std::string key = key_value.substr(0, eq), text = key_value.substr(eq + 1);
+  bool found = false;
+  VisitFields(*this, [&](const char* name, auto& value) {
+    if (key != name) return;
+    found = true;
+    char* end = nullptr;
+    errno = 0;
+    const double v = std::strtod(text.c_str(), &end);
+    if (text.empty() || *end != '\0' || errno != 0 || !std::isfinite(v))
+      throw InputError("--set " + key + ": '" + text + "' is not a number");
+    using T = std::decay_t<decltype(value)>;
+    if constexpr (std::is_integral_v<T>) {
+      if (v != std::floor(v) || v < 0 || v > 9.0e15)
+        throw InputError("--set " + key + ": '" + text + "' (expected a whole number)");
+    }
+    value = static_cast<T>(v);
+  });
+  if (!found) throw InputError("--set: unknown option '" + key + "' (see the option list in 'nerfar train --help')");
+}
+
+// --------------------------------------------------------------- trainer
+
+namespace {
+
+uint64_t Mix(uint64_t x) {  // splitmix64 finaliser
+  x += 0x9e3779b97f4a7c15ull;
+  x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ull;
+  x = (x ^ (x >> 27)) * 0x94d049bb133111ebull;
+  return x ^ (x >> 31);
+}
+float Unit(uint64_t h) { return float(h >> 40) * (1.0f / 16777216.0f); }  // [0, 1)
+
+constexpr size_t kRaysPerChunk = 256;  // fixed chunking: results independent of threads
+constexpr int kScatterParts = 2;       // fixed slot partitions for the gradient scatter
+constexpr float kTrainMinTransmittance = 1e-4f;
+
+struct Sample {
+  Corners corners;
+  float sigma, alpha, dt;
+  Vec3f color;
+};
+
+// The gradient a sample sends to its 8 corners.
+struct Record {
+  int32_t slot[8];
+  float weight[8];
+  float g_density;   // dL/d(raw density)
+  float g_color[3];  // dL/d(log radiance) per channel
+  Vec3f dir;
+};
+
+}  // namespace
+
+struct NerfTrainer::State {
+  const NerfTrainData& data;
+  NerfTrainOptions options;
+  NerfField field;
+  int step = 0;
+  int level = 0;
+  int adam_t = 0;             // Adam steps since the level started (bias correction)
+  double elapsed_before = 0;  // seconds trained before this process (checkpoints)
+  std::chrono::steady_clock::time_point start = std::chrono::steady_clock::now();
+  double epsilon = 1;                   // absolute ε of the loss
+  std::vector<uint64_t> pixel_offsets;  // prefix sums of training pixel counts
+
+  // Optimiser state, per slot.
+  std::vector<float> m_density, v_density, g_density;
+  std::vector<float> m_color, v_color, g_color;
+  std::vector<uint8_t> touched;
+  std::vector<std::vector<Record>> records;         // per chunk
+  std::vector<std::vector<int32_t>> touched_lists;  // per scatter partition
+
+  explicit State(const NerfTrainData& d) : data(d) {}
+
+  double Elapsed() const {
+    return elapsed_before + std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  }
+  double Progress() const {
+    double p = double(step) / options.steps;
+    if (options.max_seconds > 0) p = std::max(p, Elapsed() / options.max_seconds);
+    return std::min(p, 1.0);
+  }
+  double LevelStart(int l) const {
+    if (l == 0) return 0.0;
+    return options.last_level_start * double(l) / double(options.levels - 1);
+  }
+  float OccupancySigmaFor(float voxel) const { return float(-std::log1p(-options.occupancy_alpha) / voxel); }
+  float OccupancySigma() const { return OccupancySigmaFor(field.voxel_m); }
+  void ResetOptimiser() {
+    const size_t n = field.SlotCount();
+    m_density.assign(n, 0.0f);
+    v_density.assign(n, 0.0f);
+    g_density.assign(n, 0.0f);
+    m_color.assign(n * kNerfColorCoeffs, 0.0f);
+    v_color.assign(n * kNerfColorCoeffs, 0.0f);
+    g_color.assign(n * kNerfColorCoeffs, 0.0f);
+    touched.assign(n, 0);
+    adam_t = 0;
+  }
+  void Upsample();
+  double DoStep();
+};
+
+void NerfTrainer::State::Upsample() {
+  const NerfField& old = field;
+  NerfField next;
+  next.aabb = old.aabb;
+  next.origin = old.origin;
+  next.voxel_m = old.voxel_m * 0.5f;
+  for (int a = 0; a < 3; ++a) {
+    const double extent = old.aabb.max[a] - old.aabb.min[a];
+    next.res[a] = std::max(2, int(std::ceil(extent / next.voxel_m - 1e-6)) + 1);
+    next.bricks[a] = (next.res[a] + 3) / 4;
+  }
+  next.brick_table.assign(size_t(next.bricks[0]) * next.bricks[1] * next.bricks[2], -1);
+  // New bricks around every occupied old cell (dilated by one old cell), in table order.
+  std::vector<uint8_t> wanted(next.brick_table.size(), 0);
+  for (size_t b = 0; b < old.BrickCount(); ++b) {
+    const uint64_t bits = old.occupancy[b];
+    if (!bits) continue;
+    for (int cell = 0; cell < 64; ++cell) {
+      if (!((bits >> cell) & 1u)) continue;
+      const int c[3] = {old.brick_coords[3 * b] * 4 + (cell & 3), old.brick_coords[3 * b + 1] * 4 + ((cell >> 2) & 3),
+                        old.brick_coords[3 * b + 2] * 4 + (cell >> 4)};
+      int lo[3], hi[3];
+      for (int a = 0; a < 3; ++a) {
+        lo[a] = std::max(0, (2 * (c[a] - 1)) / 4);
+        hi[a] = std::min(next.bricks[a] - 1, (2 * (c[a] + 2)) / 4);
+      }
+      for (int z = lo[2]; z <= hi[2]; ++z)
+        for (int y = lo[1]; y <= hi[1]; ++y)
+          for (int x = lo[0]; x <= hi[0]; ++x) wanted[(size_t(z) * next.bricks[1] + y) * next.bricks[0] + x] = 1;
+    }
+  }
+  for (int z = 0; z < next.bricks[2]; ++z)
+    for (int y = 0; y < next.bricks[1]; ++y)
+      for (int x = 0; x < next.bricks[0]; ++x)
+        if (wanted[(size_t(z) * next.bricks[1] + y) * next.bricks[0] + x]) next.AllocateBrick(x, y, z);
+  // Values by trilinear interpolation of the old grid.
+  ParallelFor(
+      next.BrickCount(),
+      [&](size_t b) {
+        for (int v = 0; v < kNerfBrickSlots; ++v) {
+          const int i = next.brick_coords[3 * b] * 4 + (v & 3), j = next.brick_coords[3 * b + 1] * 4 + ((v >> 2) & 3),
+                    k = next.brick_coords[3 * b + 2] * 4 + (v >> 4);
+          const size_t s = b * kNerfBrickSlots + v;
+          Corners c;
+          const Vec3f g(float(i) * 0.5f, float(j) * 0.5f, float(k) * 0.5f);
+          if (i >= next.res[0] || j >= next.res[1] || k >= next.res[2] || !nerf_detail::LocateGrid(old, g, c)) continue;
+          next.density[s] = nerf_detail::RawDensity(old, c);
+          nerf_detail::ColorCoeffs(old, c, &next.color[s * kNerfColorCoeffs]);
+        }
+      },
+      16);
+  next.UpdateOccupancy(float(-std::log1p(-options.occupancy_alpha) / next.voxel_m));
+  field = std::move(next);
+  ResetOptimiser();
+}
+
+double NerfTrainer::State::DoStep() {
+  // Level schedule.
+  const double p = Progress();
+  while (level + 1 < options.levels && p >= LevelStart(level + 1)) {
+    Upsample();
+    ++level;
+  }
+  const double lr_scale = std::pow(options.lr_final_factor, p);
+  const float lr_d = float(options.lr_density * lr_scale), lr_c = float(options.lr_color * lr_scale);
+  const float step_m = float(options.step_voxels) * field.voxel_m;
+  const size_t batch = size_t(options.rays_per_step);
+  const size_t chunks = (batch + kRaysPerChunk - 1) / kRaysPerChunk;
+  records.resize(chunks);
+  std::vector<double> chunk_loss(chunks, 0.0);
+  const uint64_t total_pixels = pixel_offsets.back();
+  const float inv_batch = 1.0f / float(batch);
+  const float eps = float(epsilon);
+  const float bg_w = float(options.background_weight);
+  const uint64_t step_key = Mix(options.seed * 0x9e37ull + uint64_t(step));
+
+  ParallelForChunks(chunks, 1, [&](size_t chunk_begin, size_t chunk_end) {
+    thread_local std::vector<Sample> samples;
+    for (size_t chunk = chunk_begin; chunk < chunk_end; ++chunk) {
+      std::vector<Record>& out = records[chunk];
+      out.clear();
+      double loss_sum = 0.0;
+      const size_t r_end = std::min(batch, (chunk + 1) * kRaysPerChunk);
+      for (size_t r = chunk * kRaysPerChunk; r < r_end; ++r) {
+        const uint64_t h0 = Mix(step_key ^ Mix(r));
+        const uint64_t h1 = Mix(h0), h2 = Mix(h1), h3 = Mix(h2);
+        const uint64_t pixel = h0 % total_pixels;
+        const size_t view_index =
+            size_t(std::upper_bound(pixel_offsets.begin(), pixel_offsets.end(), pixel) - pixel_offsets.begin()) - 1;
+        const NerfView& view = data.train[view_index];
+        const uint64_t local = pixel - pixel_offsets[view_index];
+        const int px = int(local % uint64_t(view.camera.width)), py = int(local / uint64_t(view.camera.width));
+        const float* target = view.rgb.Pixel(px, py);
+        const double sx = px + Unit(h1), sy = py + Unit(h2);
+        const Vec3 dir_c =
+            view.camera.HasDistortion()
+                ? Unproject(view.camera, {sx, sy})
+                : Normalized(Vec3((sx - view.camera.cx) / view.camera.fx, (sy - view.camera.cy) / view.camera.fy, 1.0));
+        NerfRay ray;
+        ray.origin = Vec3f(view.T_world_camera.translation);
+        ray.dir = Vec3f(view.T_world_camera.Rotate(dir_c));
+        const bool background = target[0] == 0.0f && target[1] == 0.0f && target[2] == 0.0f;
+        if (!IntersectAabb(field.aabb, ray.origin, ray.dir, ray.t_near, ray.t_far)) {
+          // Nothing to learn from a ray outside the box; count its (constant) loss.
+          for (int ch = 0; ch < 3; ++ch) loss_sum += double(target[ch]) * target[ch] / (double(eps) * eps) / 3.0;
+          continue;
+        }
+        // Forward.
+        samples.clear();
+        float transmittance = 1.0f;
+        Vec3f color;
+        const float offset = Unit(h3);
+        nerf_detail::MarchRay(field, ray, step_m, offset, [&](float, float dt, const Corners& c) {
+          Sample s;
+          s.corners = c;
+          s.sigma = std::exp(nerf_detail::RawDensity(field, c));
+          s.alpha = -std::expm1(-s.sigma * dt);
+          s.dt = dt;
+          float q[kNerfColorCoeffs];
+          nerf_detail::ColorCoeffs(field, c, q);
+          s.color = nerf_detail::ColorFromCoeffs(q, ray.dir);
+          color += s.color * (transmittance * s.alpha);
+          transmittance *= 1.0f - s.alpha;
+          samples.push_back(s);
+          return transmittance >= kTrainMinTransmittance;
+        });
+        const float opacity = 1.0f - transmittance;
+        // Loss and its gradient with respect to the rendered colour and opacity.
+        float g_c[3];
+        for (int ch = 0; ch < 3; ++ch) {
+          const float pred = color[ch], denom = pred + eps;
+          const float diff = pred - target[ch];
+          loss_sum += double(diff) * diff / (double(denom) * denom) / 3.0;
+          g_c[ch] = 2.0f * diff / (denom * denom) / 3.0f * inv_batch;
+        }
+        float g_o = 0.0f;
+        if (background) {
+          loss_sum += double(bg_w) * opacity * opacity;
+          g_o = 2.0f * bg_w * opacity * inv_batch;
+        }
+        // Backward (front to back with the suffix colour S_i = C - prefix).
+        float t_i = 1.0f;
+        Vec3f prefix;
+        for (const Sample& s : samples) {
+          const float w = t_i * s.alpha;
+          const float t_next = t_i * (1.0f - s.alpha);
+          prefix += s.color * w;
+          const Vec3f suffix = color - prefix;
+          float g_raw = 0.0f;
+          Record rec;
+          for (int ch = 0; ch < 3; ++ch) {
+            g_raw += g_c[ch] * (t_next * s.color[ch] - suffix[ch]);
+            rec.g_color[ch] = g_c[ch] * w * s.color[ch];
+          }
+          g_raw += g_o * transmittance;
+          rec.g_density = g_raw * s.dt * s.sigma;
+          std::memcpy(rec.slot, s.corners.slot, sizeof rec.slot);
+          std::memcpy(rec.weight, s.corners.weight, sizeof rec.weight);
+          rec.dir = ray.dir;
+          out.push_back(rec);
+          t_i = t_next;
+        }
+      }
+      chunk_loss[chunk] = loss_sum;
+    }
+  });
+
+  // Scatter the records into the gradient arrays: partition p owns a slot
+  // range and walks all records in chunk order, so sums are deterministic.
+  const size_t slots = field.SlotCount();
+  touched_lists.resize(kScatterParts);
+  ParallelForChunks(kScatterParts, 1, [&](size_t part_begin, size_t part_end) {
+    for (size_t part = part_begin; part < part_end; ++part) {
+      const int32_t lo = int32_t(slots * part / kScatterParts), hi = int32_t(slots * (part + 1) / kScatterParts);
+      std::vector<int32_t>& list = touched_lists[part];
+      list.clear();
+      for (const std::vector<Record>& chunk : records)
+        for (const Record& rec : chunk) {
+          for (int n = 0; n < 8; ++n) {
+            const int32_t s = rec.slot[n];
+            if (s < lo || s >= hi) continue;
+            const float w = rec.weight[n];
+            if (!touched[s]) {
+              touched[s] = 1;
+              list.push_back(s);
+            }
+            g_density[s] += w * rec.g_density;
+            float* g = &g_color[size_t(s) * kNerfColorCoeffs];
+            for (int ch = 0; ch < 3; ++ch) {
+              const float gc = w * rec.g_color[ch];
+              g[4 * ch] += gc;
+              g[4 * ch + 1] += gc * rec.dir.x;
+              g[4 * ch + 2] += gc * rec.dir.y;
+              g[4 * ch + 3] += gc * rec.dir.z;
+            }
+          }
+        }
+    }
+  });
+
+  // Sparse Adam on the touched vertices, with the TV prior's gradient.
+  ++adam_t;
+  const float b1 = 0.9f, b2 = 0.99f;
+  const float c1 = 1.0f / (1.0f - std::pow(b1, float(adam_t))), c2 = 1.0f / (1.0f - std::pow(b2, float(adam_t)));
+  const float tv_d = float(options.tv_density), tv_c = float(options.tv_color);
+  std::vector<int32_t> all;
+  for (const auto& list : touched_lists) all.insert(all.end(), list.begin(), list.end());
+  // Parameters are read by the TV term while being updated: compute every
+  // update first (reading only), then write, so the order does not matter.
+  std::vector<float> new_density(all.size()), new_color(all.size() * kNerfColorCoeffs);
+  ParallelFor(
+      all.size(),
+      [&](size_t n) {
+        const int32_t s = all[n];
+        const size_t b = size_t(s) / kNerfBrickSlots;
+        const int v = s % kNerfBrickSlots;
+        const int i = field.brick_coords[3 * b] * 4 + (v & 3), j = field.brick_coords[3 * b + 1] * 4 + ((v >> 2) & 3),
+                  k = field.brick_coords[3 * b + 2] * 4 + (v >> 4);
+        float gd = g_density[s];
+        float gc[kNerfColorCoeffs];
+        std::memcpy(gc, &g_color[size_t(s) * kNerfColorCoeffs], sizeof gc);
+        if (tv_d > 0 || tv_c > 0) {
+          const int nb[6][3] = {{i - 1, j, k}, {i + 1, j, k}, {i, j - 1, k},
+                                {i, j + 1, k}, {i, j, k - 1}, {i, j, k + 1}};
+          const float own = std::max(field.density[s], -10.0f);
+          const float* own_c = &field.color[size_t(s) * kNerfColorCoeffs];
+          for (const auto& q : nb) {
+            const int32_t t = field.Slot(q[0], q[1], q[2]);
+            if (t < 0) continue;
+            gd += tv_d * (own - std::max(field.density[t], -10.0f));
+            const float* other = &field.color[size_t(t) * kNerfColorCoeffs];
+            for (int m = 0; m < kNerfColorCoeffs; ++m) gc[m] += tv_c * (own_c[m] - other[m]);
+          }
+        }
+        float& md = m_density[s];
+        float& vd = v_density[s];
+        md = b1 * md + (1 - b1) * gd;
+        vd = b2 * vd + (1 - b2) * gd * gd;
+        new_density[n] = std::clamp(field.density[s] - lr_d * (md * c1) / (std::sqrt(vd * c2) + 1e-8f),
+                                    kNerfDensityRawMin, kNerfDensityRawMax);
+        for (int m = 0; m < kNerfColorCoeffs; ++m) {
+          const size_t idx = size_t(s) * kNerfColorCoeffs + m;
+          m_color[idx] = b1 * m_color[idx] + (1 - b1) * gc[m];
+          v_color[idx] = b2 * v_color[idx] + (1 - b2) * gc[m] * gc[m];
+          float value = field.color[idx] - lr_c * (m_color[idx] * c1) / (std::sqrt(v_color[idx] * c2) + 1e-8f);
+          if (m % 4 == 0)
+            value = std::clamp(value, kNerfLogColorMin, kNerfLogColorMax);
+          else
+            value = std::clamp(value, -10.0f, 10.0f);
+          new_color[n * kNerfColorCoeffs + m] = value;
+        }
+      },
+      1024);
+  ParallelFor(
+      all.size(),
+      [&](size_t n) {
+        const int32_t s = all[n];
+        field.density[s] = new_density[n];
+        std::memcpy(&field.color[size_t(s) * kNerfColorCoeffs], &new_color[n * kNerfColorCoeffs],
+                    sizeof(float) * kNerfColorCoeffs);
+        g_density[s] = 0.0f;
+        std::memset(&g_color[size_t(s) * kNerfColorCoeffs], 0, sizeof(float) * kNerfColorCoeffs);
+        touched[s] = 0;
+      },
+      4096);
+
+  ++step;
+  if (step % options.occupancy_every == 0) field.UpdateOccupancy(OccupancySigma());
+  double loss = 0.0;
+  for (double l : chunk_loss) loss += l;
+  return loss / double(batch);
+}
+
+NerfTrainer::NerfTrainer(const NerfTrainData& data, const NerfTrainOptions& options)
+    : state_(std::make_unique<State>(data)) {
+  State& s = *state_;
+  s.options = options;
+  const std::vector<std::string> problems = options.Validate();
+  if (!problems.empty()) {
+    Problems list("NeRF training options");
+    for (const std::string& p : problems) list.Add("", p);
+    list.ThrowIfAny();
+  }
+  if (data.train.empty()) throw InputError("NeRF training: no training views");
+  s.pixel_offsets.push_back(0);
+  std::vector<float> scales;
+  double sum = 0, count = 0;
+  for (const NerfView& v : data.train) {
+    NERFAR_CHECK_EQ(v.rgb.channels, 3);
+    NERFAR_CHECK_EQ(v.rgb.width, v.camera.width);
+    NERFAR_CHECK_EQ(v.rgb.height, v.camera.height);
+    s.pixel_offsets.push_back(s.pixel_offsets.back() + v.rgb.PixelCount());
+    const float k = ExposureForPercentile(v.rgb, 0.99);
+    if (std::isfinite(k) && k > 0) scales.push_back(1.0f / k);
+    for (size_t n = 0; n < v.rgb.PixelCount(); ++n) {
+      const float l = Luminance(&v.rgb.pixels[3 * n], 3);
+      if (l > 0) sum += l, count += 1;
+    }
+  }
+  std::sort(scales.begin(), scales.end());
+  const double p99 = scales.empty() ? 1.0 : scales[scales.size() / 2];
+  s.epsilon = options.loss_epsilon * (p99 > 0 ? p99 : 1.0);
+  const double mean = count > 0 ? sum / count : 0.1;
+  const float log_mean = float(std::log(std::max(mean, 1e-6)));
+  s.field = NerfField::Dense(data.aabb, options.coarse_voxel_m, float(std::log(options.initial_sigma)),
+                             Vec3f(log_mean, log_mean, log_mean));
+  s.field.occupancy_sigma = s.OccupancySigma();
+  s.ResetOptimiser();
+}
+
+NerfTrainer::~NerfTrainer() = default;
+
+double NerfTrainer::Step() { return state_->DoStep(); }
+bool NerfTrainer::Done() const { return state_->Progress() >= 1.0; }
+int NerfTrainer::step() const { return state_->step; }
+int NerfTrainer::level() const { return state_->level; }
+double NerfTrainer::progress() const { return state_->Progress(); }
+double NerfTrainer::elapsed_seconds() const { return state_->Elapsed(); }
+const NerfField& NerfTrainer::field() const { return state_->field; }
+
+double NerfTrainer::HeldOutPsnr(int max_views) const {
+  const State& s = *state_;
+  const size_t n = max_views > 0 ? std::min<size_t>(size_t(max_views), s.data.held_out.size()) : s.data.held_out.size();
+  if (n == 0) return std::nan("");
+  NerfRenderOptions render;
+  render.step_voxels = float(s.options.step_voxels);
+  double sum = 0;
+  for (size_t v = 0; v < n; ++v) {
+    const NerfView& view = s.data.held_out[v];
+    sum += PsnrTm(RenderView(s.field, view.camera, view.T_world_camera, render).color, view.rgb);
+  }
+  return sum / double(n);
+}
+
+NerfField NerfTrainer::FinalField() const {
+  NerfField f = state_->field;
+  f.UpdateOccupancy(state_->OccupancySigma());
+  return f;
+}
+
+// ------------------------------------------------------------ checkpoints
+
+namespace {
+constexpr char kCheckpointMagic[8] = {'N', 'E', 'R', 'F', 'C', 'K', 'P', '1'};
+
+template <typename T>
+void PutVec(std::string& out, const std::vector<T>& v) {
+  const uint64_t n = v.size();
+  out.append(reinterpret_cast<const char*>(&n), 8);
+  out.append(reinterpret_cast<const char*>(v.data()), v.size() * sizeof(T));
+}
+template <typename T>
+void Put(std::string& out, const T& v) {
+  out.append(reinterpret_cast<const char*>(&v), sizeof(T));
+}
+void PutString(std::string& out, const std::string& s) {
+  Put(out, uint64_t(s.size()));
+  out += s;
+}
+
+class CheckpointReader {
+ public:
+  CheckpointReader(const std::string& bytes, const std::string& path) : b_(bytes), path_(path) {}
+  void Need(uint64_t n) {
+    if (b_.size() - pos_ < n) ThrowInputError(path_, "checkpoint is truncated (delete it to start over)");
+  }
+  template <typename T>
+  T Get() {
+    Need(sizeof(T));
+    T v;
+    std::memcpy(&v, b_.data() + pos_, sizeof(T));
+    pos_ += sizeof(T);
+    return v;
+  }
+  template <typename T>
+  std::vector<T> GetVec(uint64_t expected) {
+    const uint64_t n = Get<uint64_t>();
+    if (n != expected)
+      ThrowInputError(
+          path_, "checkpoint array has " + std::to_string(n) + " values (expected " + std::to_string(expected) + ")");
+    Need(n * sizeof(T));
+    std::vector<T> v(n);
+    std::memcpy(v.data(), b_.data() + pos_, n * sizeof(T));
+    pos_ += n * sizeof(T);
+    return v;
+  }
+  std::string GetString() {
+    const uint64_t n = Get<uint64_t>();
+    Need(n);
+    std::string s = b_.substr(pos_, n);
+    pos_ += n;
+    return s;
+  }
+  bool AtEnd() const { return pos_ == b_.size(); }
+
+ private:
+  const std::string& b_;
+  const std::string& path_;
+  size_t pos_ = 0;
+};
+
+uint64_t Checksum(const std::string& s, size_t n) {
+  uint64_t h = 1469598103934665603ull;
+  for (size_t i = 0; i < n; ++i) h = (h ^ static_cast<unsigned char>(s[i])) * 1099511628211ull;
+  return h;
+}
+}  // namespace
+
+void NerfTrainer::SaveCheckpoint(const std::string& path) const {
+  const State& s = *state_;
+  std::string out(kCheckpointMagic, 8);
+  NerfTrainOptions identity = s.options;
+  identity.max_seconds = 0;  // a resumed run may have another time budget
+  PutString(out, identity.ToJson());
+  PutString(out, s.data.source + " " + std::to_string(s.data.train.size()));
+  Put(out, int32_t(s.step));
+  Put(out, int32_t(s.level));
+  Put(out, int32_t(s.adam_t));
+  Put(out, s.Elapsed());
+  const NerfField& f = s.field;
+  Put(out, f.voxel_m);
+  for (int a = 0; a < 3; ++a) Put(out, int32_t(f.res[a]));
+  PutVec(out, f.brick_coords);
+  PutVec(out, f.density);
+  PutVec(out, f.color);
+  PutVec(out, f.occupancy);
+  PutVec(out, s.m_density);
+  PutVec(out, s.v_density);
+  PutVec(out, s.m_color);
+  PutVec(out, s.v_color);
+  Put(out, Checksum(out, out.size()));
+  WriteFileAtomic(path, out);
+}
+
+void NerfTrainer::LoadCheckpoint(const std::string& path) {
+  State& s = *state_;
+  const std::string bytes = ReadFileBytes(path, size_t{16} << 30);
+  if (bytes.size() < 16 || std::memcmp(bytes.data(), kCheckpointMagic, 8) != 0)
+    ThrowInputError(path, "not a nerfar training checkpoint (expected the magic 'NERFCKP1')");
+  uint64_t sum;
+  std::memcpy(&sum, bytes.data() + bytes.size() - 8, 8);
+  if (Checksum(bytes, bytes.size() - 8) != sum)
+    ThrowInputError(path, "checkpoint checksum mismatch (corrupt; delete it to start over)");
+  CheckpointReader r(bytes, path);
+  r.Get<uint64_t>();
+  NerfTrainOptions identity = s.options;
+  identity.max_seconds = 0;
+  if (r.GetString() != identity.ToJson())
+    ThrowInputError(path,
+                    "checkpoint was made with other training options (use the same preset and --set, or delete it)");
+  if (r.GetString() != s.data.source + " " + std::to_string(s.data.train.size()))
+    ThrowInputError(path, "checkpoint was made from another dataset (delete it to start over)");
+  const int step = r.Get<int32_t>(), level = r.Get<int32_t>(), adam_t = r.Get<int32_t>();
+  const double elapsed = r.Get<double>();
+  NerfField f;
+  f.aabb = s.data.aabb;
+  f.origin = Vec3f(s.data.aabb.min);
+  f.voxel_m = r.Get<float>();
+  for (int a = 0; a < 3; ++a) {
+    f.res[a] = r.Get<int32_t>();
+    if (f.res[a] < 2 || f.res[a] > 8192) ThrowInputError(path, "checkpoint grid resolution out of range");
+    f.bricks[a] = (f.res[a] + 3) / 4;
+  }
+  const uint64_t n_coords = r.Get<uint64_t>();
+  if (n_coords % 3 != 0 || n_coords / 3 > size_t(f.bricks[0]) * f.bricks[1] * f.bricks[2])
+    ThrowInputError(path, "checkpoint brick list is inconsistent");
+  r.Need(n_coords * 4);
+  f.brick_table.assign(size_t(f.bricks[0]) * f.bricks[1] * f.bricks[2], -1);
+  std::vector<int32_t> values(n_coords);
+  for (uint64_t n = 0; n < n_coords; ++n) values[n] = r.Get<int32_t>();
+  for (uint64_t b = 0; b < n_coords / 3; ++b) {
+    const int x = values[3 * b], y = values[3 * b + 1], z = values[3 * b + 2];
+    if (x < 0 || y < 0 || z < 0 || x >= f.bricks[0] || y >= f.bricks[1] || z >= f.bricks[2])
+      ThrowInputError(path, "checkpoint brick outside the grid");
+    if (f.brick_table[(size_t(z) * f.bricks[1] + y) * f.bricks[0] + x] >= 0)
+      ThrowInputError(path, "checkpoint brick listed twice");
+    f.brick_table[(size_t(z) * f.bricks[1] + y) * f.bricks[0] + x] = int32_t(b);
+  }
+  f.brick_coords = std::move(values);
+  const uint64_t slots = n_coords / 3 * kNerfBrickSlots;
+  f.density = r.GetVec<float>(slots);
+  f.color = r.GetVec<float>(slots * kNerfColorCoeffs);
+  f.occupancy = r.GetVec<uint64_t>(n_coords / 3);
+  s.m_density = r.GetVec<float>(slots);
+  s.v_density = r.GetVec<float>(slots);
+  s.m_color = r.GetVec<float>(slots * kNerfColorCoeffs);
+  s.v_color = r.GetVec<float>(slots * kNerfColorCoeffs);
+  r.Get<uint64_t>();
+  if (!r.AtEnd()) ThrowInputError(path, "checkpoint has trailing data");
+  f.occupancy_sigma = s.OccupancySigmaFor(f.voxel_m);
+  const std::vector<std::string> problems = f.Validate();
+  if (!problems.empty()) ThrowInputError(path, "checkpoint field: " + problems.front());
+  s.field = std::move(f);
+  s.step = step;
+  s.level = level;
+  s.elapsed_before = elapsed;
+  s.start = std::chrono::steady_clock::now();
+  s.g_density.assign(s.field.SlotCount(), 0.0f);
+  s.g_color.assign(s.field.SlotCount() * kNerfColorCoeffs, 0.0f);
+  s.touched.assign(s.field.SlotCount(), 0);
+  s.adam_t = adam_t;
+}
+
+}  // namespace nerfar

@@ -1,0 +1,131 @@
+// Training a NerfField from posed linear-HDR images on the CPU.
+//
+// Coarse to fine: a dense grid of coarse_voxel_m is optimised first, then each
+// level halves the voxel, allocating bricks only around occupied cells and
+// initialising them by trilinear upsampling. Every step renders a batch of
+// random training rays (jittered inside their pixels), compares them with the
+// pixels by a relative L2 loss that is right for HDR, back-propagates through
+// the volume rendering into the touched vertices, and applies sparse Adam
+// with a total-variation prior. Loss per ray and channel:
+//   (C - y)² / (sg(C) + ε)²,  ε = loss_epsilon · (99th-percentile luminance)
+// For C ≪ ε this is plain L2 scaled like the psnr_tm metric; for bright
+// pixels (lamps, 1e3) it is the relative error, so radiance is right across
+// the range and MC noise averages out (the target enters linearly). Pixels
+// that are exactly 0 (rays that hit nothing) also pull the ray's opacity to 0.
+// Results do not depend on the thread count: rays are drawn by a counter-based
+// hash of (seed, step, ray), and gradients are accumulated in a fixed order.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "calib/camera.h"
+#include "calib/core/image.h"
+#include "calib/core/math.h"
+#include "calib/dataset.h"
+#include "render/nerf/nerf_field.h"
+
+namespace nerfar {
+
+struct NerfView {
+  std::string name;        // file name without folder and extension, e.g. "r_003"
+  std::string image_path;  // where the image came from ("" for in-memory views)
+  CameraIntrinsics camera;
+  Pose T_world_camera;  // OpenCV camera convention
+  ImageF rgb;           // linear HDR, 3 channels, camera.width x camera.height
+};
+
+struct NerfTrainData {
+  Aabb aabb;
+  std::vector<NerfView> train;     // views to fit
+  std::vector<NerfView> held_out;  // views to report PSNR on (may be empty)
+  std::string source;              // where it was read from (names the checkpoint's data)
+};
+
+// Reads DIR/transforms_train.json (or transforms.json) and, when present,
+// DIR/transforms_test.json as the held-out views. The dataset must give an aabb.
+NerfTrainData ReadNerfTrainData(const std::string& dataset_dir);
+
+struct NerfTrainOptions {
+  // Optimisation steps in all (the schedule below is in fractions of them).
+  int steps = 3000;
+  // Training rays per step; larger batches give smoother gradients at the same cost per ray.
+  int rays_per_step = 8192;
+  // Voxel side of the first (dense) level, metres.
+  double coarse_voxel_m = 0.01;
+  // Number of levels; each halves the voxel side (finest = coarse / 2^(levels-1)).
+  int levels = 2;
+  // Fraction of the steps at which the finest level starts; the levels in between start evenly before it.
+  double last_level_start = 0.4;
+  // Sample spacing along training and evaluation rays, in voxels of the current level.
+  double step_voxels = 0.5;
+  // Adam learning rates of the raw log-density and of the log-colour coefficients.
+  double lr_density = 0.1, lr_color = 0.05;
+  // The learning rates decay exponentially to this factor of their start by the last step.
+  double lr_final_factor = 0.05;
+  // Total-variation weights (squared differences to the 6 neighbours), per step.
+  double tv_density = 1e-6, tv_color = 1e-6;
+  // Weight of the opacity penalty O² on rays whose pixel is exactly 0 (nothing hit).
+  double background_weight = 0.1;
+  // ε of the relative loss in units of the training images' 99th-percentile luminance.
+  double loss_epsilon = 0.5;
+  // Steps between occupancy updates (empty-space skipping for the next steps).
+  int occupancy_every = 16;
+  // A cell is empty when its largest corner density gives less than this opacity across one voxel.
+  double occupancy_alpha = 1e-3;
+  // Initial density (1/m) of the coarse level: a light fog that lets every voxel receive gradients.
+  double initial_sigma = 2.0;
+  // Seed of the ray sampler.
+  uint64_t seed = 1;
+  // Wall-clock budget in seconds (0: none). When set, the schedule follows
+  // max(step / steps, elapsed / max_seconds), so training ends in time (no
+  // longer bit-reproducible).
+  double max_seconds = 0;
+  // Held-out views rendered for the periodic PSNR (0: none; all at the end).
+  int eval_views = 2;
+
+  // "fast", "balanced", "accurate"; InputError for other names.
+  static NerfTrainOptions Preset(const std::string& name);
+  // Every problem with the values, "field: what (expected)".
+  std::vector<std::string> Validate() const;
+  // Compact JSON of every field (logged at start, stored in checkpoints).
+  std::string ToJson() const;
+  // Sets one field from "key=value" (the CLI's --set); InputError if unknown or bad.
+  void Set(const std::string& key_value);
+};
+
+class NerfTrainer {
+ public:
+  NerfTrainer(const NerfTrainData& data, const NerfTrainOptions& options);
+  ~NerfTrainer();
+  NerfTrainer(const NerfTrainer&) = delete;
+  NerfTrainer& operator=(const NerfTrainer&) = delete;
+
+  // One optimisation step; returns the batch loss (mean per ray and channel).
+  double Step();
+  // True once the schedule is complete.
+  bool Done() const;
+  int step() const;
+  int level() const;
+  double progress() const;         // schedule position in [0, 1]
+  double elapsed_seconds() const;  // training time, carried over checkpoints
+  const NerfField& field() const;
+
+  // psnr_tm (mean over views) of the held-out views (first `max_views`, 0: all) rendered from the current field.
+  double HeldOutPsnr(int max_views) const;
+  // The field in its final form (occupancy refreshed) for saving.
+  NerfField FinalField() const;
+
+  // Checkpoints: the whole training state (field, Adam moments, step, time),
+  // written atomically. Loading checks that options and data match.
+  void SaveCheckpoint(const std::string& path) const;
+  void LoadCheckpoint(const std::string& path);
+
+ private:
+  struct State;
+  std::unique_ptr<State> state_;
+};
+
+}  // namespace nerfar
