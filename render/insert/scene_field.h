@@ -76,6 +76,21 @@ struct AnalyticSceneParams {
   Vec3f medium_radiance{0.9f, 0.9f, 0.9f};
 };
 
+// Nothing at all: every ray is empty (opacity 0). For inserting into images
+// whose geometry comes from elsewhere (ground-truth depth, tests).
+class EmptyScene final : public SceneField {
+ public:
+  explicit EmptyScene(Aabb box) : box_(box) {}
+  Aabb Box() const override { return box_; }
+  void RenderRays(const SceneRays& rays, SceneSamples& out) const override { out.Resize(rays.size()); }
+  void Normals(const std::vector<Vec3f>& points, std::vector<Vec3f>& normals) const override {
+    normals.assign(points.size(), Vec3f{});
+  }
+
+ private:
+  Aabb box_;
+};
+
 class AnalyticScene final : public SceneField {
  public:
   explicit AnalyticScene(AnalyticSceneParams params = {}) : params_(params) {}

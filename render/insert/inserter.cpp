@@ -1,0 +1,599 @@
+#include "render/insert/inserter.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <nlohmann/json.hpp>
+
+#include "calib/core/error.h"
+#include "calib/core/json.h"
+#include "calib/core/parallel.h"
+#include "render/sg/visibility.h"
+
+namespace nerfar {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double Ms(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
+
+// Bilinear texture look-up with wrap-around; v = 0 is the top row.
+void SampleMap(const ImageF& map, float u, float v, float* out, int channels) {
+  if (map.empty() || !std::isfinite(u) || !std::isfinite(v)) return;
+  const float fx = (u - std::floor(u)) * map.width - 0.5f, fy = (v - std::floor(v)) * map.height - 0.5f;
+  const int x0 = static_cast<int>(std::floor(fx)), y0 = static_cast<int>(std::floor(fy));
+  const float ax = fx - x0, ay = fy - y0;
+  const auto wrap = [](int i, int n) { return ((i % n) + n) % n; };
+  const int xa = wrap(x0, map.width), xb = wrap(x0 + 1, map.width);
+  const int ya = wrap(y0, map.height), yb = wrap(y0 + 1, map.height);
+  for (int c = 0; c < channels; ++c) {
+    const int mc = std::min(c, map.channels - 1);
+    out[c] = (1 - ax) * (1 - ay) * map.at(xa, ya, mc) + ax * (1 - ay) * map.at(xb, ya, mc) +
+             (1 - ax) * ay * map.at(xa, yb, mc) + ax * ay * map.at(xb, yb, mc);
+  }
+}
+
+SgMaterial PixelMaterial(const InsertObject& object, const std::array<float, 2>& uv) {
+  SgMaterial m = object.material;
+  float value[3];
+  if (object.albedo_map) {
+    SampleMap(*object.albedo_map, uv[0], uv[1], value, 3);
+    m.base_color = {std::clamp(value[0], 0.0f, 1.0f), std::clamp(value[1], 0.0f, 1.0f),
+                    std::clamp(value[2], 0.0f, 1.0f)};
+  }
+  if (object.roughness_map) {
+    SampleMap(*object.roughness_map, uv[0], uv[1], value, 1);
+    m.roughness = std::clamp(value[0], 0.0f, 1.0f);
+  }
+  if (object.metallic_map) {
+    SampleMap(*object.metallic_map, uv[0], uv[1], value, 1);
+    m.metallic = std::clamp(value[0], 0.0f, 1.0f);
+  }
+  return m;
+}
+
+bool Finite(const Vec3f& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
+
+// κ (paper eqs. 8-9) with the half-space visibility of f_h bounded by the
+// occluder's size. f_h treats everything beyond the silhouette's nearest
+// point as blocked (a half-space), which for a broad lobe and a small, far
+// occluder blocks far more than the object can: the object lies inside a cap
+// of angular radius α (its bounding sphere seen from x) whose centre is α
+// beyond the nearest silhouette point, so a broad lobe k loses about
+// G(cap centre) × solid angle(cap). Broad lobes take the smaller estimate,
+// sharp ones (√λ·α ≥ 1.5) the half-space one, which is then render/sg's
+// ShadowRatio exactly; in between they blend.
+double ShadowRatioCapped(const SgMixture& cosine_weighted, const Vec3& normal, const std::vector<double>& ssd,
+                         const std::vector<double>& cap_radius) {
+  double visible = 0.0, total = 0.0;
+  for (size_t k = 0; k < cosine_weighted.size(); ++k) {
+    const Sg& sg = cosine_weighted[k];
+    const double y = LuminanceOf(sg.amplitude);
+    if (!(y > 0.0)) continue;
+    const double horizon = std::asin(std::clamp(Dot(sg.axis, normal), -1.0, 1.0));
+    const double hemisphere = HemisphereIntegral(sg.sharpness);
+    const SgTableRow row = PrepareGamma(sg.sharpness);
+    const double up = GammaPrepared(row, static_cast<float>(horizon));
+    const double seen = ssd[k] < horizon ? GammaPrepared(row, static_cast<float>(ssd[k])) : up;
+    const double lobe_total = y * hemisphere * up;
+    double blocked = y * hemisphere * (up - seen);
+    if (blocked > 0.0) {
+      const double alpha = std::clamp(cap_radius[k], 0.0, 0.5 * kPi);
+      const double centre = std::clamp(ssd[k] + alpha, 0.0, kPi);  // the cap centre's angle from the lobe axis
+      const double solid = 2.0 * kPi * (1.0 - std::cos(alpha));
+      const double cap = y * std::exp(sg.sharpness * (std::cos(centre) - 1.0)) * solid;
+      // The cap estimate (value at its centre × its solid angle) holds for
+      // lobes broader than the cap; for sharper ones it misses the peak, and
+      // the half-space estimate is the right one: blend on √λ·α.
+      const double t = std::clamp(std::sqrt(sg.sharpness) * alpha - 0.5, 0.0, 1.0);
+      blocked = (1.0 - t) * std::min(blocked, cap) + t * blocked;
+    }
+    total += lobe_total;
+    visible += lobe_total - std::min(blocked, lobe_total);
+  }
+  if (!(total > 0.0)) return 1.0;
+  return std::clamp(visible / total, 0.0, 1.0);
+}
+
+struct WorldSphere {
+  Vec3f center;
+  float radius = 0;
+};
+
+}  // namespace
+
+// ------------------------------------------------------------------ options
+
+InsertOptions InsertOptions::Preset(const std::string& name) {
+  InsertOptions o;
+  o.light.fit = SgFitOptions::Preset(name);
+  if (name == "fast") {
+    o.light.directions = 512;
+    o.shadow_reach_radii = 8.0;
+    o.shadow_epsilon = 5e-3;
+    o.kappa_step = 4;
+  } else if (name == "balanced") {
+  } else if (name == "accurate") {
+    o.light.directions = 2048;
+    o.shadow_reach_radii = 20.0;
+    o.shadow_epsilon = 5e-4;
+    o.kappa_step = 1;
+  } else {
+    ThrowInputError("preset", "unknown preset '" + name + "' (expected fast, balanced or accurate)");
+  }
+  return o;
+}
+
+std::vector<std::string> InsertOptions::Validate() const {
+  std::vector<std::string> problems = light.Validate();
+  const auto check = [&problems](bool ok, const std::string& what) {
+    if (!ok) problems.push_back(what);
+  };
+  check(std::isfinite(self_shadow_offset_radii) && self_shadow_offset_radii >= 0 && self_shadow_offset_radii <= 1,
+        "self_shadow_offset_radii: out of range (expected 0 to 1)");
+  check(std::isfinite(shadow_reach_radii) && shadow_reach_radii >= 1 && shadow_reach_radii <= 1000,
+        "shadow_reach_radii: out of range (expected 1 to 1000)");
+  check(std::isfinite(shadow_epsilon) && shadow_epsilon >= 0 && shadow_epsilon < 1,
+        "shadow_epsilon: out of range (expected 0 <= value < 1)");
+  check(kappa_step >= 1 && kappa_step <= 64, "kappa_step: out of range (expected 1 to 64)");
+  check(std::isfinite(receiver_min_opacity) && receiver_min_opacity >= 0 && receiver_min_opacity <= 1,
+        "receiver_min_opacity: out of range (expected 0 to 1)");
+  return problems;
+}
+
+std::string InsertOptions::ToJson() const {
+  nlohmann::json j;
+  j["light_directions"] = light.directions;
+  j["light_move_threshold_m"] = light.move_threshold_m;
+  j["light_source"] = LightSourceName(light.source);
+  j["sg_lobes"] = light.fit.lobes;
+  j["sg_cold_iterations"] = light.fit.cold_iterations;
+  j["sg_warm_iterations"] = light.fit.warm_iterations;
+  j["self_shadow"] = self_shadow;
+  j["self_shadow_horizon"] = self_shadow_horizon;
+  j["self_shadow_offset_radii"] = self_shadow_offset_radii;
+  j["shadows"] = shadows;
+  j["shadow_reach_radii"] = shadow_reach_radii;
+  j["shadow_epsilon"] = shadow_epsilon;
+  j["kappa_step"] = kappa_step;
+  j["receiver_min_opacity"] = receiver_min_opacity;
+  return j.dump();
+}
+
+ImageF ExpandLayer(const ImageF& layer, const PixelRect& rect, int width, int height, float fill) {
+  const int channels = layer.channels > 0 ? layer.channels : 1;
+  ImageF full(width, height, channels, fill);
+  if (layer.empty()) return full;
+  for (int y = rect.y0; y < rect.y1; ++y)
+    for (int x = rect.x0; x < rect.x1; ++x)
+      for (int c = 0; c < channels; ++c) full.at(x, y, c) = layer.at(x - rect.x0, y - rect.y0, c);
+  return full;
+}
+
+void ReceiversFromDepth(const ImageF& depth_z, const CameraIntrinsics& camera, const Pose& T_world_camera,
+                        ImageF& distance, ImageF& normal) {
+  const int w = depth_z.width, h = depth_z.height;
+  distance = ImageF(w, h, 1, 0.0f);
+  normal = ImageF(w, h, 3, 0.0f);
+  std::vector<Vec3> p(static_cast<size_t>(w) * h);
+  std::vector<uint8_t> valid(p.size(), 0);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const float z = depth_z.at(x, y, 0);
+      if (!(z > 0.0f) || !std::isfinite(z)) continue;
+      const Vec3 ray_camera{(x + 0.5 - camera.cx) / camera.fx, (y + 0.5 - camera.cy) / camera.fy, 1.0};
+      const size_t i = static_cast<size_t>(y) * w + x;
+      p[i] = T_world_camera * (ray_camera * static_cast<double>(z));
+      valid[i] = 1;
+      distance.at(x, y) = static_cast<float>(z * Length(ray_camera));
+    }
+  const Vec3 eye = T_world_camera.translation;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const size_t i = static_cast<size_t>(y) * w + x;
+      if (!valid[i]) continue;
+      // One-sided differences; per axis the neighbour nearer in depth.
+      const auto pick = [&](int dx, int dy) -> std::optional<Vec3> {
+        std::optional<Vec3> best;
+        double best_jump = std::numeric_limits<double>::infinity();
+        for (int s : {-1, 1}) {
+          const int xx = x + s * dx, yy = y + s * dy;
+          if (xx < 0 || yy < 0 || xx >= w || yy >= h) continue;
+          const size_t j = static_cast<size_t>(yy) * w + xx;
+          if (!valid[j]) continue;
+          const double jump = std::abs(depth_z.pixels[j] - depth_z.pixels[i]);
+          if (jump < best_jump) {
+            best_jump = jump;
+            best = (p[j] - p[i]) * static_cast<double>(s);
+          }
+        }
+        return best;
+      };
+      const auto du = pick(1, 0), dv = pick(0, 1);
+      if (!du || !dv) continue;
+      Vec3 n = Normalized(Cross(*du, *dv));
+      if (Dot(n, eye - p[i]) < 0) n = -n;
+      for (int c = 0; c < 3; ++c) normal.at(x, y, c) = static_cast<float>(n[c]);
+    }
+}
+
+// ------------------------------------------------------------------ inserter
+
+Inserter::Inserter(const SceneField& scene, SgMixture environment, InsertOptions options)
+    : scene_(scene), environment_(std::move(environment)), options_(std::move(options)) {
+  Problems problems("insert options");
+  for (const std::string& p : options_.Validate()) problems.Add("", p);
+  problems.ThrowIfAny();
+}
+
+const SgMixture& Inserter::Light(size_t object) const { return used_lights_.at(object); }
+
+ImageF Inserter::RenderBackground(const CameraIntrinsics& camera, const Pose& T_world_camera) const {
+  ImageF image(camera.width, camera.height, 3, 0.0f);
+  const Aabb box = scene_.Box();
+  const Vec3 eye = T_world_camera.translation;
+  ParallelFor(
+      static_cast<size_t>(camera.height),
+      [&](size_t row) {
+        const int y = static_cast<int>(row);
+        SceneRays rays;
+        SceneSamples out;
+        rays.Reserve(camera.width);
+        for (int x = 0; x < camera.width; ++x) {
+          const Vec3f d = CameraRayDirection(camera, T_world_camera, x, y);
+          const auto range = IntersectBox(box, eye, Vec3(d));
+          rays.Add(Vec3f(eye), d, range ? static_cast<float>(range->first) : 0.0f,
+                   range ? static_cast<float>(range->second) : 0.0f);
+        }
+        scene_.RenderRays(rays, out);
+        for (int x = 0; x < camera.width; ++x) {
+          const Vec3f c = Finite(out.colour[x]) ? out.colour[x] : Vec3f{};
+          image.at(x, y, 0) = c.x;
+          image.at(x, y, 1) = c.y;
+          image.at(x, y, 2) = c.z;
+        }
+      },
+      1);
+  return image;
+}
+
+InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_world_camera,
+                               const std::vector<InsertObject>& objects, ImageF& frame, InsertLayers* layers_out,
+                               const ReceiverOverride& receivers) {
+  const auto t_start = Clock::now();
+  InsertTimings times;
+  if (frame.width != camera.width || frame.height != camera.height || frame.channels != 3) {
+    ThrowInputError("frame", "size " + std::to_string(frame.width) + "x" + std::to_string(frame.height) + "x" +
+                                 std::to_string(frame.channels) + " does not match the camera (expected " +
+                                 std::to_string(camera.width) + "x" + std::to_string(camera.height) + "x3)");
+  }
+  InsertLayers local_layers;
+  InsertLayers& layers = layers_out ? *layers_out : local_layers;
+  layers = InsertLayers{};
+  const size_t n_objects = objects.size();
+  lights_.resize(n_objects);
+  used_lights_.resize(n_objects);
+
+  // World bounding spheres of the objects.
+  std::vector<WorldSphere> spheres(n_objects);
+  for (size_t i = 0; i < n_objects; ++i) {
+    if (objects[i].mesh == nullptr || objects[i].mesh->positions.empty()) continue;
+    const BoundingSphere bs = ComputeBoundingSphere(*objects[i].mesh);
+    spheres[i].center = Vec3f(objects[i].T_world_object * (bs.center * objects[i].scale));
+    spheres[i].radius = static_cast<float>(bs.radius * std::abs(objects[i].scale));
+  }
+
+  // 1. Incident light per object (cached while it stands still).
+  for (size_t i = 0; i < n_objects; ++i) {
+    if (objects[i].light_override) {
+      used_lights_[i] = *objects[i].light_override;
+      continue;
+    }
+    const Vec3 at = objects[i].light_center.value_or(Vec3(spheres[i].center));
+    const IncidentLight::Update u = lights_[i].Refresh(scene_, environment_, at, options_.light);
+    times.light_ms += u.sample_ms;
+    times.fit_ms += u.fit_ms;
+    times.lights_recomputed += u.recomputed ? 1 : 0;
+    used_lights_[i] = lights_[i].light();
+  }
+
+  // 2. G-buffer.
+  auto t0 = Clock::now();
+  std::vector<RasterObject> raster(n_objects);
+  for (size_t i = 0; i < n_objects; ++i) raster[i] = {objects[i].mesh, objects[i].T_world_object, objects[i].scale};
+  layers.gbuffer = Rasterize(camera, T_world_camera, raster);
+  const ObjectGBuffer& g = layers.gbuffer;
+  times.raster_ms = Ms(t0);
+
+  // Covered pixels (G-buffer indices), in scan order.
+  std::vector<uint32_t> covered;
+  covered.reserve(g.covered);
+  for (size_t i = 0; i < g.object.size(); ++i)
+    if (g.object[i] >= 0) covered.push_back(static_cast<uint32_t>(i));
+
+  // 3. Shading with self-shadows: lobes of each object's light, SSD of every
+  // shadow-casting object at those axes (the union takes the minimum).
+  t0 = Clock::now();
+  layers.object = ImageF(g.rect.width(), g.rect.height(), 3, 0.0f);
+  layers.alpha = ImageF(g.rect.width(), g.rect.height(), 1, 0.0f);
+  struct LightPrep {
+    std::unique_ptr<SgShader> shader;
+    std::vector<Vec3f> axes;
+    std::vector<SgTableRow> gamma_rows;
+    std::vector<std::unique_ptr<VisibilityQuery>> queries;  // one per object (nullptr: no field)
+  };
+  std::vector<LightPrep> preps(n_objects);
+  const auto prepare = [&](size_t o) {
+    LightPrep& p = preps[o];
+    if (p.shader) return;
+    const SgMixture& light = used_lights_[o];
+    p.shader = std::make_unique<SgShader>(light);
+    for (const Sg& lobe : light) {
+      p.axes.push_back(Vec3f(Normalized(lobe.axis)));
+      p.gamma_rows.push_back(PrepareGamma(lobe.sharpness));
+    }
+    p.queries.resize(n_objects);
+    for (size_t j = 0; j < n_objects; ++j)
+      if (objects[j].visibility && !p.axes.empty()) p.queries[j] = objects[j].visibility->Prepare(p.axes);
+  };
+  for (size_t o = 0; o < n_objects; ++o) {
+    bool seen = false;
+    for (uint32_t i : covered) seen = seen || g.object[i] == static_cast<int32_t>(o);
+    if (seen) prepare(o);
+  }
+  const Vec3f eye(T_world_camera.translation);
+  constexpr size_t kChunk = 256;
+  const size_t chunks = (covered.size() + kChunk - 1) / kChunk;
+  ParallelFor(
+      chunks,
+      [&](size_t c) {
+        const size_t begin = c * kChunk, end = std::min(covered.size(), begin + kChunk);
+        std::vector<float> ssd, ssd_min;
+        std::vector<float> gamma;
+        Vec3f point;
+        for (size_t k = begin; k < end; ++k) {
+          const uint32_t i = covered[k];
+          const int32_t o = g.object[i];
+          const LightPrep& p = preps[o];
+          const size_t m = p.axes.size();
+          const Vec3f n = g.normal[i];
+          const Vec3f v = Normalized(eye - g.position[i]);
+          gamma.assign(m, 1.0f);
+          if (options_.self_shadow && m > 0) {
+            point = g.position[i] + n * static_cast<float>(options_.self_shadow_offset_radii * spheres[o].radius);
+            ssd_min.assign(m, std::numeric_limits<float>::infinity());
+            ssd.resize(m);
+            for (size_t j = 0; j < n_objects; ++j) {
+              if (!p.queries[j]) continue;
+              p.queries[j]->Ssd(&point, 1, ssd.data());
+              for (size_t l = 0; l < m; ++l) ssd_min[l] = std::min(ssd_min[l], ssd[l]);
+            }
+            for (size_t l = 0; l < m; ++l) {
+              if (!(ssd_min[l] < 0.5f * static_cast<float>(kPi))) continue;  // nothing in the way: γ = 1
+              if (options_.self_shadow_horizon) {
+                const float e = std::asin(std::clamp(Dot(p.axes[l], n), -1.0f, 1.0f));
+                const float full = GammaPrepared(p.gamma_rows[l], e);
+                gamma[l] = full > 1e-6f ? GammaPrepared(p.gamma_rows[l], std::min(ssd_min[l], e)) / full : 1.0f;
+              } else {
+                gamma[l] = GammaPrepared(p.gamma_rows[l], ssd_min[l]);
+              }
+              gamma[l] = std::isfinite(gamma[l]) ? std::clamp(gamma[l], 0.0f, 1.0f) : 1.0f;
+            }
+          }
+          const SgMaterial material = PixelMaterial(objects[o], g.uv[i]);
+          Vec3f rgb = m > 0 ? p.shader->Shade(material, n, v, gamma.data()) : Vec3f{};
+          if (!Finite(rgb)) rgb = {};
+          const size_t px = i;  // same layout as the G-buffer
+          layers.object.pixels[px * 3 + 0] = std::max(rgb.x, 0.0f);
+          layers.object.pixels[px * 3 + 1] = std::max(rgb.y, 0.0f);
+          layers.object.pixels[px * 3 + 2] = std::max(rgb.z, 0.0f);
+        }
+      },
+      1);
+  times.shade_ms = Ms(t0);
+
+  // 4. Occlusion and composite on object pixels (paper eq. 7 and Fig. "sample").
+  t0 = Clock::now();
+  const Aabb box = scene_.Box();
+  std::vector<size_t> fixed_per_chunk(chunks, 0);
+  ParallelFor(
+      chunks,
+      [&](size_t c) {
+        const size_t begin = c * kChunk, end = std::min(covered.size(), begin + kChunk);
+        SceneRays rays;
+        SceneSamples out;
+        rays.Reserve(end - begin);
+        for (size_t k = begin; k < end; ++k) {
+          const uint32_t i = covered[k];
+          const int x = g.rect.x0 + static_cast<int>(i % g.rect.width());
+          const int y = g.rect.y0 + static_cast<int>(i / g.rect.width());
+          const Vec3f d = CameraRayDirection(camera, T_world_camera, x, y);
+          const auto range = IntersectBox(box, Vec3(eye), Vec3(d));
+          const float depth = g.t[i];
+          float t_near = 0.0f, t_far = 0.0f;
+          if (range) {
+            t_near = std::min(depth, static_cast<float>(range->first));
+            t_far = std::min(depth, static_cast<float>(range->second));
+          }
+          rays.Add(eye, d, t_near, t_far);
+        }
+        scene_.RenderRays(rays, out);
+        for (size_t k = begin; k < end; ++k) {
+          const uint32_t i = covered[k];
+          const int x = g.rect.x0 + static_cast<int>(i % g.rect.width());
+          const int y = g.rect.y0 + static_cast<int>(i / g.rect.width());
+          float opacity = out.opacity[k - begin];
+          Vec3f front = out.colour[k - begin];
+          if (!std::isfinite(opacity) || !Finite(front)) {
+            opacity = 0.0f;
+            front = {};
+            ++fixed_per_chunk[c];
+          }
+          opacity = std::clamp(opacity, 0.0f, 1.0f);
+          const float w = 1.0f - opacity;
+          layers.alpha.pixels[i] = w;
+          // Ĉ = I_α·I_c (opacity-weighted), so this is I_α·I_c + (1 − I_α)·I_v.
+          for (int ch = 0; ch < 3; ++ch)
+            frame.at(x, y, ch) = front[ch] + w * layers.object.pixels[static_cast<size_t>(i) * 3 + ch];
+        }
+      },
+      1);
+  for (size_t f : fixed_per_chunk) layers.nonfinite_fixed += f;
+  times.occlusion_ms = Ms(t0);
+
+  // 5. Shadows κ on the scene where an object can shadow.
+  t0 = Clock::now();
+  std::vector<size_t> casters;
+  for (size_t j = 0; j < n_objects; ++j)
+    if (objects[j].visibility && spheres[j].radius > 0) casters.push_back(j);
+  if (options_.shadows && !casters.empty()) {
+    PixelRect rect;
+    for (size_t j : casters)
+      rect = Union(rect, ProjectBall(camera, T_world_camera, Vec3(spheres[j].center),
+                                     options_.shadow_reach_radii * spheres[j].radius));
+    rect = ClipToImage(rect, camera.width, camera.height);
+    layers.kappa_rect = rect;
+    layers.kappa = ImageF(rect.width(), rect.height(), 1, 1.0f);
+    if (!rect.empty()) {
+      // Light owners: each receiver takes the light of its nearest object
+      // (relative to size); queries of every caster at each owner's lobe axes.
+      for (size_t o = 0; o < n_objects; ++o) prepare(o);
+      const int step = options_.kappa_step;
+      const auto grid_axis = [step](int lo, int hi) {
+        std::vector<int> s;
+        for (int v = lo; v < hi; v += step) s.push_back(v);
+        if (s.back() != hi - 1) s.push_back(hi - 1);
+        return s;
+      };
+      const std::vector<int> xs = grid_axis(rect.x0, rect.x1), ys = grid_axis(rect.y0, rect.y1);
+      const size_t nx = xs.size(), ny = ys.size();
+      std::vector<float> kappa_grid(nx * ny, 1.0f);
+      std::vector<size_t> queries_per_row(ny, 0);
+      const float reach = static_cast<float>(options_.shadow_reach_radii);
+      const float min_opacity = static_cast<float>(options_.receiver_min_opacity);
+      const double one_minus_eps = 1.0 - options_.shadow_epsilon;
+      ParallelFor(
+          ny,
+          [&](size_t row) {
+            const int y = ys[row];
+            SceneRays rays;
+            SceneSamples out;
+            std::vector<Vec3f> points(nx), normals;
+            std::vector<float> opacity(nx, 0.0f);
+            std::vector<Vec3f> dirs(nx);
+            for (size_t ix = 0; ix < nx; ++ix) dirs[ix] = CameraRayDirection(camera, T_world_camera, xs[ix], y);
+            if (receivers.distance) {
+              for (size_t ix = 0; ix < nx; ++ix) {
+                const float t = receivers.distance->at(xs[ix], y);
+                opacity[ix] = t > 0.0f && std::isfinite(t) ? 1.0f : 0.0f;
+                points[ix] = eye + dirs[ix] * (opacity[ix] > 0 ? t : 0.0f);
+              }
+            } else {
+              rays.Reserve(nx);
+              for (size_t ix = 0; ix < nx; ++ix) {
+                const auto range = IntersectBox(box, Vec3(eye), Vec3(dirs[ix]));
+                rays.Add(eye, dirs[ix], range ? static_cast<float>(range->first) : 0.0f,
+                         range ? static_cast<float>(range->second) : 0.0f);
+              }
+              scene_.RenderRays(rays, out);
+              for (size_t ix = 0; ix < nx; ++ix) {
+                opacity[ix] = std::isfinite(out.opacity[ix]) ? out.opacity[ix] : 0.0f;
+                const float t = std::isfinite(out.depth[ix]) ? out.depth[ix] : 0.0f;
+                points[ix] = eye + dirs[ix] * t;
+              }
+            }
+            if (receivers.normal) {
+              normals.resize(nx);
+              for (size_t ix = 0; ix < nx; ++ix)
+                normals[ix] = {receivers.normal->at(xs[ix], y, 0), receivers.normal->at(xs[ix], y, 1),
+                               receivers.normal->at(xs[ix], y, 2)};
+            } else {
+              scene_.Normals(points, normals);
+            }
+            std::vector<double> s_bound, s_exact, cap;
+            std::vector<float> ssd;
+            for (size_t ix = 0; ix < nx; ++ix) {
+              float& kappa = kappa_grid[row * nx + ix];
+              if (opacity[ix] < min_opacity || !Finite(points[ix])) continue;
+              Vec3f n = normals[ix];
+              if (!Finite(n) || Dot(n, n) < 0.25f) continue;
+              n = Normalized(n);
+              const Vec3f x = points[ix];
+              // The owner of the light: the caster nearest in units of its radius.
+              size_t owner = casters[0];
+              float best = std::numeric_limits<float>::infinity();
+              for (size_t j : casters) {
+                const float rel = Length(x - spheres[j].center) / spheres[j].radius;
+                if (rel < best) {
+                  best = rel;
+                  owner = j;
+                }
+              }
+              if (best > reach) continue;
+              const LightPrep& p = preps[owner];
+              const size_t m = p.axes.size();
+              if (m == 0) continue;
+              const SgMixture cw = CosineWeightedLight(used_lights_[owner], Vec3(n));
+              // Lower bound of S from the bounding spheres: if even that
+              // leaves κ ≥ 1 − ε, nothing needs the SSDF.
+              s_bound.assign(m, kPi);
+              for (size_t j : casters)
+                for (size_t l = 0; l < m; ++l)
+                  s_bound[l] = std::min<double>(s_bound[l],
+                                                BallSsdLowerBound(spheres[j].center, spheres[j].radius, x, p.axes[l]));
+              if (ShadowRatio(cw, Vec3(n), s_bound) >= one_minus_eps) continue;
+              ++queries_per_row[row];
+              s_exact.assign(m, kPi);
+              cap.assign(m, 0.0);
+              ssd.resize(m);
+              for (size_t j : casters) {
+                if (!p.queries[j]) continue;
+                p.queries[j]->Ssd(&x, 1, ssd.data());
+                const float dist = Length(x - spheres[j].center);
+                const double alpha =
+                    dist > spheres[j].radius ? std::asin(std::min(1.0f, spheres[j].radius / dist)) : 0.5 * kPi;
+                for (size_t l = 0; l < m; ++l) {
+                  if (ssd[l] < s_exact[l]) {
+                    s_exact[l] = ssd[l];
+                    cap[l] = alpha;
+                  }
+                }
+              }
+              const double k = ShadowRatioCapped(cw, Vec3(n), s_exact, cap);
+              kappa = std::isfinite(k) ? static_cast<float>(std::clamp(k, 0.0, 1.0)) : 1.0f;
+            }
+          },
+          1);
+      for (size_t q : queries_per_row) layers.kappa_queries += q;
+      // Bilinear from the sample grid to every pixel; multiply the background
+      // where no object covers it.
+      ParallelFor(
+          static_cast<size_t>(rect.height()),
+          [&](size_t r) {
+            const int y = rect.y0 + static_cast<int>(r);
+            const size_t iy = std::min<size_t>((y - rect.y0) / step, ny >= 2 ? ny - 2 : 0);
+            const float wy = ny >= 2 ? float(y - ys[iy]) / float(ys[iy + 1] - ys[iy]) : 0.0f;
+            const size_t iy1 = ny >= 2 ? iy + 1 : iy;
+            for (int x = rect.x0; x < rect.x1; ++x) {
+              const size_t ix = std::min<size_t>((x - rect.x0) / step, nx >= 2 ? nx - 2 : 0);
+              const float wx = nx >= 2 ? float(x - xs[ix]) / float(xs[ix + 1] - xs[ix]) : 0.0f;
+              const size_t ix1 = nx >= 2 ? ix + 1 : ix;
+              const float k = (1 - wx) * (1 - wy) * kappa_grid[iy * nx + ix] +
+                              wx * (1 - wy) * kappa_grid[iy * nx + ix1] + (1 - wx) * wy * kappa_grid[iy1 * nx + ix] +
+                              wx * wy * kappa_grid[iy1 * nx + ix1];
+              layers.kappa.at(x - rect.x0, y - rect.y0) = k;
+              if (k >= 1.0f) continue;
+              if (g.rect.Contains(x, y) && g.object[g.Index(x, y)] >= 0) continue;
+              for (int ch = 0; ch < 3; ++ch) frame.at(x, y, ch) *= k;
+            }
+          },
+          4);
+    }
+  }
+  times.kappa_ms = Ms(t0);
+  times.total_ms = Ms(t_start);
+  return times;
+}
+
+}  // namespace nerfar

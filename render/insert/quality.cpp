@@ -1,0 +1,143 @@
+#include "render/insert/quality.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "calib/core/error.h"
+#include "calib/core/metrics.h"
+#include "render/sg/sphere.h"
+#include "render/sg/visibility.h"
+
+namespace nerfar {
+
+namespace {
+
+constexpr int kLightingNormals = 64;
+
+// Luminance of the 5×5 box-blurred image (window clipped at the borders).
+std::vector<double> BlurredLuminance(const ImageF& image) {
+  const int w = image.width, h = image.height;
+  std::vector<double> lum(static_cast<size_t>(w) * h), tmp(lum.size()), out(lum.size());
+  for (size_t p = 0; p < lum.size(); ++p) lum[p] = Luminance(&image.pixels[p * image.channels], image.channels);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      double s = 0;
+      int n = 0;
+      for (int dx = -2; dx <= 2; ++dx)
+        if (x + dx >= 0 && x + dx < w) {
+          s += lum[static_cast<size_t>(y) * w + x + dx];
+          ++n;
+        }
+      tmp[static_cast<size_t>(y) * w + x] = s / n;
+    }
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      double s = 0;
+      int n = 0;
+      for (int dy = -2; dy <= 2; ++dy)
+        if (y + dy >= 0 && y + dy < h) {
+          s += tmp[static_cast<size_t>(y + dy) * w + x];
+          ++n;
+        }
+      out[static_cast<size_t>(y) * w + x] = s / n;
+    }
+  return out;
+}
+
+std::vector<double> KappaOf(const ImageF& with, const ImageF& without) {
+  const std::vector<double> a = BlurredLuminance(with), b = BlurredLuminance(without);
+  std::vector<double> k(a.size(), 1.0);
+  for (size_t i = 0; i < k.size(); ++i) k[i] = b[i] > 1e-8 ? a[i] / b[i] : 1.0;
+  return k;
+}
+
+void CheckSameSize(const ImageF& a, const ImageF& b, const char* what) {
+  if (a.width != b.width || a.height != b.height)
+    ThrowInputError(what, "sizes differ (" + std::to_string(a.width) + "x" + std::to_string(a.height) + " vs " +
+                              std::to_string(b.width) + "x" + std::to_string(b.height) + ")");
+}
+
+double RelativeRms(const std::vector<Vec3>& ours, const std::vector<Vec3>& truth) {
+  double num = 0, den = 0;
+  for (size_t i = 0; i < truth.size(); ++i) {
+    const Vec3 d = ours[i] - truth[i];
+    num += Dot(d, d);
+    den += Dot(truth[i], truth[i]);
+  }
+  return den > 0 ? std::sqrt(num / den) : (num > 0 ? std::numeric_limits<double>::infinity() : 0.0);
+}
+
+}  // namespace
+
+double ObjectPsnrTm(const ImageF& ours, const ImageF& truth, const ImageF& mask) {
+  CheckSameSize(ours, truth, "object psnr");
+  CheckSameSize(mask, truth, "object mask");
+  ImageF m(mask.width, mask.height, 1);
+  float scale = 1.0f;
+  for (float v : mask.pixels) scale = std::max(scale, v > 1.0f ? 1.0f / 255.0f : 1.0f);
+  for (size_t p = 0; p < m.pixels.size(); ++p) m.pixels[p] = mask.pixels[p * mask.channels] * scale;
+  return PsnrTm(ours, truth, &m);
+}
+
+ShadowError ComputeShadowError(const ImageF& ours_with, const ImageF& ours_without, const ImageF& truth_with,
+                               const ImageF& truth_without, const ImageF& mask) {
+  CheckSameSize(ours_with, truth_with, "shadow error");
+  CheckSameSize(ours_without, truth_with, "shadow error");
+  CheckSameSize(truth_without, truth_with, "shadow error");
+  CheckSameSize(mask, truth_with, "shadow mask");
+  const int w = truth_with.width, h = truth_with.height;
+  const std::vector<double> k_ours = KappaOf(ours_with, ours_without);
+  const std::vector<double> k_gt = KappaOf(truth_with, truth_without);
+  std::vector<uint8_t> in_mask(k_gt.size()), seed(k_gt.size()), region(k_gt.size(), 0);
+  for (size_t p = 0; p < k_gt.size(); ++p) {
+    in_mask[p] = mask.pixels[p * mask.channels] > 0.5f;
+    seed[p] = !in_mask[p] && k_gt[p] < 0.9;
+  }
+  // Dilate by 5 px (a square window), then drop the object's own pixels.
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      if (!seed[static_cast<size_t>(y) * w + x]) continue;
+      for (int dy = -5; dy <= 5; ++dy)
+        for (int dx = -5; dx <= 5; ++dx) {
+          const int xx = x + dx, yy = y + dy;
+          if (xx >= 0 && xx < w && yy >= 0 && yy < h) region[static_cast<size_t>(yy) * w + xx] = 1;
+        }
+    }
+  ShadowError e;
+  double num = 0, den = 0, sum_k = 0, sum_gt = 0;
+  for (size_t p = 0; p < region.size(); ++p) {
+    if (!region[p] || in_mask[p]) continue;
+    num += std::abs(k_ours[p] - k_gt[p]);
+    den += std::abs(1.0 - k_gt[p]);
+    sum_k += k_ours[p];
+    sum_gt += k_gt[p];
+    ++e.region;
+  }
+  if (e.region == 0 || !(den > 0)) {
+    e.error = std::numeric_limits<double>::quiet_NaN();
+    return e;
+  }
+  e.error = num / den;
+  e.mean_kappa = sum_k / e.region;
+  e.mean_kappa_gt = sum_gt / e.region;
+  return e;
+}
+
+std::vector<Vec3> IrradianceAtNormals(const ImageF& panorama) {
+  std::vector<Vec3> e;
+  for (const Vec3& n : FibonacciSphere(kLightingNormals)) e.push_back(PanoramaIrradiance(panorama, n));
+  return e;
+}
+
+double LightingError(const ImageF& our_panorama, const ImageF& true_panorama) {
+  return RelativeRms(IrradianceAtNormals(our_panorama), IrradianceAtNormals(true_panorama));
+}
+
+double LightingError(const SgMixture& our_light, const ImageF& true_panorama) {
+  std::vector<Vec3> ours;
+  for (const Vec3& n : FibonacciSphere(kLightingNormals)) ours.push_back(Irradiance(our_light, n));
+  return RelativeRms(ours, IrradianceAtNormals(true_panorama));
+}
+
+}  // namespace nerfar
