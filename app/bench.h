@@ -51,5 +51,6 @@ double MedianMilliseconds(Body&& body, int min_repeats, double min_seconds) {
 
 // Stage entry points (one bench_NAME.cpp each).
 std::vector<BenchFigure> BenchCore(const BenchOptions& options);
+std::vector<BenchFigure> BenchSsdf(const BenchOptions& options);
 
 }  // namespace nerfar
