@@ -5,6 +5,7 @@ namespace nerfar {
 const std::vector<BenchStage>& AllBenchStages() {
   static const std::vector<BenchStage> stages = {
       {"core", "file I/O: EXR read/write, JSON parse", BenchCore},
+      {"synth", "synthetic scenes: scene build, one view per scene and preset, camera-stream frame, SG accuracy", BenchSynth},
       {"ssdf", "SSDF bake time, file size, SSD error per preset, query cost", BenchSsdf},
   };
   return stages;

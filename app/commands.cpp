@@ -7,6 +7,7 @@ const std::vector<Command>& AllCommands() {
   static const std::vector<Command> commands = {
       {"help", "list the commands, or show one command's help", RunHelp},
       {"version", "print the version and the libraries it was built with", RunVersion},
+      {"synth", "render a procedural tabletop scene with exact ground truth (dataset layout)", RunSynth},
       {"bake", "bake the SSDF visibility field of a virtual object (shadows, self-shadows)", RunBake},
       {"bench", "measure each stage's speed and accuracy; print a table and write JSON", RunBench},
   };

@@ -401,8 +401,9 @@ void Scene::Build() {
         total += lum * sin_theta;
       }
     }
-    // Floor: 5% of the mean, spread like sin(theta), so dim regions still get samples.
-    const double floor_w = 0.05 * std::max(total, 1e-12) / (static_cast<double>(w) * h);
+    // Floor: 20% of the mean, spread like sin(theta), so surfaces that only see the
+    // dim sky (not a bright window) still get samples of it.
+    const double floor_w = 0.2 * std::max(total, 1e-12) / (static_cast<double>(w) * h);
     total = 0;
     for (int j = 0; j < h; ++j) {
       const double sin_theta = std::sin(kPi * (j + 0.5) / h);
