@@ -53,5 +53,6 @@ double MedianMilliseconds(Body&& body, int min_repeats, double min_seconds) {
 std::vector<BenchFigure> BenchCore(const BenchOptions& options);
 std::vector<BenchFigure> BenchSsdf(const BenchOptions& options);
 std::vector<BenchFigure> BenchSynth(const BenchOptions& options);
+std::vector<BenchFigure> BenchSg(const BenchOptions& options);
 
 }  // namespace nerfar

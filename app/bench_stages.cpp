@@ -7,6 +7,7 @@ const std::vector<BenchStage>& AllBenchStages() {
       {"core", "file I/O: EXR read/write, JSON parse", BenchCore},
       {"synth", "synthetic scenes: scene build, one view per scene and preset, camera-stream frame, SG accuracy", BenchSynth},
       {"ssdf", "SSDF bake time, file size, SSD error per preset, query cost", BenchSsdf},
+      {"sg", "SG shading cost, fit time cold/warm and optimisers, fitted-light error vs lobe count", BenchSg},
   };
   return stages;
 }

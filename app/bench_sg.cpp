@@ -1,0 +1,204 @@
+// Bench stage "sg": spherical-Gaussian shading cost, SG fit time cold and warm
+// on 2048 directions (one core), the optimisers side by side, and the error of
+// the fitted light against the lobe count (8/16/32/64) on the shared panoramas
+// (window/env.exr and every insert/*/probe.exr; skipped when absent).
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <random>
+#include <string>
+
+#include "app/bench.h"
+#include "calib/core/exr.h"
+#include "calib/core/metrics.h"
+#include "render/sg/brdf.h"
+#include "render/sg/fit.h"
+#include "render/sg/sphere.h"
+#include "render/sg/visibility.h"
+
+namespace nerfar {
+
+namespace {
+
+// A light without the shared scenes: a sky-like broad part plus a bright
+// window-like cluster, sampled like a 64 × 32 panorama.
+SgMixture SyntheticLight() {
+  SgMixture light;
+  const std::vector<Vec3> axes = FibonacciSphere(24);
+  for (size_t k = 0; k < axes.size(); ++k)
+    light.push_back({axes[k], 2.0 + static_cast<double>(k % 5), Vec3(0.2, 0.22, 0.3) * (1.0 + 0.1 * (k % 3))});
+  const Vec3 window = Normalized(Vec3(0.6, 0.55, 0.45));
+  for (int k = 0; k < 6; ++k) {
+    const Vec3 offset(0.05 * std::cos(k), 0.05 * std::sin(k), 0.03 * (k % 2));
+    light.push_back({Normalized(window + offset), 300.0, Vec3(35, 32, 27)});
+  }
+  return light;
+}
+
+ImageF SyntheticPanorama() { return RenderEquirect(SyntheticLight(), 256, 128); }
+
+struct LightError {
+  double irradiance_rel_rms = 0;
+  double psnr_tm = 0;
+};
+
+// Lighting error of DESIGN.md (irradiance for 64 normals, relative RMS) and
+// psnr_tm of the panorama rendered from the fit.
+LightError ErrorOf(const SgMixture& fit, const ImageF& pano) {
+  double num = 0.0, den = 0.0;
+  for (const Vec3& n : FibonacciSphere(64)) {
+    const double a = LuminanceOf(Irradiance(fit, n)), b = LuminanceOf(PanoramaIrradiance(pano, n));
+    num += (a - b) * (a - b);
+    den += b * b;
+  }
+  return {den > 0.0 ? std::sqrt(num / den) : 0.0, PsnrTm(RenderEquirect(fit, pano.width, pano.height), pano)};
+}
+
+RadianceSamples Rotated(RadianceSamples samples, double angle_rad) {
+  const Mat3 r = RotationFromAxisAngle(Vec3(0, 0, 1), angle_rad);
+  for (Vec3& d : samples.directions) d = r * d;
+  return samples;
+}
+
+std::string MapName(const std::string& scenes, const std::string& path) {
+  return std::filesystem::relative(path, scenes).string();
+}
+
+}  // namespace
+
+std::vector<BenchFigure> BenchSg(const BenchOptions& options) {
+  std::vector<BenchFigure> figures;
+  const int repeats = options.quick ? 3 : 7;
+  const double min_seconds = options.quick ? 0.05 : 0.5;
+
+  // ---- the panorama the fit timings use
+  ImageF pano;
+  std::string source = "synthetic sky + window";
+  if (!options.scenes_dir.empty() && std::filesystem::exists(options.scenes_dir + "/window/env.exr")) {
+    pano = ReadExrRgb(options.scenes_dir + "/window/env.exr");
+    source = "window/env.exr";
+  } else {
+    pano = SyntheticPanorama();
+  }
+  const RadianceSamples samples = SamplesFromEquirect(pano, 64, 32);
+  const std::string condition = "2048 directions, " + source + ", 1 thread";
+
+  // ---- fit time, default method (cold, and warm after a 2° rotation)
+  const SgFitOptions fit_options;  // balanced: 32 lobes
+  SgMixture cold;
+  figures.push_back({"fit_cold_ms",
+                     MedianMilliseconds([&] { cold = FitSg(samples, fit_options); }, repeats, min_seconds), "ms",
+                     condition + ", 32 lobes (budget 80)"});
+  const RadianceSamples moved = Rotated(samples, 2.0 * kPi / 180.0);
+  SgFitReport warm_report;
+  figures.push_back(
+      {"fit_warm_ms",
+       MedianMilliseconds([&] { FitSg(moved, fit_options, &cold, &warm_report); }, repeats * 3, min_seconds), "ms",
+       condition + ", 32 lobes, light turned 2 deg (budget 3)"});
+  SgFitReport moved_cold_report;
+  FitSg(moved, fit_options, nullptr, &moved_cold_report);
+  figures.push_back({"fit_warm_loss_ratio", warm_report.final_loss / moved_cold_report.final_loss, "",
+                     "warm loss / cold loss on the turned light"});
+
+  // ---- optimisers side by side (docs/SG.md): time and result of a cold fit
+  struct Method {
+    const char* name;
+    SgFitMethod method;
+  };
+  for (const Method& m : {Method{"block", SgFitMethod::kAlternatingBlock},
+                          Method{"dense", SgFitMethod::kAlternatingDense}, Method{"adam", SgFitMethod::kAdam}}) {
+    SgFitOptions o = fit_options;
+    o.method = m.method;
+    if (options.quick) {
+      o.cold_iterations = 3;
+      o.adam_iterations = 20;
+    }
+    SgFitReport report;
+    SgMixture fit;
+    const double ms = MedianMilliseconds([&] { fit = FitSg(samples, o, nullptr, &report); }, 1, 0.0);
+    const LightError error = ErrorOf(fit, pano);
+    const std::string note = std::string(m.name) + ", " + condition + ", 32 lobes";
+    figures.push_back({std::string("fit_cold_ms_") + m.name, ms, "ms", note});
+    figures.push_back({std::string("fit_loss_") + m.name, report.final_loss, "", note});
+    figures.push_back({std::string("fit_irradiance_rel_rms_") + m.name, error.irradiance_rel_rms, "", note});
+  }
+
+  // ---- shading cost per pixel, 32 lobes (prepared float path)
+  {
+    const SgFitOptions o;
+    const SgMixture light = cold.size() == 32 ? cold : FitSg(samples, o);
+    const SgShader shader(light);
+    const int pixels = 4096;
+    std::vector<Vec3f> normals(pixels), views(pixels);
+    std::vector<float> gamma(32 * pixels);
+    std::mt19937 rng(1);
+    std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+    for (int p = 0; p < pixels; ++p) {
+      normals[p] = Normalized(Vec3f(u(rng), u(rng), u(rng) + 0.01f));
+      views[p] = Normalized(normals[p] + Vec3f(u(rng), u(rng), u(rng)) * 0.5f);
+      for (int k = 0; k < 32; ++k) gamma[32 * p + k] = 0.5f + 0.5f * u(rng);
+    }
+    for (const auto& [name, material] : {std::pair{"diffuse", SgMaterial{Vec3(0.8, 0.35, 0.2), 0.7, 0.0}},
+                                         std::pair{"glossy", SgMaterial{Vec3(0.9, 0.9, 0.9), 0.25, 1.0}}}) {
+      float sink = 0.0f;
+      const double ms = MedianMilliseconds(
+          [&] {
+            for (int p = 0; p < pixels; ++p) sink += shader.Shade(material, normals[p], views[p], &gamma[32 * p]).x;
+          },
+          repeats, min_seconds);
+      if (!std::isfinite(sink)) figures.push_back({"shade_nonfinite", 1, "", name});
+      figures.push_back({std::string("shade_ns_per_pixel_32_lobes") + (std::string(name) == "diffuse" ? "" : "_glossy"),
+                         ms * 1e6 / pixels, "ns", std::string(name) + " material, with gamma, 1 thread"});
+    }
+    // γ for 32 lobes per pixel (the SSDF values given).
+    std::vector<SgTableRow> rows;
+    for (const Sg& sg : light) rows.push_back(PrepareGamma(sg.sharpness));
+    float sink = 0.0f;
+    const double gamma_ms = MedianMilliseconds(
+        [&] {
+          for (int p = 0; p < pixels; ++p)
+            for (int k = 0; k < 32; ++k) sink += GammaPrepared(rows[k], gamma[32 * p + k] - 0.5f);
+        },
+        repeats, min_seconds);
+    figures.push_back({"gamma_ns_per_pixel_32_lobes", gamma_ms * 1e6 / pixels + 0.0 * sink, "ns",
+                       "table lookups, SSD given, 1 thread"});
+  }
+
+  // ---- error of the fitted light against the lobe count
+  std::vector<std::pair<std::string, ImageF>> maps;
+  if (!options.scenes_dir.empty()) {
+    namespace fs = std::filesystem;
+    const std::string env = options.scenes_dir + "/window/env.exr";
+    if (fs::exists(env)) maps.emplace_back(MapName(options.scenes_dir, env), pano);
+    std::vector<std::string> probes;
+    std::error_code error;
+    for (const auto& scene : fs::directory_iterator(options.scenes_dir, error)) {
+      const fs::path insert = scene.path() / "insert";
+      if (!fs::is_directory(insert, error)) continue;
+      for (const auto& object : fs::directory_iterator(insert, error))
+        if (fs::exists(object.path() / "probe.exr")) probes.push_back((object.path() / "probe.exr").string());
+    }
+    std::sort(probes.begin(), probes.end());
+    for (const std::string& p : probes) maps.emplace_back(MapName(options.scenes_dir, p), ReadExrRgb(p));
+  }
+  if (maps.empty()) maps.emplace_back("synthetic", SyntheticPanorama());
+  if (options.quick) maps.resize(1);
+  for (const auto& [name, map] : maps) {
+    const RadianceSamples s = SamplesFromEquirect(map, 64, 32);
+    for (int lobes : {8, 16, 32, 64}) {
+      SgFitOptions o;
+      o.lobes = lobes;
+      if (options.quick) o.cold_iterations = 3;
+      const double t0 = NowSeconds();
+      const SgMixture fit = FitSg(s, o);
+      const double ms = (NowSeconds() - t0) * 1e3;
+      const LightError error = ErrorOf(fit, map);
+      const std::string note = name + ", cold fit " + std::to_string(static_cast<int>(ms + 0.5)) + " ms";
+      figures.push_back({"irradiance_rel_rms_" + std::to_string(lobes) + "_lobes", error.irradiance_rel_rms, "", note});
+      figures.push_back({"psnr_tm_" + std::to_string(lobes) + "_lobes", error.psnr_tm, "dB", note});
+    }
+  }
+  return figures;
+}
+
+}  // namespace nerfar

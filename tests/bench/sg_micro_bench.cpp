@@ -1,0 +1,76 @@
+// render/sg micro-kernels, timed with Google Benchmark (not run by ctest):
+// per-pixel shading with 32 lobes, γ lookups, the product/inner-product closed
+// forms, and a warm fit on 2048 directions (docs/BENCHMARKS.md "sg").
+#include <benchmark/benchmark.h>
+
+#include <cmath>
+#include <random>
+
+#include "render/sg/brdf.h"
+#include "render/sg/fit.h"
+#include "render/sg/sphere.h"
+#include "render/sg/visibility.h"
+
+namespace nerfar {
+namespace {
+
+SgMixture Light(int lobes) {
+  SgMixture light;
+  const std::vector<Vec3> axes = FibonacciSphere(lobes);
+  for (int k = 0; k < lobes; ++k)
+    light.push_back({axes[k], std::pow(10.0, 0.1 * (k % 25)), Vec3(1.0 + k % 3, 1.0, 0.5 + 0.1 * k)});
+  return light;
+}
+
+void BM_ShadePixel32Lobes(benchmark::State& state) {
+  const SgShader shader(Light(32));
+  const SgMaterial material{Vec3(0.8, 0.35, 0.2), 0.7, state.range(0) ? 1.0 : 0.0};
+  std::vector<float> gamma(32, 0.8f);
+  Vec3f n = Normalized(Vec3f(0.2f, 0.3f, 1.0f)), v = Normalized(Vec3f(-0.3f, 0.1f, 1.0f));
+  for (auto _ : state) {
+    benchmark::DoNotOptimize(n);
+    benchmark::DoNotOptimize(shader.Shade(material, n, v, gamma.data()));
+  }
+  state.SetItemsProcessed(state.iterations());
+}
+BENCHMARK(BM_ShadePixel32Lobes)->Arg(0)->Arg(1);  // 0: diffuse dielectric, 1: metal
+
+void BM_Gamma32Lobes(benchmark::State& state) {
+  std::vector<SgTableRow> rows;
+  for (const Sg& sg : Light(32)) rows.push_back(PrepareGamma(sg.sharpness));
+  float s = -0.3f;
+  for (auto _ : state) {
+    float sum = 0.0f;
+    for (const SgTableRow& row : rows) sum += GammaPrepared(row, s);
+    s = s > 0.5f ? -0.3f : s + 1e-3f;
+    benchmark::DoNotOptimize(sum);
+  }
+  state.SetItemsProcessed(state.iterations());
+}
+BENCHMARK(BM_Gamma32Lobes);
+
+void BM_InnerProduct(benchmark::State& state) {
+  Sg a{Normalized(Vec3(0.1, 0.2, 1.0)), 30.0, Vec3(1, 2, 3)}, b{Normalized(Vec3(0.3, -0.1, 1.0)), 500.0, Vec3(1, 1, 1)};
+  for (auto _ : state) {
+    benchmark::DoNotOptimize(a);
+    benchmark::DoNotOptimize(InnerProduct(a, b));
+  }
+}
+BENCHMARK(BM_InnerProduct);
+
+void BM_FitWarm2048(benchmark::State& state) {
+  const SgMixture truth = Light(40);
+  RadianceSamples samples;
+  for (const Vec3& d : FibonacciSphere(2048)) {
+    samples.directions.push_back(d);
+    samples.radiance.push_back(Evaluate(truth, d));
+    samples.solid_angles.push_back(4.0 * kPi / 2048);
+  }
+  const SgFitOptions options;
+  const SgMixture previous = FitSg(samples, options);
+  for (auto _ : state) benchmark::DoNotOptimize(FitSg(samples, options, &previous));
+}
+BENCHMARK(BM_FitWarm2048)->Unit(benchmark::kMillisecond);
+
+}  // namespace
+}  // namespace nerfar
