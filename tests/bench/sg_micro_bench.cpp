@@ -72,5 +72,18 @@ void BM_FitWarm2048(benchmark::State& state) {
 }
 BENCHMARK(BM_FitWarm2048)->Unit(benchmark::kMillisecond);
 
+void BM_FitCold2048(benchmark::State& state) {
+  const SgMixture truth = Light(40);
+  RadianceSamples samples;
+  for (const Vec3& d : FibonacciSphere(2048)) {
+    samples.directions.push_back(d);
+    samples.radiance.push_back(Evaluate(truth, d));
+    samples.solid_angles.push_back(4.0 * kPi / 2048);
+  }
+  const SgFitOptions options;
+  for (auto _ : state) benchmark::DoNotOptimize(FitSg(samples, options));
+}
+BENCHMARK(BM_FitCold2048)->Unit(benchmark::kMillisecond);
+
 }  // namespace
 }  // namespace nerfar
