@@ -146,10 +146,15 @@ Vec3f SgShader::Shade(const SgMaterial& m, const Vec3f& n, const Vec3f& v, const
     }
     // ⟨G_k, spec⟩ with unit amplitudes (sg.cpp's MultiplyUnit, in float).
     const float l = lambda_[k];
+    const float dx = px_[k] - sx, dy = py_[k] - sy, dz = pz_[k] - sz;
+    const float d2 = dx * dx + dy * dy + dz * dz;
+    // λ_m ≤ λ_k + λ_s bounds the product's scale by exp(−λ_k λ_s d²/(2(λ_k + λ_s))):
+    // below e^{−30} the lobes do not overlap (most lobes for a glossy
+    // surface); skip the sqrt and two exps.
+    if (l * sl * d2 > 60.0f * (l + sl)) continue;
     const float ux = l * px_[k] + sl * sx, uy = l * py_[k] + sl * sy, uz = l * pz_[k] + sl * sz;
     const float lm = std::sqrt(ux * ux + uy * uy + uz * uz);
-    const float dx = px_[k] - sx, dy = py_[k] - sy, dz = pz_[k] - sz;
-    const float log_scale = std::min(0.0f, -l * sl * (dx * dx + dy * dy + dz * dz) / (l + sl + lm));
+    const float log_scale = std::min(0.0f, -l * sl * d2 / (l + sl + lm));
     const float integral = lm > 1e-6f ? -std::expm1(-2.0f * lm) / lm : 2.0f - 2.0f * lm;
     const float s = kTwoPiF * std::exp(log_scale) * integral;
     sr += wr * s;
