@@ -132,13 +132,21 @@ class SsdfField {
   void EvaluateBasis(const Vec3f& d, float* out) const;
   // Coefficients at a point of the grid box by trilinear weights into out[0..K-1].
   void InterpolateCoefficients(const Vec3f& x, float* out) const;
-  // Maps (x, d) outside the grid onto the grid box: x_b, d_b and the factors
-  // needed to map the answer back. Returns false when x is inside the box.
+  // Outside the grid: the per-point part (x_b on the grid box and the apparent
+  // size change), then per direction d_b and what MapBack needs.
+  struct OutsidePoint {
+    Vec3f x_b;
+    Vec3 u;                    // unit, from x towards the centre
+    double far_over_near = 1;  // D_f / D_b
+    double alpha_f = 0, alpha_b = 0;
+  };
   struct OutsideMap {
-    Vec3f x_b, d_b;
+    Vec3f d_b;
     float beta_f = 0, h_beta = 0, ratio = 1;  // ratio = D_b / D_f
   };
-  bool MapOutside(const Vec3f& x, const Vec3f& d, OutsideMap* map) const;
+  // False when x is inside the grid box.
+  bool MapPoint(const Vec3f& x, OutsidePoint* point) const;
+  static OutsideMap MapDirection(const OutsidePoint& point, const Vec3f& d);
   static float MapBack(const OutsideMap& map, float s_b);
 
   int grid_ = 0, dirs_ = 0, components_ = 0;

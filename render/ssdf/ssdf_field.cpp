@@ -82,33 +82,44 @@ void SsdfField::InterpolateCoefficients(const Vec3f& x, float* out) const {
 // For a sphere every step is exact; for other shapes the error comes from
 // parallax (the x_b view is not a scaled x_f view) and from treating the
 // nearest-silhouette distance as radial. It is bounded because |ρ_f| ≤ α_f.
-bool SsdfField::MapOutside(const Vec3f& x, const Vec3f& d, OutsideMap* map) const {
+bool SsdfField::MapPoint(const Vec3f& x, OutsidePoint* point) const {
   const Vec3 v = Vec3(x) - center_;
   const double half = edge_ / 2;
   const double extent = std::max({std::abs(v.x), std::abs(v.y), std::abs(v.z)});
   if (extent <= half) return false;
   const double t = half / extent;
   const double d_f = Length(v), d_b = d_f * t;
-  const Vec3 u = -v / d_f;
-  const Vec3 dn = Normalized(Vec3(d));
-  const double cos_beta = std::clamp(Dot(dn, u), -1.0, 1.0);
-  const double beta_f = std::acos(cos_beta);
-  const double alpha_f = std::asin(std::min(1.0, radius_ / d_f)), alpha_b = std::asin(std::min(1.0, radius_ / d_b));
-  double h;
-  if (beta_f <= alpha_f)
-    h = std::asin(std::min(1.0, std::sin(beta_f) * d_f / d_b));
-  else
-    h = alpha_b + (beta_f - alpha_f) * (kPi - alpha_b) / (kPi - alpha_f);
-  const Vec3 side = dn - u * cos_beta;
-  const double side_len = Length(side);
-  Vec3 d_b_dir = dn;
-  if (side_len > 1e-9) d_b_dir = u * std::cos(h) + (side / side_len) * std::sin(h);
-  map->x_b = Vec3f(center_ + v * t);
-  map->d_b = Vec3f(d_b_dir);
-  map->beta_f = static_cast<float>(beta_f);
-  map->h_beta = static_cast<float>(h);
-  map->ratio = static_cast<float>(d_b / d_f);
+  point->x_b = Vec3f(center_ + v * t);
+  point->u = -v / d_f;
+  point->far_over_near = d_f / d_b;
+  point->alpha_f = std::asin(std::min(1.0, radius_ / d_f));
+  point->alpha_b = std::asin(std::min(1.0, radius_ / d_b));
   return true;
+}
+
+SsdfField::OutsideMap SsdfField::MapDirection(const OutsidePoint& point, const Vec3f& d) {
+  const Vec3 dn = Normalized(Vec3(d));
+  const double cos_beta = std::clamp(Dot(dn, point.u), -1.0, 1.0);
+  const Vec3 side = dn - point.u * cos_beta;
+  const double sin_beta = Length(side);  // |d - (d·u)u| = sin β
+  const double beta_f = std::atan2(sin_beta, cos_beta);
+  double h, sin_h, cos_h;
+  if (beta_f <= point.alpha_f) {
+    // Inverse shrink on the object's cone: sin h = sin β · D_f/D_b, h ≤ α_b < π/2.
+    sin_h = std::min(1.0, sin_beta * point.far_over_near);
+    cos_h = std::sqrt(1.0 - sin_h * sin_h);
+    h = std::asin(sin_h);
+  } else {
+    h = point.alpha_b + (beta_f - point.alpha_f) * (kPi - point.alpha_b) / (kPi - point.alpha_f);
+    sin_h = std::sin(h);
+    cos_h = std::cos(h);
+  }
+  OutsideMap map;
+  map.d_b = sin_beta > 1e-9 ? Vec3f(point.u * cos_h + side * (sin_h / sin_beta)) : Vec3f(dn);
+  map.beta_f = static_cast<float>(beta_f);
+  map.h_beta = static_cast<float>(h);
+  map.ratio = static_cast<float>(1.0 / point.far_over_near);
+  return map;
 }
 
 float SsdfField::MapBack(const OutsideMap& map, float s_b) {
@@ -120,9 +131,11 @@ float SsdfField::MapBack(const OutsideMap& map, float s_b) {
 float SsdfField::Query(const Vec3f& x, const Vec3f& d) const {
   const size_t k = static_cast<size_t>(components_);
   float basis[kMaxComponents + 1], coefficients[kMaxComponents];  // K ≤ 1024 (Validate)
+  OutsidePoint point;
+  const bool outside = MapPoint(x, &point);
   OutsideMap map;
-  const bool outside = MapOutside(x, d, &map);
-  InterpolateCoefficients(outside ? map.x_b : x, coefficients);
+  if (outside) map = MapDirection(point, d);
+  InterpolateCoefficients(outside ? point.x_b : x, coefficients);
   EvaluateBasis(outside ? map.d_b : d, basis);
   float s = basis[0];
   for (size_t c = 0; c < k; ++c) s += coefficients[c] * basis[1 + c];
@@ -175,8 +188,8 @@ void SsdfBatch::QueryBatch(const Vec3f* points, size_t count, float* out) const 
   for (size_t p = 0; p < count; ++p) {
     float* result = out + p * lobes;
     const Vec3f& x = points[p];
-    SsdfField::OutsideMap map;
-    if (!field_.MapOutside(x, directions_.empty() ? Vec3f(0, 0, 1) : directions_[0], &map)) {
+    SsdfField::OutsidePoint point;
+    if (!field_.MapPoint(x, &point)) {
       field_.InterpolateCoefficients(x, coefficients.data());
       for (size_t m = 0; m < lobes; ++m) {
         const float* e = evaluated_.data() + m * (k + 1);
@@ -186,9 +199,9 @@ void SsdfBatch::QueryBatch(const Vec3f* points, size_t count, float* out) const 
       }
       continue;
     }
-    field_.InterpolateCoefficients(map.x_b, coefficients.data());  // x_b is the same for every lobe
+    field_.InterpolateCoefficients(point.x_b, coefficients.data());  // x_b is the same for every lobe
     for (size_t m = 0; m < lobes; ++m) {
-      if (m > 0) field_.MapOutside(x, directions_[m], &map);
+      const SsdfField::OutsideMap map = SsdfField::MapDirection(point, directions_[m]);
       field_.EvaluateBasis(map.d_b, basis.data());
       float s = basis[0];
       for (size_t c = 0; c < k; ++c) s += coefficients[c] * basis[1 + c];
