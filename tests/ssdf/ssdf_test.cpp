@@ -510,6 +510,35 @@ TEST(File, CorruptAndTruncatedFilesAreRejected) {
   EXPECT_THROW(ReadSsdf(dir.File("missing.ssdf")), InputError);
 }
 
+TEST(File, RandomlyDamagedHeadersNeverCrash) {
+  // Mutations of the header and strings, resealed so that the checksum passes:
+  // every one either parses into a valid field or is an InputError.
+  SsdfBakeOptions o = TestOptions();
+  o.grid = 3;
+  o.dirs = 6;
+  o.components = 4;
+  const std::string good = SerializeSsdf(BakeSsdf(Box(), o, Material{}));
+  std::mt19937 rng(12);
+  std::uniform_int_distribution<size_t> where(0, std::min<size_t>(good.size() - 9, 400));
+  std::uniform_int_distribution<int> byte(0, 255);
+  int parsed = 0, rejected = 0;
+  for (int i = 0; i < 500; ++i) {
+    std::string bytes = good;
+    for (int k = 0; k < 3; ++k) bytes[where(rng)] = static_cast<char>(byte(rng));
+    const uint64_t h = Fnv1a(bytes, bytes.size() - 8);
+    std::memcpy(bytes.data() + bytes.size() - 8, &h, 8);
+    try {
+      const SsdfField field = ParseSsdf(bytes, "field.ssdf");
+      EXPECT_TRUE(field.Validate().empty());
+      ++parsed;
+    } catch (const InputError&) {
+      ++rejected;
+    }
+  }
+  EXPECT_EQ(parsed + rejected, 500);
+  EXPECT_GT(rejected, 0);
+}
+
 TEST(File, SharedObjectsBakeAndLoadBackBitIdentical) {
   NERFAR_REQUIRE_SHARED_SCENES(scenes);
   TempDir dir;
