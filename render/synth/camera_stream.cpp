@@ -16,7 +16,7 @@ namespace nerfar::synth {
 namespace {
 
 constexpr double kDeg = kPi / 180.0;
-constexpr double kGridM = 0.004;  // baked irradiance grid spacing on the table top
+constexpr double kGridM = 0.005;  // baked irradiance grid spacing on the table top
 constexpr int kBakeSamples = 16;  // light samples per grid point (noise ~ 1/4 of one sample)
 
 }  // namespace
@@ -142,6 +142,8 @@ Frame SyntheticCameraSource::RenderFrame(double t_s, int64_t index) const {
   const int side = static_cast<int>(std::lround(std::sqrt(static_cast<double>(spp))));
   const bool square = side * side == spp;
   const Scene& scene = m.synth.scene;
+  RenderOptions light;
+  light.seed = o.seed;
   ImageF linear(o.width, o.height, 3);
   ParallelFor(
       linear.PixelCount(),
@@ -164,10 +166,10 @@ Frame SyntheticCameraSource::RenderFrame(double t_s, int64_t index) const {
             // Table top or tag sheet: exact albedo, baked light.
             sum += scene.Albedo(hit) * m.TableIrradiance(hit.point.x, hit.point.y) * (1.0f / static_cast<float>(kPi));
           } else {
-            // Other surfaces: their albedo under the light baked at the table point below them
-            // times their orientation towards the sky, a cheap stand-in for shading.
-            const Vec3f e = m.TableIrradiance(hit.point.x, hit.point.y);
-            sum += scene.Albedo(hit) * e * ((0.55f + 0.45f * hit.normal.z) / static_cast<float>(kPi));
+            // Other surfaces: one light sample each, with shadows.
+            const Vec3f e = EstimateIrradiance(scene, hit.point + hit.normal * 1e-4f, hit.normal, 1, light,
+                                               Mix64(static_cast<uint64_t>(index)) ^ (index_px * spp + s));
+            sum += scene.Albedo(hit) * e * (1.0f / static_cast<float>(kPi));
           }
         }
         float* p = linear.Pixel(x, y);

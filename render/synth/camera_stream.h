@@ -1,9 +1,9 @@
 // A synthetic camera: 8-bit frames of a synthetic scene along a smooth,
 // handheld-like trajectory over the tag mat, each with its true pose
 // (Frame::T_world_camera_true, OpenCV camera axes, at the middle of the
-// exposure). Fast enough for tests and the live demo: primary rays only, the
-// table top's light (direct, with shadows) baked once on a 4 mm grid, other
-// surfaces shaded with one light sample; optional sensor noise, motion blur
+// exposure). Fast enough for tests and the live demo: primary rays, the table
+// top's direct light (with shadows) baked once on a 5 mm grid, other surfaces
+// shaded with one sample per light; optional sensor noise, motion blur
 // and slow exposure changes. Display tone mapping of calib/core/image_io.h.
 #pragma once
 
