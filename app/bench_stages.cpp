@@ -5,6 +5,7 @@ namespace nerfar {
 const std::vector<BenchStage>& AllBenchStages() {
   static const std::vector<BenchStage> stages = {
       {"core", "file I/O: EXR read/write, JSON parse", BenchCore},
+      {"insert", "per-frame insertion stages at 1280x720 per preset; quality with ground-truth inputs", BenchInsert},
       {"synth", "synthetic scenes: scene build, one view per scene and preset, camera-stream frame, SG accuracy", BenchSynth},
       {"ssdf", "SSDF bake time, file size, SSD error per preset, query cost", BenchSsdf},
       {"sg", "SG shading cost, fit time cold/warm and optimisers, fitted-light error vs lobe count", BenchSg},

@@ -9,6 +9,7 @@ const std::vector<Command>& AllCommands() {
       {"version", "print the version and the libraries it was built with", RunVersion},
       {"synth", "render a procedural tabletop scene with exact ground truth (dataset layout)", RunSynth},
       {"bake", "bake the SSDF visibility field of a virtual object (shadows, self-shadows)", RunBake},
+      {"insert", "insert virtual objects into a scene's views: light, shade, occlude, shadow, composite", RunInsert},
       {"bench", "measure each stage's speed and accuracy; print a table and write JSON", RunBench},
   };
   return commands;

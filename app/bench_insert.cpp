@@ -1,0 +1,257 @@
+// Bench stage "insert": per-stage time of a 1280x720 AR frame with the object
+// covering about 10% of the frame, per preset (paper §4.4, budgets of
+// DESIGN.md), and, where ../shared/scenes is present, quality with
+// ground-truth inputs (true probe fitted with SGs as the light, true depth as
+// the receivers): object psnr_tm, shadow error and the SG fit's lighting error.
+//
+// The scene is a NeRF grid (render/nerf's NerfField, 1 cm voxels) filled
+// from an exact tabletop (table slab, a sphere), so the occlusion and κ stages
+// pay the real cost of marching a NeRF with empty-space skipping.
+#include <cmath>
+#include <filesystem>
+#include <string>
+
+#include "app/bench.h"
+#include "calib/core/exr.h"
+#include "calib/core/image_io.h"
+#include "calib/core/log.h"
+#include "calib/core/parallel.h"
+#include "calib/dataset.h"
+#include "calib/object.h"
+#include "render/insert/inserter.h"
+#include "render/insert/nerf_scene.h"
+#include "render/insert/quality.h"
+#include "render/insert/ssdf_visibility.h"
+#include "render/mesh/mesh.h"
+#include "render/nerf/nerf_field.h"
+#include "render/sg/fit.h"
+#include "render/sg/sphere.h"
+#include "render/ssdf/ssdf.h"
+
+namespace nerfar {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+Pose LookAtPose(const Vec3& eye, const Vec3& target) {
+  const Vec3 z = Normalized(target - eye);
+  const Vec3 x = Normalized(Cross(z, Vec3{0, 0, 1}));
+  return {Mat3::FromColumns(x, Cross(z, x), z), eye};
+}
+
+// The shared scenes' box, a 4 cm table slab (albedo-like radiance 0.4) and a
+// sphere (r = 8 cm) standing on it, as a 1 cm NeRF grid.
+NerfField TabletopNerf() {
+  const Aabb box{{-0.62, -0.42, -0.05}, {0.62, 0.42, 0.60}};
+  NerfField field =
+      NerfField::Dense(box, 0.01, kNerfEmptyDensityRaw, {std::log(0.4f), std::log(0.35f), std::log(0.3f)});
+  const Vec3 sphere_center{-0.2, 0.12, 0.08};
+  for (int k = 0; k < field.res[2]; ++k)
+    for (int j = 0; j < field.res[1]; ++j)
+      for (int i = 0; i < field.res[0]; ++i) {
+        const int32_t slot = field.Slot(i, j, k);
+        if (slot < 0) continue;
+        const Vec3 p = Vec3(field.origin) + Vec3(i, j, k) * double(field.voxel_m);
+        const bool table = p.z <= 0.0 && p.z >= -0.04 && std::abs(p.x) <= 0.6 && std::abs(p.y) <= 0.4;
+        const bool sphere = Length(p - sphere_center) <= 0.08;
+        if (table || sphere) field.density[slot] = std::log(3000.0f);  // σ = 3000/m: opaque within ~2 mm
+        if (sphere) field.color[size_t(slot) * kNerfColorCoeffs + 8] = std::log(0.8f);
+      }
+  field.UpdateOccupancy(1.0f);
+  return field;
+}
+
+TriangleMesh BenchMesh(const std::string& scenes_dir, std::string* name) {
+  if (!scenes_dir.empty()) {
+    const std::string path = scenes_dir + "/objects/monkey_diffuse.obj";
+    std::error_code error;
+    if (fs::is_regular_file(path, error)) {
+      *name = "monkey_diffuse (3936 triangles)";
+      return ReadMesh(path);
+    }
+  }
+  *name = "torus (2304 triangles)";
+  return MakeTorus(0.04, 0.015, 48, 24);
+}
+
+struct StageMedians {
+  double light = 0, fit_warm = 0, raster = 0, shade = 0, occlusion = 0, kappa = 0, frame_still = 0, frame_moving = 0;
+  double coverage = 0;
+};
+
+StageMedians TimePreset(const NerfScene& scene, const SgMixture& environment, const InsertObject& object_template,
+                        const CameraIntrinsics& camera, const Pose& T_world_camera, const InsertOptions& options,
+                        int repeats) {
+  Inserter inserter(scene, environment, options);
+  ImageF background(camera.width, camera.height, 3, 0.3f);
+  InsertObject object = object_template;
+  std::vector<double> light, fit, raster, shade, occlusion, kappa, still, moving;
+  InsertLayers layers;
+  // Warm-up: the cold fit and allocations.
+  {
+    ImageF frame = background;
+    inserter.Render(camera, T_world_camera, {object}, frame, &layers);
+  }
+  StageMedians m;
+  m.coverage = double(layers.gbuffer.covered) / (double(camera.width) * camera.height);
+  for (int r = 0; r < repeats; ++r) {
+    // The object still: the incident light is reused.
+    ImageF frame = background;
+    InsertTimings t = inserter.Render(camera, T_world_camera, {object}, frame, &layers);
+    raster.push_back(t.raster_ms);
+    shade.push_back(t.shade_ms);
+    occlusion.push_back(t.occlusion_ms);
+    kappa.push_back(t.kappa_ms);
+    still.push_back(t.total_ms);
+    // The object moved by 1 mm: new rays from its centre and a warm-started fit.
+    object.T_world_object.translation.x += (r % 2 ? -1e-3 : 1e-3);
+    frame = background;
+    t = inserter.Render(camera, T_world_camera, {object}, frame, &layers);
+    light.push_back(t.light_ms);
+    fit.push_back(t.fit_ms);
+    moving.push_back(t.total_ms);
+  }
+  m.light = MedianOf(light);
+  m.fit_warm = MedianOf(fit);
+  m.raster = MedianOf(raster);
+  m.shade = MedianOf(shade);
+  m.occlusion = MedianOf(occlusion);
+  m.kappa = MedianOf(kappa);
+  m.frame_still = MedianOf(still);
+  m.frame_moving = MedianOf(moving);
+  return m;
+}
+
+// Quality with ground-truth inputs for one scene and object; appends figures.
+void GroundTruthQuality(const std::string& scenes_dir, const std::string& scene_name, const std::string& object_name,
+                        std::vector<BenchFigure>& figures) {
+  const fs::path scene_dir = fs::path(scenes_dir) / scene_name;
+  const fs::path truth = scene_dir / "insert" / object_name;
+  const Dataset dataset = ReadDataset((scene_dir / "transforms_test.json").string(), false);
+  const Material material = ReadMaterial((fs::path(scenes_dir) / "objects" / (object_name + ".json")).string());
+  const TriangleMesh mesh = ReadMesh(material.mesh);
+  const ObjectPlacement placement = ReadObjectPlacement((truth / "pose.json").string());
+  const SsdfField field = BakeSsdf(mesh, SsdfBakeOptions::Preset("fast"), material);
+  const SsdfVisibility visibility(field, placement.T_world_object, placement.scale);
+  InsertOptions options = InsertOptions::Preset("balanced");
+  const ImageF probe = ReadExrRgb((truth / "probe.exr").string());
+  const SgMixture light = FitSg(SamplesFromEquirect(probe, 64, 32), options.light.fit);
+  InsertObject object;
+  object.mesh = &mesh;
+  object.T_world_object = placement.T_world_object;
+  object.scale = placement.scale;
+  object.material.base_color = material.albedo;
+  object.material.roughness = material.roughness;
+  object.material.metallic = material.metallic;
+  object.visibility = &visibility;
+  object.light_override = &light;
+  const EmptyScene scene(*dataset.aabb);
+  Inserter inserter(scene, {}, options);
+  double psnr_sum = 0, shadow_sum = 0;
+  int psnr_n = 0, shadow_n = 0;
+  for (size_t v = 0; v < dataset.frames.size(); ++v) {
+    char index[8];
+    std::snprintf(index, sizeof index, "%03zu", v);
+    const ImageF bg = ReadExrRgb((scene_dir / "insert" / ("bg_" + std::string(index) + ".exr")).string());
+    const ImageF gt = ReadExrRgb((truth / ("rgb_" + std::string(index) + ".exr")).string());
+    const ImageF depth = ReadExrChannel((truth / ("depth_" + std::string(index) + ".exr")).string());
+    const Image8 mask8 = ReadImage8((truth / ("mask_" + std::string(index) + ".png")).string());
+    ImageF mask(mask8.width, mask8.height, 1);
+    for (size_t p = 0; p < mask.pixels.size(); ++p) mask.pixels[p] = mask8.pixels[p * mask8.channels] / 255.0f;
+    ImageF distance, normal;
+    ReceiversFromDepth(depth, dataset.camera, dataset.frames[v].T_world_camera, distance, normal);
+    ImageF frame = bg;
+    inserter.Render(dataset.camera, dataset.frames[v].T_world_camera, {object}, frame, nullptr, {&distance, &normal});
+    const double psnr = ObjectPsnrTm(frame, gt, mask);
+    const ShadowError se = ComputeShadowError(frame, bg, gt, bg, mask);
+    if (std::isfinite(psnr)) psnr_sum += psnr, ++psnr_n;
+    if (std::isfinite(se.error)) shadow_sum += se.error, ++shadow_n;
+  }
+  const std::string key = scene_name + "_" + object_name;
+  const std::string note =
+      "balanced, SSDF baked fast; GT inputs: true probe fitted (32 SGs), true depth as receivers, bg_XXX frames";
+  figures.push_back({"psnr_obj_" + key + "_db", psnr_n ? psnr_sum / psnr_n : NAN, "dB", note});
+  figures.push_back({"shadow_err_" + key, shadow_n ? shadow_sum / shadow_n : NAN, "", note});
+  figures.push_back({"light_err_fit_" + key, LightingError(light, probe), "", "32-SG fit of the true probe"});
+}
+
+}  // namespace
+
+std::vector<BenchFigure> BenchInsert(const BenchOptions& options) {
+  std::vector<BenchFigure> figures;
+  if (!options.quick && !options.scenes_dir.empty()) {
+    for (const char* scene_name : {"lamps", "window"})
+      for (const char* object_name : {"monkey_diffuse", "sphere_glossy"})
+        GroundTruthQuality(options.scenes_dir, scene_name, object_name, figures);
+  }
+  const int width = options.quick ? 320 : 1280, height = options.quick ? 180 : 720;
+  const int repeats = options.quick ? 2 : 3;
+  const NerfField nerf = TabletopNerf();
+  const NerfScene scene(nerf);
+  SgMixture environment;
+  {
+    Sg sky;
+    sky.axis = {0, 0, 1};
+    sky.sharpness = 1.0;
+    sky.amplitude = {0.3, 0.35, 0.4};
+    Sg window;
+    window.axis = Normalized(Vec3{0.6, 0.5, 0.6});
+    window.sharpness = 60.0;
+    window.amplitude = {30.0, 28.0, 25.0};
+    environment = {sky, window};
+  }
+  std::string mesh_name;
+  const TriangleMesh mesh = BenchMesh(options.scenes_dir, &mesh_name);
+  const double t_bake = NowSeconds();
+  const SsdfField field = BakeSsdf(mesh, SsdfBakeOptions::Preset("fast"), std::nullopt);
+  LogInfo("bench insert: baked the object's SSDF (fast) in " + FormatDuration(NowSeconds() - t_bake));
+  const BoundingSphere bs = ComputeBoundingSphere(mesh);
+  const Pose T_world_object{Mat3::Identity(), {0.1, -0.05, -bs.center.z + (ComputeBounds(mesh).max.z - bs.center.z)}};
+  const SsdfVisibility visibility(field, T_world_object, 1.0);
+  InsertObject object;
+  object.mesh = &mesh;
+  object.T_world_object = T_world_object;
+  object.material.base_color = {0.8, 0.35, 0.2};
+  object.material.roughness = 0.7;
+  object.visibility = &visibility;
+
+  // Camera: 60° horizontal view, distance set so the object covers ~10%.
+  CameraIntrinsics camera;
+  camera.width = width;
+  camera.height = height;
+  camera.fx = camera.fy = 0.5 * width / std::tan(kPi / 6);
+  camera.cx = width / 2.0;
+  camera.cy = height / 2.0;
+  const Vec3 target = T_world_object.translation;
+  const Vec3 direction = Normalized(Vec3{0.7, -0.6, 0.5});
+  double distance = 0.4;
+  Pose T_world_camera = LookAtPose(target + direction * distance, target);
+  for (int iteration = 0; iteration < 4; ++iteration) {
+    const ObjectGBuffer g = Rasterize(camera, T_world_camera, {{&mesh, T_world_object, 1.0}});
+    const double coverage = double(g.covered) / (double(width) * height);
+    if (coverage <= 0) break;
+    distance *= std::sqrt(coverage / 0.10);
+    T_world_camera = LookAtPose(target + direction * distance, target);
+  }
+  const std::string size = std::to_string(width) + "x" + std::to_string(height) + ", " + mesh_name;
+  for (const char* preset : {"fast", "balanced", "accurate"}) {
+    const InsertOptions insert_options = InsertOptions::Preset(preset);
+    const StageMedians m = TimePreset(scene, environment, object, camera, T_world_camera, insert_options, repeats);
+    const std::string note = std::string(preset) + ", " + size + ", object " +
+                             std::to_string(int(std::round(m.coverage * 100))) + "% of the frame";
+    const std::string p = std::string(preset) + "_";
+    figures.push_back({p + "light_ms", m.light, "ms", note + "; N=" + std::to_string(insert_options.light.directions)});
+    figures.push_back(
+        {p + "fit_warm_ms", m.fit_warm, "ms", note + "; M=" + std::to_string(insert_options.light.fit.lobes)});
+    figures.push_back({p + "raster_ms", m.raster, "ms", note});
+    figures.push_back({p + "shade_ms", m.shade, "ms", note + " (with self-shadow)"});
+    figures.push_back({p + "occlusion_ms", m.occlusion, "ms", note + " (incl. composite)"});
+    figures.push_back({p + "kappa_ms", m.kappa, "ms", note + "; step " + std::to_string(insert_options.kappa_step)});
+    figures.push_back({p + "frame_still_ms", m.frame_still, "ms", note + "; light cached"});
+    figures.push_back({p + "frame_moving_ms", m.frame_moving, "ms", note + "; light + warm fit"});
+  }
+  return figures;
+}
+
+}  // namespace nerfar

@@ -1,0 +1,339 @@
+// nerfar insert --nerf scene.nerf --env env.json --object object.ssdf --pose pose.json
+//               --dataset DIR --split test -o OUT [--frames DIR] [--background images|nerf] [--preset P]
+// Inserts one or more virtual objects (paper §4.4) into every view of a
+// dataset split: OUT/r_XXX.exr composites named like the dataset's images,
+// OUT/r_XXX.png tone-mapped, the layers OUT/r_XXX_object.exr, _alpha.exr and
+// _kappa.exr, the incident light at the object centre as OUT/probe.exr
+// (equirect, scenes/README.md convention), per-stage timings in
+// OUT/timings.json and, with --truth, the metrics of DESIGN.md in OUT/report.json.
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <memory>
+#include <nlohmann/json.hpp>
+
+#include "app/bench.h"
+#include "app/cli.h"
+#include "app/commands.h"
+#include "calib/core/atomic_file.h"
+#include "calib/core/error.h"
+#include "calib/core/exr.h"
+#include "calib/core/image_io.h"
+#include "calib/core/json.h"
+#include "calib/core/log.h"
+#include "calib/core/parallel.h"
+#include "calib/dataset.h"
+#include "calib/object.h"
+#include "render/insert/inserter.h"
+#include "render/insert/nerf_scene.h"
+#include "render/insert/quality.h"
+#include "render/insert/ssdf_visibility.h"
+#include "render/lighting/env_light.h"
+#include "render/nerf/nerf_file.h"
+#include "render/sg/fit.h"
+#include "render/sg/sphere.h"
+#include "render/ssdf/ssdf.h"
+
+namespace nerfar {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+struct LoadedObject {
+  SsdfField field;
+  TriangleMesh mesh;
+  ObjectPlacement placement;
+  SgMaterial material;
+  std::unique_ptr<SsdfVisibility> visibility;
+};
+
+// The mesh an .ssdf was baked from: as stored, or relative to the field's folder.
+std::string ResolveMesh(const std::string& reference, const std::string& ssdf_path) {
+  if (reference.empty()) ThrowInputError(ssdf_path, "names no mesh (give --mesh FILE)");
+  const fs::path p(reference);
+  std::error_code error;
+  if (p.is_absolute() || fs::is_regular_file(p, error)) return reference;
+  const fs::path beside = fs::path(ssdf_path).parent_path() / p;
+  if (fs::is_regular_file(beside, error)) return beside.string();
+  ThrowInputError(ssdf_path, "its mesh '" + reference + "' was not found (give --mesh FILE)");
+}
+
+ImageF ReadFrame(const std::string& path) {
+  const std::string ext = fs::path(path).extension().string();
+  if (ext == ".exr" || ext == ".EXR") return ReadExrRgb(path);
+  Image8 image = ReadImage8(path);
+  if (image.channels == 1) {
+    Image8 rgb(image.width, image.height, 3);
+    for (size_t p = 0; p < image.PixelCount(); ++p)
+      for (int c = 0; c < 3; ++c) rgb.pixels[p * 3 + c] = image.pixels[p];
+    image = rgb;
+  }
+  return DisplayToLinear(image);
+}
+
+ImageF ReadMask(const std::string& path) {
+  const Image8 m = ReadImage8(path);
+  ImageF out(m.width, m.height, 1);
+  for (size_t p = 0; p < m.PixelCount(); ++p) out.pixels[p] = m.pixels[p * m.channels] / 255.0f;
+  return out;
+}
+
+// "r_003" -> "003" (the index the scenes' ground-truth files use).
+std::string IndexSuffix(const std::string& stem) {
+  const size_t underscore = stem.rfind('_');
+  return underscore == std::string::npos ? stem : stem.substr(underscore + 1);
+}
+
+}  // namespace
+
+int RunInsert(const CommandArgs& args) {
+  std::string nerf_path, env_path, dataset_dir, split = "test", output, frames_dir, background = "images";
+  std::string preset = "balanced", light_source, truth_dir, light_probe;
+  std::vector<std::string> object_paths, pose_paths, mesh_paths, material_paths;
+  int light_directions = -1, sg_lobes = -1, kappa_step = -1;
+  double shadow_reach = -1;
+  bool no_self_shadow = false, no_shadows = false, paper_gamma = false;
+  ArgParser parser("insert", "Insert virtual objects into a captured scene: light, shade, occlude, shadow, composite.");
+  parser.Option("--nerf", &nerf_path, "FILE", "the scene's HDR NeRF (.nerf; required)");
+  parser.Option("--env", &env_path, "FILE", "environment SGs (env.json from `nerfar env`; default: none)");
+  parser.Option("--object", &object_paths, "FILE", "an object's SSDF field (.ssdf from `nerfar bake`); repeatable");
+  parser.Option("--pose", &pose_paths, "FILE", "the object's pose.json (object_to_world); one per --object");
+  parser.Option("--mesh", &mesh_paths, "FILE", "the object's mesh (default: the one the .ssdf names); per --object");
+  parser.Option("--material", &material_paths, "FILE",
+                "the object's material JSON (default: the .ssdf's); per --object");
+  parser.Option("--dataset", &dataset_dir, "DIR", "dataset folder with the cameras (required)");
+  parser.Option("--split", &split, "NAME", "test (default) or train");
+  parser.Option("-o", &output, "OUT", "output folder (required)");
+  parser.Option("--frames", &frames_dir, "DIR",
+                "camera frames named like the dataset's images (default: those images)");
+  parser.Option("--background", &background, "B", "images (AR over the camera frames, default) or nerf");
+  parser.Option("--preset", &preset, "P", "fast, balanced (default) or accurate; the knobs below override it");
+  parser.Option("--light-directions", &light_directions, "N", "rays from the object centre (balanced: 1024)");
+  parser.Option("--sg-lobes", &sg_lobes, "M", "SG lobes of the incident light (balanced: 32)");
+  parser.Option("--kappa-step", &kappa_step, "S", "κ every S pixels, interpolated between (balanced: 2)");
+  parser.Option("--shadow-reach", &shadow_reach, "R", "κ within R bounding radii of an object (balanced: 12)");
+  parser.Option("--light-source", &light_source, "L", "full (default), near (NeRF only) or env (environment only)");
+  parser.Flag("--no-self-shadow", &no_self_shadow, "objects do not shadow themselves or each other");
+  parser.Flag("--no-shadows", &no_shadows, "no shadows on the scene (κ = 1)");
+  parser.Flag("--paper-gamma", &paper_gamma,
+              "self-shadow γ = f_h(S)/f_h(π/2) as in the paper (default: horizon-relative)");
+  parser.Option("--light-probe", &light_probe, "FILE", "light every object with this panorama fitted with SGs instead");
+  parser.Option("--truth", &truth_dir, "DIR",
+                "ground truth (scenes/*/insert/<object>): writes report.json with object psnr_tm, shadow and "
+                "lighting errors");
+  parser.Epilog(
+      "outputs: OUT/<name>.exr and .png, OUT/<name>_object.exr, _alpha.exr, _kappa.exr, OUT/probe.exr\n"
+      "(probe_<i>.exr for further objects), OUT/timings.json, OUT/options.json [, OUT/report.json]\n"
+      "example:\n"
+      "  nerfar insert --nerf lamps.nerf --object monkey.ssdf --pose "
+      "../shared/scenes/lamps/insert/monkey_diffuse/pose.json \\\n"
+      "      --dataset ../shared/scenes/lamps -o out/monkey\n");
+  if (!parser.Parse(args)) return 0;
+  Problems usage("nerfar insert");
+  if (nerf_path.empty()) usage.Add("--nerf", "missing (expected the scene's .nerf file)");
+  if (dataset_dir.empty()) usage.Add("--dataset", "missing (expected the dataset folder)");
+  if (output.empty()) usage.Add("-o", "missing (expected an output folder)");
+  if (object_paths.empty()) usage.Add("--object", "missing (expected at least one .ssdf)");
+  if (pose_paths.size() != object_paths.size())
+    usage.Add("--pose", std::to_string(pose_paths.size()) + " given for " + std::to_string(object_paths.size()) +
+                            " objects (expected one per --object)");
+  if (!mesh_paths.empty() && mesh_paths.size() != object_paths.size())
+    usage.Add("--mesh", "expected none or one per --object");
+  if (!material_paths.empty() && material_paths.size() != object_paths.size())
+    usage.Add("--material", "expected none or one per --object");
+  if (background != "images" && background != "nerf")
+    usage.Add("--background", "'" + background + "' (expected images or nerf)");
+  usage.ThrowIfAny();
+
+  InsertOptions options = InsertOptions::Preset(preset);
+  if (light_directions != -1) options.light.directions = light_directions;
+  if (sg_lobes != -1) options.light.fit.lobes = sg_lobes;
+  if (kappa_step != -1) options.kappa_step = kappa_step;
+  if (shadow_reach != -1) options.shadow_reach_radii = shadow_reach;
+  if (!light_source.empty()) options.light.source = ParseLightSource(light_source);
+  if (no_self_shadow) options.self_shadow = false;
+  if (no_shadows) options.shadows = false;
+  if (paper_gamma) options.self_shadow_horizon = false;
+  {
+    Problems p("nerfar insert options");
+    for (const std::string& s : options.Validate()) p.Add("", s);
+    p.ThrowIfAny();
+  }
+
+  // Inputs.
+  const Dataset dataset = ReadDataset(DatasetSplitPath(dataset_dir, split));
+  const NerfField nerf = LoadNerf(nerf_path);
+  const NerfScene scene(nerf);
+  EnvLight environment;
+  if (!env_path.empty()) {
+    environment = ReadEnvLight(env_path);
+    if (environment.negligible) {
+      LogInfo("insert: " + env_path + " marks the environment as negligible: it is dropped");
+      environment.lobes.clear();
+    }
+  }
+  std::vector<LoadedObject> loaded(object_paths.size());
+  std::vector<std::string> inputs = {nerf_path, env_path};
+  for (size_t i = 0; i < object_paths.size(); ++i) {
+    LoadedObject& o = loaded[i];
+    o.field = ReadSsdf(object_paths[i]);
+    const std::string mesh_path =
+        mesh_paths.empty() ? ResolveMesh(o.field.mesh_reference, object_paths[i]) : mesh_paths[i];
+    o.mesh = ReadMesh(mesh_path);
+    o.placement = ReadObjectPlacement(pose_paths[i]);
+    std::optional<Material> material = o.field.material;
+    if (!material_paths.empty()) material = ReadMaterial(material_paths[i]);
+    if (!material) material = o.mesh.material;
+    if (material) {
+      o.material.base_color = material->albedo;
+      o.material.roughness = material->roughness;
+      o.material.metallic = material->metallic;
+    } else {
+      LogWarning("insert: " + object_paths[i] + " carries no material; using the default grey");
+    }
+    o.visibility = std::make_unique<SsdfVisibility>(o.field, o.placement.T_world_object, o.placement.scale);
+    inputs.push_back(object_paths[i]);
+    inputs.push_back(pose_paths[i]);
+  }
+  SgMixture probe_light;
+  if (!light_probe.empty()) {
+    const ImageF panorama = ReadExrRgb(light_probe);
+    const int w = panorama.width % 64 == 0 && panorama.height % 32 == 0 ? 64 : panorama.width;
+    const int h = w == 64 ? 32 : panorama.height;
+    probe_light = FitSg(SamplesFromEquirect(panorama, w, h), options.light.fit);
+    LogInfo("insert: lighting every object with " + light_probe + " fitted with " + std::to_string(probe_light.size()) +
+            " SGs");
+  }
+  MakeDirectories(output);
+  for (const auto& in : inputs)
+    if (!in.empty()) CheckNotSameFile((fs::path(output) / "probe.exr").string(), {in});
+  const std::string options_json = options.ToJson();
+  LogInfo("insert: options " + options_json + ", threads " + std::to_string(ThreadCount()));
+  WriteFileAtomic((fs::path(output) / "options.json").string(), options_json + "\n");
+
+  std::vector<InsertObject> objects(loaded.size());
+  for (size_t i = 0; i < loaded.size(); ++i) {
+    InsertObject& o = objects[i];
+    o.mesh = &loaded[i].mesh;
+    o.T_world_object = loaded[i].placement.T_world_object;
+    o.scale = loaded[i].placement.scale;
+    o.material = loaded[i].material;
+    o.visibility = loaded[i].visibility.get();
+    o.light_center = loaded[i].placement.center_world;
+    if (!light_probe.empty()) o.light_override = &probe_light;
+  }
+
+  Inserter inserter(scene, environment.lobes, options);
+  Json views = Json::array();
+  std::vector<double> psnrs, shadow_errors;
+  std::vector<std::vector<double>> stage_ms(8);
+  std::printf("%-8s %9s %7s %8s %8s %8s %9s %8s %9s %10s %8s\n", "view", "light_ms", "fit_ms", "raster", "shade",
+              "occlude", "kappa_ms", "total", "bg_ms", "psnr_obj", "shadow");
+  for (const DatasetFrame& frame_info : dataset.frames) {
+    const fs::path image_path(frame_info.image_path);
+    const std::string stem = image_path.stem().string();
+    CameraIntrinsics camera = dataset.camera;
+    ImageF frame;
+    double background_ms = 0;
+    if (background == "nerf") {
+      const double t0 = NowSeconds();
+      frame = inserter.RenderBackground(camera, frame_info.T_world_camera);
+      background_ms = (NowSeconds() - t0) * 1e3;
+    } else {
+      const std::string path =
+          frames_dir.empty() ? frame_info.image_path : (fs::path(frames_dir) / image_path.filename()).string();
+      frame = ReadFrame(path);
+      if (frame.width != camera.width || frame.height != camera.height)
+        camera = camera.Scaled(frame.width, frame.height);
+    }
+    const ImageF without = frame;
+    InsertLayers layers;
+    const InsertTimings t = inserter.Render(camera, frame_info.T_world_camera, objects, frame, &layers);
+    const fs::path out(output);
+    WriteExrRgb((out / (stem + ".exr")).string(), frame);
+    WriteImage8((out / (stem + ".png")).string(), ToneMapToDisplay(frame, ExposureForPercentile(without)));
+    WriteExrRgb((out / (stem + "_object.exr")).string(),
+                ExpandLayer(layers.object, layers.gbuffer.rect, camera.width, camera.height, 0.0f));
+    WriteExr((out / (stem + "_alpha.exr")).string(),
+             ExpandLayer(layers.alpha, layers.gbuffer.rect, camera.width, camera.height, 0.0f), {"Y"});
+    WriteExr((out / (stem + "_kappa.exr")).string(),
+             ExpandLayer(layers.kappa, layers.kappa_rect, camera.width, camera.height, 1.0f), {"Y"});
+    Json view = {{"name", stem},
+                 {"light_ms", t.light_ms},
+                 {"fit_ms", t.fit_ms},
+                 {"raster_ms", t.raster_ms},
+                 {"shade_ms", t.shade_ms},
+                 {"occlusion_ms", t.occlusion_ms},
+                 {"kappa_ms", t.kappa_ms},
+                 {"total_ms", t.total_ms},
+                 {"background_ms", background_ms},
+                 {"lights_recomputed", t.lights_recomputed},
+                 {"object_pixels", layers.gbuffer.covered},
+                 {"kappa_queries", layers.kappa_queries}};
+    const double values[8] = {t.light_ms,     t.fit_ms,   t.raster_ms, t.shade_ms,
+                              t.occlusion_ms, t.kappa_ms, t.total_ms,  background_ms};
+    for (int s = 0; s < 8; ++s) stage_ms[s].push_back(values[s]);
+    double psnr = NAN, shadow = NAN;
+    if (!truth_dir.empty()) {
+      const std::string index = IndexSuffix(stem);
+      const fs::path truth(truth_dir);
+      const ImageF truth_with = ReadExrRgb((truth / ("rgb_" + index + ".exr")).string());
+      const ImageF truth_without = ReadExrRgb((truth.parent_path() / ("bg_" + index + ".exr")).string());
+      const ImageF mask = ReadMask((truth / ("mask_" + index + ".png")).string());
+      if (truth_with.width == frame.width && truth_with.height == frame.height) {
+        psnr = ObjectPsnrTm(frame, truth_with, mask);
+        const ShadowError se = ComputeShadowError(frame, without, truth_with, truth_without, mask);
+        shadow = se.error;
+        view["object_psnr_tm_db"] = std::isfinite(psnr) ? Json(psnr) : Json(nullptr);
+        view["shadow_error"] = std::isfinite(shadow) ? Json(shadow) : Json(nullptr);
+        view["shadow_region_pixels"] = se.region;
+        if (std::isfinite(psnr)) psnrs.push_back(psnr);
+        if (std::isfinite(shadow)) shadow_errors.push_back(shadow);
+      } else {
+        LogWarning("insert: " + stem + ": truth size differs from the frame; no metrics");
+      }
+    }
+    std::printf("%-8s %9.2f %7.2f %8.2f %8.2f %8.2f %9.2f %8.2f %9.1f %10.2f %8.3f\n", stem.c_str(), t.light_ms,
+                t.fit_ms, t.raster_ms, t.shade_ms, t.occlusion_ms, t.kappa_ms, t.total_ms, background_ms, psnr, shadow);
+    views.push_back(view);
+  }
+  // Incident light at each object's centre, as the scenes' probes are stored.
+  for (size_t i = 0; i < objects.size(); ++i) {
+    const std::string name = i == 0 ? "probe.exr" : "probe_" + std::to_string(i) + ".exr";
+    WriteExrRgb((fs::path(output) / name).string(), RenderEquirect(inserter.Light(i), 256, 128), ExrPixelType::kFloat);
+  }
+  const char* stage_names[8] = {"light_ms",     "fit_ms",   "raster_ms", "shade_ms",
+                                "occlusion_ms", "kappa_ms", "total_ms",  "background_ms"};
+  Json medians = Json::object();
+  for (int s = 0; s < 8; ++s) medians[stage_names[s]] = MedianOf(stage_ms[s]);
+  WriteJsonFile((fs::path(output) / "timings.json").string(),
+                {{"threads", ThreadCount()},
+                 {"note", "per-stage wall time of each frame; the first frame includes the cold SG fit"},
+                 {"median", medians},
+                 {"views", views}});
+  if (!truth_dir.empty()) {
+    Json report = {{"truth", truth_dir}, {"views", views}, {"light_source", LightSourceName(options.light.source)}};
+    const auto mean = [](const std::vector<double>& v) {
+      double s = 0;
+      for (double x : v) s += x;
+      return v.empty() ? NAN : s / v.size();
+    };
+    report["mean_object_psnr_tm_db"] = psnrs.empty() ? Json(nullptr) : Json(mean(psnrs));
+    report["mean_shadow_error"] = shadow_errors.empty() ? Json(nullptr) : Json(mean(shadow_errors));
+    const fs::path true_probe = fs::path(truth_dir) / "probe.exr";
+    std::error_code error;
+    if (fs::is_regular_file(true_probe, error)) {
+      const double lighting = LightingError(inserter.Light(0), ReadExrRgb(true_probe.string()));
+      report["lighting_error"] = lighting;
+      std::printf("lighting error (relative RMS irradiance, 64 normals): %.3f\n", lighting);
+    }
+    std::printf("mean object psnr_tm %.2f dB, mean shadow error %.3f\n", mean(psnrs), mean(shadow_errors));
+    WriteJsonFile((fs::path(output) / "report.json").string(), report);
+  }
+  LogInfo("insert: wrote " + std::to_string(dataset.frames.size()) + " views to " + output);
+  return 0;
+}
+
+}  // namespace nerfar
