@@ -10,6 +10,7 @@ const std::vector<Command>& AllCommands() {
       {"synth", "render a procedural tabletop scene with exact ground truth (dataset layout)", RunSynth},
       {"bake", "bake the SSDF visibility field of a virtual object (shadows, self-shadows)", RunBake},
       {"insert", "insert virtual objects into a scene's views: light, shade, occlude, shadow, composite", RunInsert},
+      {"env", "estimate the distant environment light (32 SGs, env.json) that the NeRF does not hold", RunEnv},
       {"bench", "measure each stage's speed and accuracy; print a table and write JSON", RunBench},
   };
   return commands;
