@@ -1,0 +1,93 @@
+// The per-frame tracker: tag detection -> board pose -> choice between
+// ambiguous solutions by consistency with the recent track -> temporal filter
+// -> tracking state. Poses are T_world_camera (board world frame, metres,
+// OpenCV camera axes). Process() never throws on frame content: a frame
+// without a usable pose makes the state kLost and the last good pose is kept.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "calib/board.h"
+#include "calib/camera.h"
+#include "calib/core/frame_source.h"
+#include "tracking/board_pose.h"
+#include "tracking/pose_filter.h"
+#include "tracking/tag_detector.h"
+
+namespace nerfar {
+
+// kTracking: this frame gave a pose consistent with the track.
+// kLost: this frame gave no usable pose; the last good pose is reported.
+// kRecovering: poses again after a loss (or at the start), not yet confirmed
+//   by `confirm_frames` consistent frames in a row.
+enum class TrackingState { kTracking, kLost, kRecovering };
+const char* TrackingStateName(TrackingState state);
+
+struct TrackerOptions {
+  TagDetectorOptions detector;
+  BoardPoseOptions pose;
+  PoseFilterOptions filter;
+  // Consistent frames in a row needed to go from recovering to tracking
+  // (0: a single good frame is tracking; use 0 for unordered image sets).
+  int confirm_frames = 2;
+  // Frames after which the track is too old to arbitrate an ambiguous pose.
+  int history_frames = 15;
+  // A pose whose reprojection RMS exceeds this (pixels) is not used.
+  double max_rms_px = 2.0;
+
+  std::vector<std::string> Validate() const;
+  // "fast", "balanced", "accurate": detector presets with the balanced filter.
+  static TrackerOptions Preset(const std::string& name);
+};
+
+struct TrackResult {
+  TrackingState state = TrackingState::kLost;
+  bool has_pose = false;    // a pose (current or last good) is available
+  bool measured = false;    // this frame produced a pose
+  Pose T_world_camera;      // filtered pose, or the last good one when lost
+  Pose T_world_camera_raw;  // this frame's unfiltered pose (when measured)
+  double rms_px = 0;        // reprojection RMS of this frame's pose
+  int tags_detected = 0;    // detections of any id
+  int tags_used = 0;        // inlier board tags
+  int tags_rejected = 0;    // outlier board tags
+  bool ambiguous = false;   // two solutions were possible this frame
+  std::vector<TagDetection> detections;
+  DetectStatus detect_status = DetectStatus::kOk;
+  std::string note;  // why a frame was lost, or what happened
+  double detect_ms = 0, pose_ms = 0;
+};
+
+class Tracker {
+ public:
+  // InputError if the options or the camera are invalid or the board is empty.
+  Tracker(Board board, CameraIntrinsics camera, const TrackerOptions& options = {});
+
+  const TrackerOptions& options() const { return options_; }
+  // One frame. The camera is rescaled if the frame size differs from the
+  // intrinsics' size with the same aspect ratio; otherwise the frame is lost.
+  TrackResult Process(const Frame& frame);
+  // A frame that never arrived (corrupt, device lost): the state becomes lost.
+  TrackResult MarkLost(const std::string& why);
+  void Reset();
+  TrackingState state() const { return state_; }
+
+ private:
+  TrackResult Lost(TrackResult result, const std::string& why);
+
+  Board board_;
+  CameraIntrinsics camera_;
+  TrackerOptions options_;
+  TagDetector detector_;
+  PoseFilter filter_;
+  TrackingState state_ = TrackingState::kLost;
+  bool has_good_ = false;
+  Pose last_good_;  // last reported (filtered) pose
+  Pose last_raw_;   // last measured pose
+  std::int64_t last_t_ns_ = 0;
+  int frames_since_good_ = 1 << 20;
+  int consistent_run_ = 0;
+};
+
+}  // namespace nerfar
