@@ -193,14 +193,13 @@ ImageF MergeExposures(const std::vector<ExposureFrame>& frames, const CameraResp
     for (int c = 0; c < channels; ++c) {
       const auto& g = response.log_exposure[response.channels() == 1 ? 0 : c];
       double num = 0, den = 0;
-      int saturated = 0, black = 0;
+      int saturated = 0;
       for (int j = 0; j < p; ++j) {
         const int z = sorted[j]->image.pixels[i * channels + c];
         const double w = HatWeight(z);
         num += w * (g[z] - log_t[j]);
         den += w;
         saturated += z == 255;
-        black += z == 0;
       }
       float value;
       if (den > 0) {

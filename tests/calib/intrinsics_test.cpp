@@ -103,6 +103,11 @@ TEST(Intrinsics, RecoversKnownCameraAndRejectsABadView) {
   }
   const IntrinsicsResult r = CalibrateIntrinsics(set.views, 640, 480);
   const CameraIntrinsics t = TrueCamera();
+  std::printf(
+      "calibration, 13 views (1 corrupted), 0.2 px noise: fx err %.3f%%, fy err %.3f%%, cx err %.3f px, "
+      "cy err %.3f px, RMS %.3f px, sigma fx %.3f px\n",
+      100 * (r.camera.fx - t.fx) / t.fx, 100 * (r.camera.fy - t.fy) / t.fy, r.camera.cx - t.cx, r.camera.cy - t.cy,
+      r.rms_px, r.sigma.fx);
   // Issue 8's acceptance: focal error <= 0.5 %, principal point <= 1 px.
   EXPECT_LE(std::abs(r.camera.fx - t.fx) / t.fx, 0.005);
   EXPECT_LE(std::abs(r.camera.fy - t.fy) / t.fy, 0.005);
