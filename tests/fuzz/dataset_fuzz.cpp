@@ -16,14 +16,24 @@
 
 namespace {
 
-const std::string& TempPath() {
-  static const std::string path = [] {
-    const std::filesystem::path dir =
-        std::filesystem::temp_directory_path() / ("nerfar_fuzz_dataset_" + std::to_string(::getpid()));
+// A per-process folder for the input file, removed at exit.
+struct TempFolder {
+  std::filesystem::path dir =
+      std::filesystem::temp_directory_path() / ("nerfar_fuzz_dataset_" + std::to_string(::getpid()));
+  std::string file;
+  TempFolder() {
     std::filesystem::create_directories(dir);
-    return (dir / "transforms.json").string();
-  }();
-  return path;
+    file = (dir / "transforms.json").string();
+  }
+  ~TempFolder() {
+    std::error_code error;
+    std::filesystem::remove_all(dir, error);
+  }
+};
+
+const std::string& TempPath() {
+  static const TempFolder folder;
+  return folder.file;
 }
 
 template <typename Body>
