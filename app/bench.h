@@ -56,5 +56,6 @@ std::vector<BenchFigure> BenchInsert(const BenchOptions& options);
 std::vector<BenchFigure> BenchSsdf(const BenchOptions& options);
 std::vector<BenchFigure> BenchSynth(const BenchOptions& options);
 std::vector<BenchFigure> BenchSg(const BenchOptions& options);
+std::vector<BenchFigure> BenchNerf(const BenchOptions& options);
 
 }  // namespace nerfar

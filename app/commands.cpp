@@ -10,7 +10,9 @@ const std::vector<Command>& AllCommands() {
       {"synth", "render a procedural tabletop scene with exact ground truth (dataset layout)", RunSynth},
       {"bake", "bake the SSDF visibility field of a virtual object (shadows, self-shadows)", RunBake},
       {"insert", "insert virtual objects into a scene's views: light, shade, occlude, shadow, composite", RunInsert},
+      {"train", "train the HDR NeRF of a dataset (checkpoints, resumes, presets)", RunTrain},
       {"env", "estimate the distant environment light (32 SGs, env.json) that the NeRF does not hold", RunEnv},
+      {"render", "render a NeRF at a dataset's cameras: colour, depth, opacity EXR and psnr_tm report", RunRender},
       {"bench", "measure each stage's speed and accuracy; print a table and write JSON", RunBench},
   };
   return commands;

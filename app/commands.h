@@ -26,6 +26,8 @@ int RunBench(const CommandArgs& args);
 int RunEnv(const CommandArgs& args);
 int RunInsert(const CommandArgs& args);
 int RunSynth(const CommandArgs& args);
+int RunTrain(const CommandArgs& args);
+int RunRender(const CommandArgs& args);
 int RunBake(const CommandArgs& args);
 
 }  // namespace nerfar

@@ -1,0 +1,128 @@
+// nerfar train DATASET -o scene.nerf [--preset P] [--minutes M] [--set key=value]...
+// Trains the HDR NeRF; checkpoints beside the output (OUTPUT.ckpt) every few
+// seconds and on Ctrl-C; running the same command again resumes from it.
+#include <csignal>
+#include <cstdio>
+#include <filesystem>
+#include <string>
+
+#include "app/cli.h"
+#include "app/commands.h"
+#include "calib/core/atomic_file.h"
+#include "calib/core/error.h"
+#include "calib/core/log.h"
+#include "render/nerf/nerf_file.h"
+#include "render/nerf/nerf_train.h"
+
+namespace nerfar {
+namespace {
+
+volatile std::sig_atomic_t g_stop = 0;
+extern "C" void OnInterrupt(int) { g_stop = 1; }
+
+std::string Fixed(double v, int digits) {
+  char buffer[64];
+  std::snprintf(buffer, sizeof buffer, "%.*f", digits, v);
+  return buffer;
+}
+
+}  // namespace
+
+int RunTrain(const CommandArgs& args) {
+  std::string dataset, output, preset = "balanced";
+  double minutes = 0, checkpoint_seconds = 60;
+  std::vector<std::string> sets;
+  bool restart = false;
+  ArgParser parser("train", "Train the HDR NeRF of a dataset (transforms.json + linear EXR images).");
+  parser.Positional("DATASET", &dataset, "dataset folder (transforms_train.json or transforms.json, images)");
+  parser.Option("-o", &output, "FILE", "output model (.nerf); its checkpoint is FILE.ckpt");
+  parser.Option("--preset", &preset, "P", "fast | balanced (default) | accurate");
+  parser.Option("--minutes", &minutes, "M", "wall-clock budget: the schedule is compressed to end in M minutes");
+  parser.Option("--set", &sets, "KEY=VALUE", "override one training option (repeatable; see below)");
+  parser.Option("--checkpoint-seconds", &checkpoint_seconds, "S", "seconds between checkpoints (default 60)");
+  parser.Flag("--restart", &restart, "ignore an existing checkpoint and start over");
+  parser.Epilog("Options (--set): " + NerfTrainOptions::Preset("balanced").ToJson() +
+                "\nCtrl-C stops after the current step and keeps a checkpoint; the same command resumes.\n"
+                "Example: nerfar train ../shared/scenes/lamps -o lamps.nerf --preset fast");
+  if (!parser.Parse(args)) return 0;
+  if (output.empty()) throw InputError("nerfar train: -o FILE is required (see 'nerfar train --help')");
+  if (minutes < 0) throw InputError("nerfar train: --minutes must be >= 0");
+  if (checkpoint_seconds <= 0) throw InputError("nerfar train: --checkpoint-seconds must be > 0");
+
+  NerfTrainOptions options = NerfTrainOptions::Preset(preset);
+  for (const std::string& s : sets) options.Set(s);
+  if (minutes > 0) options.max_seconds = minutes * 60.0;
+  {
+    const std::vector<std::string> problems = options.Validate();
+    if (!problems.empty()) {
+      Problems list("nerfar train");
+      for (const std::string& p : problems) list.Add("options", p);
+      list.ThrowIfAny();
+    }
+  }
+  const NerfTrainData data = ReadNerfTrainData(dataset);
+  std::vector<std::string> inputs;
+  for (const NerfView& v : data.train) inputs.push_back(v.image_path);
+  inputs.push_back(data.source);
+  CheckNotSameFile(output, inputs);
+  const std::string checkpoint = output + ".ckpt";
+  LogInfo("train: " + std::to_string(data.train.size()) + " training views, " + std::to_string(data.held_out.size()) +
+          " held-out; preset " + preset + "; options " + options.ToJson());
+
+  NerfTrainer trainer(data, options);
+  std::error_code error;
+  if (!restart && std::filesystem::is_regular_file(checkpoint, error)) {
+    trainer.LoadCheckpoint(checkpoint);
+    LogInfo("train: resumed from " + checkpoint + " at step " + std::to_string(trainer.step()) + " (" +
+            FormatDuration(trainer.elapsed_seconds()) + " trained)");
+  }
+
+  g_stop = 0;
+  auto previous = std::signal(SIGINT, OnInterrupt);
+  const auto restore = [&] { std::signal(SIGINT, previous); };
+  // Progress counts schedule per-mille so the ETA is right under a time budget too.
+  Progress progress("train", 1000);
+  double last_checkpoint = trainer.elapsed_seconds(), last_eval = -1e9;
+  double loss = 0, psnr = std::nan("");
+  try {
+    while (!trainer.Done() && !g_stop) {
+      loss = trainer.Step();
+      const double now = trainer.elapsed_seconds();
+      if (now - last_eval > 20.0) {
+        psnr = trainer.HeldOutPsnr(options.eval_views);
+        last_eval = trainer.elapsed_seconds();
+      }
+      progress.Update(size_t(trainer.progress() * 1000), "step " + std::to_string(trainer.step()) + " level " +
+                                                             std::to_string(trainer.level()) + " loss " +
+                                                             Fixed(loss, 5) + " held-out psnr_tm " + Fixed(psnr, 2));
+      if (now - last_checkpoint > checkpoint_seconds) {
+        trainer.SaveCheckpoint(checkpoint);
+        last_checkpoint = trainer.elapsed_seconds();
+      }
+    }
+  } catch (...) {
+    restore();
+    throw;
+  }
+  restore();
+  if (g_stop) {
+    trainer.SaveCheckpoint(checkpoint);
+    progress.Finish("interrupted");
+    LogInfo("train: stopped at step " + std::to_string(trainer.step()) + "; checkpoint " + checkpoint +
+            " (run the same command to resume)");
+    return 130;
+  }
+  const NerfField field = trainer.FinalField();
+  SaveNerf(output, field);
+  const double final_psnr = trainer.HeldOutPsnr(0);
+  progress.Finish("step " + std::to_string(trainer.step()) + " loss " + Fixed(loss, 5));
+  std::error_code size_error;
+  const auto bytes = std::filesystem::file_size(output, size_error);
+  std::printf("trained %s: %d steps in %s, held-out psnr_tm %.2f dB (%zu views), %.1f MB, %.2f%% cells occupied\n",
+              output.c_str(), trainer.step(), FormatDuration(trainer.elapsed_seconds()).c_str(), final_psnr,
+              data.held_out.size(), size_error ? 0.0 : double(bytes) / 1e6, 100.0 * field.OccupiedFraction());
+  std::filesystem::remove(checkpoint, error);
+  return 0;
+}
+
+}  // namespace nerfar
