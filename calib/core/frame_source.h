@@ -38,6 +38,13 @@ class FrameSource {
   virtual std::string Describe() const = 0;
   // Waits for the next frame (at most timeout_ms where the source is live).
   virtual FrameStatus Next(Frame& frame, int timeout_ms) = 0;
+  // Sets a manual exposure time for the frames that follow (exposure brackets
+  // for HDR capture). False where the source cannot (files, synthetic
+  // streams, cameras without the control); frames then keep their exposure.
+  virtual bool SetExposure(double exposure_us) {
+    (void)exposure_us;
+    return false;
+  }
   // Last error message after a non-kOk status, for the user.
   virtual std::string LastError() const { return {}; }
 };

@@ -1,0 +1,139 @@
+// The offline jobs a user runs before training, end to end through the
+// `nerfar` executable, on the synthetic camera of render/synth (known
+// intrinsics and poses): calibrate recovers the intrinsics; capture turns a
+// tracked stream into a dataset whose poses match the truth and which the
+// dataset reader (the trainer's input) accepts.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdio>
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "calib/board.h"
+#include "calib/camera_file.h"
+#include "calib/core/atomic_file.h"
+#include "calib/core/image_io.h"
+#include "calib/core/json.h"
+#include "calib/dataset.h"
+#include "render/synth/camera_stream.h"
+#include "tests/support/support.h"
+
+namespace nerfar {
+namespace {
+
+int RunNerfar(const std::string& arguments, std::string* output = nullptr) {
+  const std::string command = std::string(NERFAR_BINARY) + " " + arguments + " 2>&1";
+  FILE* pipe = ::popen(command.c_str(), "r");
+  std::string text;
+  std::array<char, 4096> buffer{};
+  while (pipe != nullptr && std::fgets(buffer.data(), buffer.size(), pipe) != nullptr) text += buffer.data();
+  const int status = pipe != nullptr ? ::pclose(pipe) : -1;
+  if (output != nullptr) *output = text;
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+synth::CameraStreamOptions StreamOptions() {
+  synth::CameraStreamOptions options;
+  options.scene = "lamps";
+  options.width = 640;
+  options.height = 480;
+  options.samples_per_pixel = 2;
+  options.speed = 4;  // cover more of the trajectory in few frames
+  return options;
+}
+
+TEST(Calibrate, RecoversTheSyntheticCamerasIntrinsics) {
+  testing::TempDir dir;
+  const synth::SyntheticCameraSource source(StreamOptions());
+  WriteBoard(dir.File("board.json"), source.board());
+  MakeDirectories(dir.File("frames"));
+  // 60 views spread over 30 s of the handheld trajectory (about 5 orbits at speed 4).
+  for (int i = 0; i < 60; ++i) {
+    const Frame frame = source.RenderFrame(0.5 * i, i);
+    char name[32];
+    std::snprintf(name, sizeof name, "frame_%03d.png", i);
+    WriteImage8(dir.File("frames/") + name, frame.image);
+  }
+  std::string output;
+  const int code = RunNerfar("calibrate --board " + dir.File("board.json") + " --images " + dir.File("frames") +
+                                 " -o " + dir.File("camera.json") + " --min-tags 2 --no-tangential --square-pixels",
+                             &output);
+  ASSERT_TRUE(code == 0 || code == 1) << output;  // 1: wrote the file but the gate failed
+  const CameraFile file = ReadCameraFile(dir.File("camera.json"));
+  const CameraIntrinsics& truth = source.camera();
+  ASSERT_TRUE(file.calibration.has_value());
+  const CalibrationRecord& record = *file.calibration;
+  // Focal length: the issue's 0.5 %. The principal point of these frames
+  // (small tags, a camera that always looks at the table centre) is only
+  // determined to a few pixels, and the calibration says so: it must lie
+  // within 3 of its own reported sigmas (plus 0.5 px of detector bias). The
+  // issue's 1 px on exact correspondences is tested in calib_test.
+  EXPECT_LT(std::abs(file.camera.fx / truth.fx - 1), 0.005) << output;
+  EXPECT_LT(std::abs(file.camera.fy / truth.fy - 1), 0.005) << output;
+  EXPECT_LT(std::abs(file.camera.cx - truth.cx), 3 * record.sigma_cx + 0.5) << output;
+  EXPECT_LT(std::abs(file.camera.cy - truth.cy), 3 * record.sigma_cy + 0.5) << output;
+  EXPECT_LT(record.sigma_cy, 5.0) << output;
+  EXPECT_LT(record.rms_px, 0.5) << output;
+}
+
+TEST(Capture, SyntheticStreamBecomesADatasetWithTruePoses) {
+  testing::TempDir dir;
+  synth::CameraStreamOptions options = StreamOptions();
+  const synth::SyntheticCameraSource truth(options);
+  WriteBoard(dir.File("board.json"), truth.board());
+  CameraFile camera;
+  camera.camera = truth.camera();
+  WriteCameraFile(dir.File("camera.json"), camera);
+  std::string output;
+  const std::string source = "synthetic:lamps,size=640x480,spp=2,speed=4,frames=240";
+  ASSERT_EQ(RunNerfar("capture --source " + source + " --board " + dir.File("board.json") + " --camera " +
+                          dir.File("camera.json") + " -o " + dir.File("ds") + " --views 12 --test-every 4",
+                      &output),
+            0)
+      << output;
+  const Dataset train = ReadDataset(dir.File("ds/transforms_train.json"));
+  const Dataset test = ReadDataset(dir.File("ds/transforms_test.json"));
+  EXPECT_EQ(train.frames.size() + test.frames.size(), 12u) << output;
+  EXPECT_EQ(test.frames.size(), 3u);
+  ASSERT_TRUE(train.aabb.has_value());
+
+  // Each view's pose against the true pose of the frame it came from.
+  const Json log = ReadJsonFile(dir.File("ds/capture_log.json"));
+  ASSERT_EQ(log["views"].size(), 12u);
+  std::vector<double> rotation_deg, translation_mm;
+  for (const Json& view : log["views"]) {
+    const std::string file_path = view["file_path"].get<std::string>();
+    const Dataset& split = file_path.rfind("test/", 0) == 0 ? test : train;
+    const DatasetFrame* frame = nullptr;
+    for (const DatasetFrame& f : split.frames)
+      if (f.file_path == file_path) frame = &f;
+    ASSERT_NE(frame, nullptr) << file_path;
+    const Pose expected = truth.PoseAt(view["t_ns"].get<double>() * 1e-9);
+    rotation_deg.push_back(RotationAngleBetween(frame->T_world_camera.rotation, expected.rotation) * 180 / kPi);
+    translation_mm.push_back(Length(frame->T_world_camera.translation - expected.translation) * 1e3);
+  }
+  std::sort(rotation_deg.begin(), rotation_deg.end());
+  std::sort(translation_mm.begin(), translation_mm.end());
+  // Tracking targets of the issue on clean views: 0.2 deg and 2 mm (median).
+  EXPECT_LT(rotation_deg[rotation_deg.size() / 2], 0.2);
+  EXPECT_LT(translation_mm[translation_mm.size() / 2], 2.0);
+}
+
+TEST(Capture, BadInputExitsTwoWithAMessage) {
+  testing::TempDir dir;
+  std::string output;
+  EXPECT_EQ(
+      RunNerfar("capture --source synthetic --board " + dir.File("missing.json") + " --camera x -o " + dir.File("ds"),
+                &output),
+      2);
+  EXPECT_NE(output.find("missing.json"), std::string::npos) << output;
+  EXPECT_EQ(RunNerfar("calibrate --board b.json -o c.json", &output), 2);
+  EXPECT_NE(output.find("--images DIR or --source S"), std::string::npos) << output;
+}
+
+}  // namespace
+}  // namespace nerfar
