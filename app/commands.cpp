@@ -13,6 +13,8 @@ const std::vector<Command>& AllCommands() {
       {"train", "train the HDR NeRF of a dataset (checkpoints, resumes, presets)", RunTrain},
       {"env", "estimate the distant environment light (32 SGs, env.json) that the NeRF does not hold", RunEnv},
       {"render", "render a NeRF at a dataset's cameras: colour, depth, opacity EXR and psnr_tm report", RunRender},
+      {"cameras", "list the cameras attached (V4L2, libcamera) with formats and controls", RunCameras},
+      {"track", "camera pose per frame from the board's AprilTags; poses.json in the transforms.json convention", RunTrack},
       {"bench", "measure each stage's speed and accuracy; print a table and write JSON", RunBench},
   };
   return commands;

@@ -23,6 +23,8 @@ const std::vector<Command>& AllCommands();
 int RunHelp(const CommandArgs& args);
 int RunVersion(const CommandArgs& args);
 int RunBench(const CommandArgs& args);
+int RunTrack(const CommandArgs& args);
+int RunCameras(const CommandArgs& args);
 int RunEnv(const CommandArgs& args);
 int RunInsert(const CommandArgs& args);
 int RunSynth(const CommandArgs& args);
