@@ -51,6 +51,7 @@ double MedianMilliseconds(Body&& body, int min_repeats, double min_seconds) {
 
 // Stage entry points (one bench_NAME.cpp each).
 std::vector<BenchFigure> BenchCore(const BenchOptions& options);
+std::vector<BenchFigure> BenchTracking(const BenchOptions& options);
 std::vector<BenchFigure> BenchEnv(const BenchOptions& options);
 std::vector<BenchFigure> BenchInsert(const BenchOptions& options);
 std::vector<BenchFigure> BenchSsdf(const BenchOptions& options);

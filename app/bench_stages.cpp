@@ -5,6 +5,7 @@ namespace nerfar {
 const std::vector<BenchStage>& AllBenchStages() {
   static const std::vector<BenchStage> stages = {
       {"core", "file I/O: EXR read/write, JSON parse", BenchCore},
+      {"tracking", "tag detection + pose at 1280x720 per preset; pose error on the shared scenes", BenchTracking},
       {"env", "environment estimation per preset and pixels x rays on a synthetic scene with a known environment", BenchEnv},
       {"insert", "per-frame insertion stages at 1280x720 per preset; quality with ground-truth inputs", BenchInsert},
       {"synth", "synthetic scenes: scene build, one view per scene and preset, camera-stream frame, SG accuracy", BenchSynth},
