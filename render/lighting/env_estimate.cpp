@@ -310,6 +310,7 @@ EnvSurfaceSamples SampleSurfaces(const NerfField& field, const EnvEstimateOption
   }
   local.rendered = static_cast<int>(views.size());
   if (accepted < options.views) {
+    const int passed = accepted;
     // Too few views passed: take the best-scoring of the rest (the paper repeats
     // until 100 pass; a bounded budget must end).
     std::vector<size_t> rest;
@@ -317,11 +318,8 @@ EnvSurfaceSamples SampleSurfaces(const NerfField& field, const EnvEstimateOption
       if (!local.kept[v]) rest.push_back(v);
     std::stable_sort(rest.begin(), rest.end(), [&](size_t a, size_t b) { return views[a].score < views[b].score; });
     for (size_t i = 0; i < rest.size() && accepted < options.views; ++i, ++accepted) local.kept[rest[i]] = true;
-    LogWarning("env: only " +
-               std::to_string(std::count(local.kept.begin(), local.kept.end(), true) -
-                              (accepted - static_cast<int>(std::count(local.kept.begin(), local.kept.end(), true)))) +
-               " views scored <= " + std::to_string(options.brisque_max) +
-               " by BRISQUE; the best-scoring others were kept");
+    LogWarning("env: only " + std::to_string(passed) + " of " + std::to_string(local.rendered) + " views scored <= " +
+               std::to_string(options.brisque_max) + " by BRISQUE; the best-scoring others were kept");
   }
   local.accepted = accepted;
   EnvSurfaceSamples samples;
@@ -718,8 +716,7 @@ SgMixture FitEnvironment(const EnvSurfaceSamples& samples, const Aabb& aabb, con
       const double loss = Loss(st, Shading(st), true, &st);
       double albedo = 0, light = 0;
       for (size_t i = 0; i < samples.size(); ++i) albedo += Y(st.albedo[st.cell[i]]) / samples.size();
-      for (Eigen::Index k = 0; k < st.mu.rows(); ++k)
-        light += st.mu(k, 1) * SgUnitIntegral(k < static_cast<Eigen::Index>(dict.size()) ? dict.sharpness[k] : 1.0);
+      for (Eigen::Index k = 0; k < st.mu.rows(); ++k) light += st.mu(k, 1) * st.lobe_integral[k];
       LogVerbose("env fit: step " + std::to_string(step) + " loss " + std::to_string(loss) + " mean albedo " +
                  std::to_string(albedo) + " light green integral " + std::to_string(light));
       if (progress) progress("fit", static_cast<size_t>(step + 1), static_cast<size_t>(total_steps));
