@@ -74,9 +74,9 @@ struct NerfTrainOptions {
   // Steps between occupancy updates (empty-space skipping for the next steps).
   int occupancy_every = 16;
   // A cell is empty when its largest corner density gives less than this opacity across one voxel.
-  double occupancy_alpha = 1e-3;
+  double occupancy_alpha = 1e-2;
   // Initial density (1/m) of the coarse level: a light fog that lets every voxel receive gradients.
-  double initial_sigma = 2.0;
+  double initial_sigma = 4.0;
   // Seed of the ray sampler.
   uint64_t seed = 1;
   // Wall-clock budget in seconds (0: none). When set, the schedule follows

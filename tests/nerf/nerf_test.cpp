@@ -392,7 +392,7 @@ TEST(NerfTrain, TinySceneReachesStatedPsnr) {
   ASSERT_TRUE(IntersectAabb(trainer.field().aabb, lamp.origin, lamp.dir, lamp.t_near, lamp.t_far));
   const NerfRayResult r = trainer.field().RenderRay(lamp);
   EXPECT_NEAR(r.color.x / 20.0, 1.0, 0.2) << "bright box radiance (20)";
-  EXPECT_GT(r.opacity, 0.95);
+  EXPECT_GT(r.opacity, 0.9) << "a 6 cm box seen through 2 cm voxels";
   // Depth: the top of the bright box is at z = 0.3, so t = 0.7 (within 2 cm = one finest voxel).
   EXPECT_NEAR_WHY(r.depth, 0.7, 0.02, "one finest voxel");
 }
