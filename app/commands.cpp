@@ -7,14 +7,16 @@ const std::vector<Command>& AllCommands() {
   static const std::vector<Command> commands = {
       {"help", "list the commands, or show one command's help", RunHelp},
       {"version", "print the version and the libraries it was built with", RunVersion},
+      {"calibrate", "camera intrinsics and distortion from AprilTag board views (camera.json)", RunCalibrate},
+      {"cameras", "list the cameras attached (V4L2, libcamera) with formats and controls", RunCameras},
+      {"track", "camera pose per frame from the board's AprilTags; poses.json in the transforms.json convention", RunTrack},
+      {"capture", "an HDR capture session: tracked, sharp, spread-out views written as a dataset", RunCapture},
       {"synth", "render a procedural tabletop scene with exact ground truth (dataset layout)", RunSynth},
-      {"bake", "bake the SSDF visibility field of a virtual object (shadows, self-shadows)", RunBake},
-      {"insert", "insert virtual objects into a scene's views: light, shade, occlude, shadow, composite", RunInsert},
       {"train", "train the HDR NeRF of a dataset (checkpoints, resumes, presets)", RunTrain},
       {"env", "estimate the distant environment light (32 SGs, env.json) that the NeRF does not hold", RunEnv},
       {"render", "render a NeRF at a dataset's cameras: colour, depth, opacity EXR and psnr_tm report", RunRender},
-      {"cameras", "list the cameras attached (V4L2, libcamera) with formats and controls", RunCameras},
-      {"track", "camera pose per frame from the board's AprilTags; poses.json in the transforms.json convention", RunTrack},
+      {"bake", "bake the SSDF visibility field of a virtual object (shadows, self-shadows)", RunBake},
+      {"insert", "insert virtual objects into a scene's views: light, shade, occlude, shadow, composite", RunInsert},
       {"bench", "measure each stage's speed and accuracy; print a table and write JSON", RunBench},
   };
   return commands;

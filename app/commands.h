@@ -23,13 +23,15 @@ const std::vector<Command>& AllCommands();
 int RunHelp(const CommandArgs& args);
 int RunVersion(const CommandArgs& args);
 int RunBench(const CommandArgs& args);
-int RunTrack(const CommandArgs& args);
-int RunCameras(const CommandArgs& args);
 int RunEnv(const CommandArgs& args);
 int RunInsert(const CommandArgs& args);
+int RunBake(const CommandArgs& args);
+int RunCalibrate(const CommandArgs& args);
+int RunCapture(const CommandArgs& args);
 int RunSynth(const CommandArgs& args);
 int RunTrain(const CommandArgs& args);
 int RunRender(const CommandArgs& args);
-int RunBake(const CommandArgs& args);
+int RunTrack(const CommandArgs& args);
+int RunCameras(const CommandArgs& args);
 
 }  // namespace nerfar
