@@ -151,7 +151,7 @@ void GroundTruthQuality(const std::string& scenes_dir, const std::string& scene_
   double psnr_sum = 0, shadow_sum = 0;
   int psnr_n = 0, shadow_n = 0;
   for (size_t v = 0; v < dataset.frames.size(); ++v) {
-    char index[8];
+    char index[24];
     std::snprintf(index, sizeof index, "%03zu", v);
     const ImageF bg = ReadExrRgb((scene_dir / "insert" / ("bg_" + std::string(index) + ".exr")).string());
     const ImageF gt = ReadExrRgb((truth / ("rgb_" + std::string(index) + ".exr")).string());
