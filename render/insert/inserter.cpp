@@ -69,20 +69,15 @@ double ShadowRatioCapped(const SgMixture& cosine_weighted, const Vec3& normal, c
   double visible = 0.0, total = 0.0;
   for (size_t k = 0; k < cosine_weighted.size(); ++k) {
     const Sg& sg = cosine_weighted[k];
-    const double y = LuminanceOf(sg.amplitude);
-    if (!(y > 0.0)) continue;
-    const double horizon = std::asin(std::clamp(Dot(sg.axis, normal), -1.0, 1.0));
-    const double hemisphere = HemisphereIntegral(sg.sharpness);
-    const SgTableRow row = PrepareGamma(sg.sharpness);
-    const double up = GammaPrepared(row, static_cast<float>(horizon));
-    const double seen = ssd[k] < horizon ? GammaPrepared(row, static_cast<float>(ssd[k])) : up;
-    const double lobe_total = y * hemisphere * up;
-    double blocked = y * hemisphere * (up - seen);
+    const LobeShadow lobe = ShadowOfLobe(sg, normal, ssd[k]);
+    if (!(lobe.total > 0.0)) continue;
+    const double lobe_total = lobe.total;
+    double blocked = lobe.total - lobe.visible;
     if (blocked > 0.0) {
       const double alpha = std::clamp(cap_radius[k], 0.0, 0.5 * kPi);
       const double centre = std::clamp(ssd[k] + alpha, 0.0, kPi);  // the cap centre's angle from the lobe axis
       const double solid = 2.0 * kPi * (1.0 - std::cos(alpha));
-      const double cap = y * std::exp(sg.sharpness * (std::cos(centre) - 1.0)) * solid;
+      const double cap = LuminanceOf(sg.amplitude) * std::exp(sg.sharpness * (std::cos(centre) - 1.0)) * solid;
       // The cap estimate (value at its centre × its solid angle) holds for
       // lobes broader than the cap; for sharper ones it misses the peak, and
       // the half-space estimate is the right one: blend on √λ·α.

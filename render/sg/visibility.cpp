@@ -323,20 +323,24 @@ SgMixture CosineWeightedLight(const SgMixture& light, const Vec3& normal) {
   return out;
 }
 
+LobeShadow ShadowOfLobe(const Sg& sg, const Vec3& normal, double ssd_rad) {
+  const double y = LuminanceOf(sg.amplitude);
+  if (!(y > 0.0)) return {};
+  const double horizon = std::asin(std::clamp(Dot(sg.axis, normal), -1.0, 1.0));
+  const double hemisphere = HemisphereIntegral(sg.sharpness);
+  const SgTableRow row = PrepareGamma(sg.sharpness);
+  const double up = GammaPrepared(row, static_cast<float>(horizon));
+  const double seen = ssd_rad < horizon ? GammaPrepared(row, static_cast<float>(ssd_rad)) : up;
+  return {y * hemisphere * up, y * hemisphere * seen};
+}
+
 double ShadowRatio(const SgMixture& cosine_weighted, const Vec3& normal, const std::vector<double>& ssd_rad) {
   NERFAR_CHECK_EQ(cosine_weighted.size(), ssd_rad.size());
   double visible = 0.0, total = 0.0;
   for (size_t k = 0; k < cosine_weighted.size(); ++k) {
-    const Sg& sg = cosine_weighted[k];
-    const double y = LuminanceOf(sg.amplitude);
-    if (!(y > 0.0)) continue;
-    const double horizon = std::asin(std::clamp(Dot(sg.axis, normal), -1.0, 1.0));
-    const double hemisphere = HemisphereIntegral(sg.sharpness);
-    const SgTableRow row = PrepareGamma(sg.sharpness);
-    const double up = GammaPrepared(row, static_cast<float>(horizon));
-    const double seen = ssd_rad[k] < horizon ? GammaPrepared(row, static_cast<float>(ssd_rad[k])) : up;
-    total += y * hemisphere * up;
-    visible += y * hemisphere * seen;
+    const LobeShadow lobe = ShadowOfLobe(cosine_weighted[k], normal, ssd_rad[k]);
+    total += lobe.total;
+    visible += lobe.visible;
   }
   if (!(total > 0.0)) return 1.0;
   return std::clamp(visible / total, 0.0, 1.0);

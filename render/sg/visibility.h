@@ -60,4 +60,12 @@ SgMixture CosineWeightedLight(const SgMixture& light, const Vec3& normal);
 // in the way of any lobe) or when no light reaches the receiver.
 double ShadowRatio(const SgMixture& cosine_weighted, const Vec3& normal, const std::vector<double>& ssd_rad);
 
+// One lobe's share of ShadowRatio, in luminance: its energy above the
+// receiver's horizon (`total`) and the part of that not blocked by an
+// occluder at signed distance ssd_rad from its axis (`visible` <= total).
+struct LobeShadow {
+  double total = 0, visible = 0;
+};
+LobeShadow ShadowOfLobe(const Sg& cosine_weighted_lobe, const Vec3& normal, double ssd_rad);
+
 }  // namespace nerfar
