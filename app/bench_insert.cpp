@@ -34,12 +34,6 @@ namespace fs = std::filesystem;
 
 namespace {
 
-Pose LookAtPose(const Vec3& eye, const Vec3& target) {
-  const Vec3 z = Normalized(target - eye);
-  const Vec3 x = Normalized(Cross(z, Vec3{0, 0, 1}));
-  return {Mat3::FromColumns(x, Cross(z, x), z), eye};
-}
-
 // The shared scenes' box, a 4 cm table slab (albedo-like radiance 0.4) and a
 // sphere (r = 8 cm) standing on it, as a 1 cm NeRF grid.
 NerfField TabletopNerf() {
@@ -226,13 +220,13 @@ std::vector<BenchFigure> BenchInsert(const BenchOptions& options) {
   const Vec3 target = T_world_object.translation;
   const Vec3 direction = Normalized(Vec3{0.7, -0.6, 0.5});
   double distance = 0.4;
-  Pose T_world_camera = LookAtPose(target + direction * distance, target);
+  Pose T_world_camera = LookAt(target + direction * distance, target);
   for (int iteration = 0; iteration < 4; ++iteration) {
     const ObjectGBuffer g = Rasterize(camera, T_world_camera, {{&mesh, T_world_object, 1.0}});
     const double coverage = double(g.covered) / (double(width) * height);
     if (coverage <= 0) break;
     distance *= std::sqrt(coverage / 0.10);
-    T_world_camera = LookAtPose(target + direction * distance, target);
+    T_world_camera = LookAt(target + direction * distance, target);
   }
   const std::string size = std::to_string(width) + "x" + std::to_string(height) + ", " + mesh_name;
   for (const char* preset : {"fast", "balanced", "accurate"}) {

@@ -285,6 +285,22 @@ TEST(Math, PoseComposesAndInverts) {
   EXPECT_NEAR(Length(back * p_c - T_a_b * p_c), 0.0, 1e-12);
 }
 
+TEST(Math, LookAtHasNoRollAndSeesTheTarget) {
+  // From (0,-1,0) towards the origin: forward +y, right +x, image down -z.
+  const Pose pose = LookAt({0, -1, 0}, {0, 0, 0});
+  EXPECT_NEAR(Length(pose.rotation.Column(0) - Vec3{1, 0, 0}), 0, 1e-12);
+  EXPECT_NEAR(Length(pose.rotation.Column(1) - Vec3{0, 0, -1}), 0, 1e-12);
+  EXPECT_NEAR(Length(pose.rotation.Column(2) - Vec3{0, 1, 0}), 0, 1e-12);
+  // Any target lands on the optical axis; x stays horizontal; straight down is defined.
+  const Pose tilted = LookAt({0.3, -0.8, 0.9}, {0.05, 0.02, 0});
+  const Vec3 p_camera = tilted.Inverse() * Vec3{0.05, 0.02, 0};
+  EXPECT_NEAR(p_camera.x, 0, 1e-12);
+  EXPECT_NEAR(p_camera.y, 0, 1e-12);
+  EXPECT_GT(p_camera.z, 0);
+  EXPECT_NEAR(tilted.rotation.Column(0).z, 0, 1e-12);
+  EXPECT_NEAR(Length(LookAt({0, 0, 1}, {0, 0, 0}).rotation.Column(0) - Vec3{1, 0, 0}), 0, 1e-12);
+}
+
 TEST(Parallel, ChunksCoverEveryIndexOnceForAnyThreadCount) {
   for (int threads : {1, 2}) {
     SetThreadCount(threads);

@@ -29,6 +29,13 @@ Vec3 AxisAngleFromRotation(const Mat3& r) {
 
 double RotationAngleBetween(const Mat3& a, const Mat3& b) { return Length(AxisAngleFromRotation(a.Transposed() * b)); }
 
+Pose LookAt(const Vec3& eye, const Vec3& target) {
+  const Vec3 z = Normalized(target - eye);
+  Vec3 x = Cross(z, Vec3{0, 0, 1});
+  x = Length(x) < 1e-9 ? Vec3{1, 0, 0} : Normalized(x);
+  return {Mat3::FromColumns(x, Cross(z, x), z), eye};
+}
+
 std::array<double, 16> Pose::ToMatrix4() const {
   return {rotation(0, 0),
           rotation(0, 1),

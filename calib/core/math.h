@@ -126,6 +126,11 @@ struct Pose {
   static Pose FromMatrix4(const std::array<double, 16>& m);
 };
 
+// Camera pose T_world_camera (OpenCV axes: x right, y down, z forward) at
+// `eye` looking at `target`, world z up, no roll (x horizontal). Looking
+// straight up or down, x is world +x.
+Pose LookAt(const Vec3& eye, const Vec3& target);
+
 constexpr double kPi = 3.14159265358979323846;
 
 }  // namespace nerfar

@@ -229,15 +229,6 @@ struct ViewPick {
   std::vector<Vec3f> positions, normals, radiance;
 };
 
-Pose LookAt(const Vec3& eye, const Vec3& target) {
-  const Vec3 forward = Normalized(target - eye);
-  Vec3 up{0, 0, 1};
-  if (std::fabs(Dot(forward, up)) > 0.999) up = {0, 1, 0};
-  const Vec3 right = Normalized(Cross(forward, up));
-  const Vec3 down = Cross(forward, right);
-  return {Mat3::FromColumns(right, down, forward), eye};  // OpenCV: x right, y down, z forward
-}
-
 }  // namespace
 
 EnvSurfaceSamples SampleSurfaces(const NerfField& field, const EnvEstimateOptions& options, EnvViewReport* report,

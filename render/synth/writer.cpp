@@ -193,18 +193,6 @@ CameraIntrinsics SynthCamera(int width, int height) {
   return camera;
 }
 
-Pose LookAt(const Vec3& eye, const Vec3& target) {
-  const Vec3 z = Normalized(target - eye);  // forward
-  Vec3 x = Cross(z, Vec3{0, 0, 1});         // right, horizontal
-  if (Length(x) < 1e-9) x = {1, 0, 0};
-  x = Normalized(x);
-  const Vec3 y = Cross(z, x);  // down
-  Pose pose;
-  pose.rotation = Mat3::FromColumns(x, y, z);
-  pose.translation = eye;
-  return pose;
-}
-
 std::vector<Pose> HemisphereCameras(int count, uint64_t seed, uint64_t stream, const Aabb& aabb) {
   Rng rng(seed, stream ^ 0xca3e7a5ull, 0, 0);
   // Stratified elevations in a shuffled order so that any prefix covers the range.

@@ -56,9 +56,6 @@ CameraIntrinsics SynthCamera(int width, int height);
 // outside `aabb`.
 std::vector<Pose> HemisphereCameras(int count, uint64_t seed, uint64_t stream, const Aabb& aabb);
 
-// Pose looking from `eye` at `target` with the camera x axis horizontal (no roll).
-Pose LookAt(const Vec3& eye, const Vec3& target);
-
 // Tiles tone-mapped images (each exposed for its own 99th percentile) into a
 // grid with `columns` columns.
 Image8 ContactSheet(const std::vector<ImageF>& images, int columns);

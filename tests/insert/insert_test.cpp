@@ -28,16 +28,6 @@ CameraIntrinsics TestCamera(int w = 160, int h = 120) {
   return c;
 }
 
-// Camera at `eye` looking at `target`, world z up (OpenCV axes: z forward, y down).
-Pose LookAt(const Vec3& eye, const Vec3& target) {
-  const Vec3 z = Normalized(target - eye);
-  Vec3 x = Cross(z, Vec3{0, 0, 1});
-  if (Length(x) < 1e-9) x = {1, 0, 0};
-  x = Normalized(x);
-  const Vec3 y = Cross(z, x);
-  return {Mat3::FromColumns(x, y, z), eye};
-}
-
 // Möller-Trumbore; the reference the rasteriser is checked against.
 struct Hit {
   double t = std::numeric_limits<double>::infinity();

@@ -30,14 +30,6 @@ CameraIntrinsics Camera(int w = 128, int h = 96) {
   return c;
 }
 
-Pose LookAt(const Vec3& eye, const Vec3& target) {
-  const Vec3 z = Normalized(target - eye);
-  Vec3 x = Cross(z, Vec3{0, 0, 1});
-  if (Length(x) < 1e-9) x = {1, 0, 0};
-  x = Normalized(x);
-  return {Mat3::FromColumns(x, Cross(z, x), z), eye};
-}
-
 // A table alone (no sphere, no medium), plain radiance.
 AnalyticSceneParams TableOnly() {
   AnalyticSceneParams p;
