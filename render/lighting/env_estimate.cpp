@@ -11,6 +11,7 @@
 #include "calib/core/json.h"
 #include "calib/core/log.h"
 #include "calib/core/parallel.h"
+#include "calib/core/random.h"
 #include "render/lighting/view_quality.h"
 #include "render/sg/sphere.h"
 #include "render/sg/visibility.h"
@@ -21,15 +22,8 @@ namespace {
 // ----------------------------------------------------------------- randomness
 // Counter-based: a number is fixed by (seed, stream, item, k), so results do
 // not depend on the order or the thread that draws them.
-uint64_t Mix64(uint64_t x) {
-  x += 0x9e3779b97f4a7c15ull;
-  x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ull;
-  x = (x ^ (x >> 27)) * 0x94d049bb133111ebull;
-  return x ^ (x >> 31);
-}
 double Uniform(uint64_t seed, uint64_t stream, uint64_t item, uint64_t k) {
-  const uint64_t h = Mix64(Mix64(Mix64(Mix64(seed) ^ stream) ^ item) ^ k);
-  return static_cast<double>(h >> 11) * 0x1.0p-53;
+  return UnitDouble(CounterHash(seed, stream, item, k));
 }
 enum Stream : uint64_t { kViewDir = 1, kPixelPick = 2, kRayTurn = 3 };
 

@@ -15,6 +15,7 @@
 #include "calib/core/json.h"
 #include "calib/core/metrics.h"
 #include "calib/core/parallel.h"
+#include "calib/core/random.h"
 #include "render/nerf/nerf_internal.h"
 
 namespace nerfar {
@@ -175,14 +176,6 @@ void NerfTrainOptions::Set(const std::string& key_value) {
 
 namespace {
 
-uint64_t Mix(uint64_t x) {  // splitmix64 finaliser
-  x += 0x9e3779b97f4a7c15ull;
-  x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ull;
-  x = (x ^ (x >> 27)) * 0x94d049bb133111ebull;
-  return x ^ (x >> 31);
-}
-float Unit(uint64_t h) { return float(h >> 40) * (1.0f / 16777216.0f); }  // [0, 1)
-
 constexpr size_t kRaysPerChunk = 256;  // fixed chunking: results independent of threads
 constexpr int kScatterParts = 2;       // fixed slot partitions for the gradient scatter
 constexpr float kTrainMinTransmittance = 1e-4f;
@@ -328,7 +321,7 @@ double NerfTrainer::State::DoStep() {
   const float inv_batch = 1.0f / float(batch);
   const float eps = float(epsilon);
   const float bg_w = float(options.background_weight);
-  const uint64_t step_key = Mix(options.seed * 0x9e37ull + uint64_t(step));
+  const uint64_t step_key = Mix64(options.seed * 0x9e37ull + uint64_t(step));
 
   ParallelForChunks(chunks, 1, [&](size_t chunk_begin, size_t chunk_end) {
     thread_local std::vector<Sample> samples;
@@ -338,8 +331,8 @@ double NerfTrainer::State::DoStep() {
       double loss_sum = 0.0;
       const size_t r_end = std::min(batch, (chunk + 1) * kRaysPerChunk);
       for (size_t r = chunk * kRaysPerChunk; r < r_end; ++r) {
-        const uint64_t h0 = Mix(step_key ^ Mix(r));
-        const uint64_t h1 = Mix(h0), h2 = Mix(h1), h3 = Mix(h2);
+        const uint64_t h0 = Mix64(step_key ^ Mix64(r));
+        const uint64_t h1 = Mix64(h0), h2 = Mix64(h1), h3 = Mix64(h2);
         const uint64_t pixel = h0 % total_pixels;
         const size_t view_index =
             size_t(std::upper_bound(pixel_offsets.begin(), pixel_offsets.end(), pixel) - pixel_offsets.begin()) - 1;
@@ -347,7 +340,7 @@ double NerfTrainer::State::DoStep() {
         const uint64_t local = pixel - pixel_offsets[view_index];
         const int px = int(local % uint64_t(view.camera.width)), py = int(local / uint64_t(view.camera.width));
         const float* target = view.rgb.Pixel(px, py);
-        const double sx = px + Unit(h1), sy = py + Unit(h2);
+        const double sx = px + UnitFloat(h1), sy = py + UnitFloat(h2);
         const Vec3 dir_c =
             view.camera.HasDistortion()
                 ? Unproject(view.camera, {sx, sy})
@@ -365,7 +358,7 @@ double NerfTrainer::State::DoStep() {
         samples.clear();
         float transmittance = 1.0f;
         Vec3f color;
-        const float offset = Unit(h3);
+        const float offset = UnitFloat(h3);
         nerf_detail::MarchRay(field, ray, step_m, offset, [&](float, float dt, const Corners& c) {
           Sample s;
           s.corners = c;

@@ -6,7 +6,7 @@
 #include "calib/core/error.h"
 #include "calib/core/image_io.h"
 #include "calib/core/parallel.h"
-#include "render/synth/random.h"
+#include "calib/core/random.h"
 #include "render/synth/renderer.h"
 #include "render/synth/scenes.h"
 #include "render/synth/writer.h"

@@ -5,7 +5,7 @@
 
 #include "calib/core/error.h"
 #include "calib/core/parallel.h"
-#include "render/synth/random.h"
+#include "calib/core/random.h"
 
 namespace nerfar::synth {
 

@@ -13,7 +13,7 @@ extern "C" {
 #include <memory>
 
 #include "calib/core/error.h"
-#include "render/synth/random.h"
+#include "calib/core/random.h"
 
 namespace nerfar::synth {
 

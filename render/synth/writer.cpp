@@ -15,9 +15,9 @@
 #include "calib/core/json.h"
 #include "calib/core/log.h"
 #include "calib/core/parallel.h"
+#include "calib/core/random.h"
 #include "calib/dataset.h"
 #include "calib/object.h"
-#include "render/synth/random.h"
 #include "render/synth/renderer.h"
 
 namespace nerfar::synth {
