@@ -13,20 +13,11 @@
 #include "render/insert/rasterizer.h"
 #include "render/insert/scene_field.h"
 #include "render/mesh/mesh.h"
+#include "tests/insert/test_camera.h"
 #include "tests/support/support.h"
 
 namespace nerfar {
 namespace {
-
-CameraIntrinsics TestCamera(int w = 160, int h = 120) {
-  CameraIntrinsics c;
-  c.width = w;
-  c.height = h;
-  c.fx = c.fy = 0.9 * w;
-  c.cx = w / 2.0;
-  c.cy = h / 2.0;
-  return c;
-}
 
 // Möller-Trumbore; the reference the rasteriser is checked against.
 struct Hit {
@@ -117,7 +108,7 @@ TEST(Rasterizer, TorusMatchesRayCasting) {
   c.T_world_object = {RotationFromAxisAngle({1, 0.3, 0}, 0.7), {0.02, -0.01, 0.05}};
   c.T_world_camera = LookAt({0.25, -0.3, 0.2}, {0, 0, 0.05});
   size_t covered = 0;
-  CompareWithRayCasting(c, TestCamera(), &covered);
+  CompareWithRayCasting(c, testing::TestCamera(160, 120), &covered);
   EXPECT_GT(covered, 500u);  // the torus fills a good part of the frame
 }
 
@@ -129,7 +120,7 @@ TEST(Rasterizer, ScaledSphereHalfOutOfFrame) {
   // The camera looks past the sphere: it straddles the image's right border
   // (camera x is world +y here; half the view is 0.4·80/144 = 0.222 m wide).
   c.T_world_object = {Mat3::Identity(), {0, 0.22, 0.1}};
-  const CameraIntrinsics camera = TestCamera();
+  const CameraIntrinsics camera = testing::TestCamera(160, 120);
   const ObjectGBuffer g = Rasterize(camera, c.T_world_camera, {{&c.mesh, c.T_world_object, c.scale}});
   ASSERT_FALSE(g.rect.empty());
   EXPECT_EQ(g.rect.x1, camera.width);  // clipped at the border
@@ -145,15 +136,15 @@ TEST(Rasterizer, NearPlaneClippingWithCameraInsideTheObject) {
   c.T_world_object = {RotationFromAxisAngle({0, 0, 1}, 0.3), {0.05, 0.02, 0.0}};
   c.T_world_camera = LookAt({0.0, 0.0, 0.0}, {1.0, 0.2, -0.1});
   size_t covered = 0;
-  CompareWithRayCasting(c, TestCamera(), &covered);
-  const CameraIntrinsics camera = TestCamera();
+  CompareWithRayCasting(c, testing::TestCamera(160, 120), &covered);
+  const CameraIntrinsics camera = testing::TestCamera(160, 120);
   EXPECT_GT(covered, static_cast<size_t>(camera.width * camera.height * 9 / 10));
 }
 
 TEST(Rasterizer, BehindTheCameraDrawsNothing) {
   const TriangleMesh mesh = MakeUvSphere(0.05, 16, 8);
   const Pose cam = LookAt({0.5, 0, 0.1}, {1.0, 0, 0.1});  // looks away from the origin
-  const ObjectGBuffer g = Rasterize(TestCamera(), cam, {{&mesh, Pose::Identity(), 1.0}});
+  const ObjectGBuffer g = Rasterize(testing::TestCamera(160, 120), cam, {{&mesh, Pose::Identity(), 1.0}});
   EXPECT_TRUE(g.rect.empty());
   EXPECT_EQ(g.covered, 0u);
 }
@@ -164,7 +155,7 @@ TEST(Rasterizer, NearestObjectWinsAndThreadCountDoesNotMatter) {
   const Pose cam = LookAt({0.5, -0.1, 0.15}, {0, 0, 0.05});
   const std::vector<RasterObject> objects = {{&a, {Mat3::Identity(), {0.0, 0.0, 0.05}}, 1.0},
                                              {&b, {Mat3::Identity(), {0.1, 0.0, 0.05}}, 1.0}};
-  const CameraIntrinsics camera = TestCamera();
+  const CameraIntrinsics camera = testing::TestCamera(160, 120);
   SetThreadCount(1);
   const ObjectGBuffer g1 = Rasterize(camera, cam, objects);
   SetThreadCount(2);
@@ -190,7 +181,7 @@ TEST(Rasterizer, NearestObjectWinsAndThreadCountDoesNotMatter) {
 }
 
 TEST(Rasterizer, ProjectBallHoldsTheSphere) {
-  const CameraIntrinsics camera = TestCamera();
+  const CameraIntrinsics camera = testing::TestCamera(160, 120);
   const TriangleMesh sphere = MakeUvSphere(0.06, 32, 16);
   for (const Vec3& center : {Vec3{0, 0, 0.05}, Vec3{0.15, 0.1, 0.0}, Vec3{-0.2, 0.3, 0.1}}) {
     const Pose cam = LookAt({0.5, -0.2, 0.3}, {0, 0, 0});
@@ -221,7 +212,7 @@ TEST(Rasterizer, DegenerateAndNonFiniteTrianglesAreSkipped) {
   mesh.triangles.push_back({n - 3, n - 2, n - 1});  // NaN corner
   mesh.triangles.push_back({0, 1, n + 5});          // index out of range
   const Pose cam = LookAt({0.3, 0, 0.1}, {0, 0, 0});
-  const ObjectGBuffer g = Rasterize(TestCamera(), cam, {{&mesh, Pose::Identity(), 1.0}});
+  const ObjectGBuffer g = Rasterize(testing::TestCamera(160, 120), cam, {{&mesh, Pose::Identity(), 1.0}});
   EXPECT_GT(g.covered, 100u);
   for (size_t i = 0; i < g.t.size(); ++i) {
     EXPECT_TRUE(std::isfinite(g.t[i]));

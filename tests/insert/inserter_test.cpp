@@ -15,20 +15,11 @@
 #include "calib/core/error.h"
 #include "calib/core/parallel.h"
 #include "render/sg/sphere.h"
+#include "tests/insert/test_camera.h"
 #include "tests/support/support.h"
 
 namespace nerfar {
 namespace {
-
-CameraIntrinsics Camera(int w = 128, int h = 96) {
-  CameraIntrinsics c;
-  c.width = w;
-  c.height = h;
-  c.fx = c.fy = 0.9 * w;
-  c.cx = w / 2.0;
-  c.cy = h / 2.0;
-  return c;
-}
 
 // A table alone (no sphere, no medium), plain radiance.
 AnalyticSceneParams TableOnly() {
@@ -86,7 +77,7 @@ TEST(Composite, ClippedRangeAndTranslucentOccluder) {
   const SphereObject object({0.0, -0.1, 0.1}, 0.04);  // behind the medium seen from +x
   const Vec3 eye{0.6, -0.1, 0.1};
   const Pose cam = LookAt(eye, object.center);
-  const CameraIntrinsics camera = Camera();
+  const CameraIntrinsics camera = testing::TestCamera(128, 96);
   const SgMixture light = OneLobe({0, 0, 1}, 2.0, 1.0);
   InsertOptions options;
   options.shadows = false;
@@ -138,7 +129,7 @@ TEST(Composite, OpaqueSceneInFrontHidesTheObject) {
   const AnalyticScene scene(params);
   const SphereObject object({0.0, 0.0, 0.1}, 0.05);
   const Pose cam = LookAt({0.6, 0.0, 0.1}, object.center);  // scene sphere between camera and object
-  const CameraIntrinsics camera = Camera();
+  const CameraIntrinsics camera = testing::TestCamera(128, 96);
   const SgMixture light = OneLobe({0, 0, 1}, 2.0, 1.0);
   InsertOptions options;
   options.shadows = false;
@@ -182,7 +173,7 @@ struct KappaReference {
 TEST(Shadow, KappaMatchesQuadratureUnderASphere) {
   const AnalyticScene scene(TableOnly());
   const SphereObject object({0.0, 0.0, 0.06}, 0.05);
-  const CameraIntrinsics camera = Camera(96, 72);
+  const CameraIntrinsics camera = testing::TestCamera(96, 72);
   const Pose cam = LookAt({0.25, -0.3, 0.35}, {0.02, 0.0, 0.0});
   // A moderately sharp light from a slanted direction plus a dim ambient lobe.
   SgMixture light = OneLobe({0.4, 0.1, 1.0}, 40.0, 5.0);
@@ -234,7 +225,7 @@ TEST(Shadow, KappaMatchesQuadratureUnderASphere) {
 TEST(Shadow, FarFromTheObjectKappaIsOne) {
   const AnalyticScene scene(TableOnly());
   const SphereObject object({0.3, 0.2, 0.05}, 0.05);
-  const CameraIntrinsics camera = Camera();
+  const CameraIntrinsics camera = testing::TestCamera(128, 96);
   const Pose cam = LookAt({0.8, 0.6, 0.5}, {0.3, 0.2, 0.0});
   const SgMixture light = OneLobe({0, 0, 1}, 100.0, 10.0);  // from straight above: shadow right below
   InsertOptions options;
@@ -261,7 +252,7 @@ TEST(Shadow, FarFromTheObjectKappaIsOne) {
 TEST(Shadow, KappaStepInterpolatesNearTheExactField) {
   const AnalyticScene scene(TableOnly());
   const SphereObject object({0.0, 0.0, 0.06}, 0.05);
-  const CameraIntrinsics camera = Camera(96, 72);
+  const CameraIntrinsics camera = testing::TestCamera(96, 72);
   const Pose cam = LookAt({0.25, -0.3, 0.35}, {0.02, 0.0, 0.0});
   const SgMixture light = OneLobe({0.4, 0.1, 1.0}, 10.0, 5.0);
   InsertOptions a, b;
@@ -288,7 +279,7 @@ TEST(Shadow, KappaStepInterpolatesNearTheExactField) {
 TEST(Shading, ConvexObjectIsNotDarkenedByItsOwnField) {
   const AnalyticScene scene(TableOnly());
   const SphereObject object({0.0, 0.0, 0.2}, 0.05);
-  const CameraIntrinsics camera = Camera();
+  const CameraIntrinsics camera = testing::TestCamera(128, 96);
   const Pose cam = LookAt({0.3, -0.2, 0.35}, object.center);
   SgMixture light = OneLobe({0.3, 0.2, 1.0}, 3.0, 2.0);
   light.push_back(OneLobe({-1, 0.2, 0.1}, 20.0, 4.0)[0]);  // near the horizon of many pixels
@@ -320,7 +311,7 @@ TEST(Shading, AnObjectShadowsAnotherThroughItsField) {
   const AnalyticScene scene(TableOnly());
   const SphereObject lower({0.0, 0.0, 0.05}, 0.05);
   const SphereObject upper({0.0, 0.0, 0.2}, 0.06);  // right above it
-  const CameraIntrinsics camera = Camera();
+  const CameraIntrinsics camera = testing::TestCamera(128, 96);
   const Pose cam = LookAt({0.35, -0.1, 0.12}, lower.center);
   const SgMixture light = OneLobe({0, 0, 1}, 50.0, 10.0);  // from above
   InsertOptions options;
@@ -402,7 +393,7 @@ TEST(IncidentLight, CachedWhileStillAndWarmStartedWhenMoved) {
 TEST(IncidentLight, EachObjectGetsTheLightAtItsOwnCentre) {
   const AnalyticScene scene;  // the sphere and the medium make light depend on position
   const SphereObject a({-0.2, 0.25, 0.05}, 0.04), b({0.35, -0.25, 0.05}, 0.04);
-  const CameraIntrinsics camera = Camera(64, 48);
+  const CameraIntrinsics camera = testing::TestCamera(64, 48);
   const Pose cam = LookAt({0.6, -0.6, 0.6}, {0, 0, 0});
   InsertOptions options = InsertOptions::Preset("fast");
   Inserter inserter(scene, OneLobe({0, 0, 1}, 2.0, 1.0), options);
@@ -420,7 +411,7 @@ TEST(IncidentLight, EachObjectGetsTheLightAtItsOwnCentre) {
 TEST(Background, NerfRenderingMatchesTheFieldAndBothBackgroundsAgreeOnTheObject) {
   const AnalyticScene scene;
   const SphereObject object({0.05, 0.0, 0.05}, 0.05);
-  const CameraIntrinsics camera = Camera(64, 48);
+  const CameraIntrinsics camera = testing::TestCamera(64, 48);
   const Pose cam = LookAt({0.5, -0.5, 0.4}, {0, 0, 0});
   const SgMixture light = OneLobe({0, 0, 1}, 2.0, 1.0);
   InsertOptions options;
@@ -481,7 +472,7 @@ TEST(Stability, ExtremesGiveFiniteBoundedOutput) {
       {"1e5 sun, rough dielectric", {0.0, 0.0, 0.05}, 0.05, {0.4, -0.3, 0.3}, {0, 0, 0}, sun, 1, 0},
       {"1e5 sun, glossy dielectric", {0.0, 0.0, 0.05}, 0.05, {0.4, -0.3, 0.3}, {0, 0, 0}, sun, 0.02, 0},
   };
-  const CameraIntrinsics camera = Camera(64, 48);
+  const CameraIntrinsics camera = testing::TestCamera(64, 48);
   for (const StabilityCase& c : cases) {
     SCOPED_TRACE(c.name);
     const SphereObject object(c.center, c.radius);
@@ -518,7 +509,7 @@ TEST(Stability, ExtremesGiveFiniteBoundedOutput) {
 TEST(Stability, SunLitSphereIsBrighterThanSkyLitAndRoughnessChangesTheHighlight) {
   const AnalyticScene scene(TableOnly());
   const SphereObject object({0.0, 0.0, 0.1}, 0.05);
-  const CameraIntrinsics camera = Camera(64, 48);
+  const CameraIntrinsics camera = testing::TestCamera(64, 48);
   const Pose cam = LookAt({0.4, -0.3, 0.3}, object.center);
   const SgMixture sky = OneLobe({0, 0, 1}, 1.0, 1.0);
   SgMixture sun = sky;
@@ -556,7 +547,7 @@ TEST(Stability, SunLitSphereIsBrighterThanSkyLitAndRoughnessChangesTheHighlight)
 TEST(Stability, ResultsDoNotDependOnTheThreadCount) {
   const AnalyticScene scene;
   const SphereObject object({0.05, 0.0, 0.06}, 0.05);
-  const CameraIntrinsics camera = Camera(64, 48);
+  const CameraIntrinsics camera = testing::TestCamera(64, 48);
   const Pose cam = LookAt({0.4, -0.3, 0.3}, {0, 0, 0});
   const InsertOptions options = InsertOptions::Preset("fast");
   ImageF a(camera.width, camera.height, 3, 0.5f), b = a;
@@ -582,7 +573,7 @@ TEST(Options, PresetsValidateAndBadValuesAreListed) {
   EXPECT_THROW(Inserter(scene, {}, bad), InputError);
   ImageF wrong(10, 10, 3);
   Inserter ok(scene, {}, InsertOptions{});
-  EXPECT_THROW(ok.Render(Camera(), Pose::Identity(), {}, wrong), InputError);
+  EXPECT_THROW(ok.Render(testing::TestCamera(128, 96), Pose::Identity(), {}, wrong), InputError);
 }
 
 TEST(Layers, ExpandPlacesTheRect) {
