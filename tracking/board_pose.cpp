@@ -128,6 +128,8 @@ std::vector<std::string> BoardPoseOptions::Validate() const {
     problems.push_back("ambiguity_ratio: " + std::to_string(ambiguity_ratio) + " (expected 1 to 100)");
   if (refine_iterations < 0 || refine_iterations > 1000)
     problems.push_back("refine_iterations: " + std::to_string(refine_iterations) + " (expected 0 to 1000)");
+  if (!(corner_noise_px >= 0 && corner_noise_px <= 10))
+    problems.push_back("corner_noise_px: " + std::to_string(corner_noise_px) + " (expected 0 to 10 pixels)");
   if (min_tags < 1 || min_tags > 1000) problems.push_back("min_tags: " + std::to_string(min_tags) + " (expected >= 1)");
   return problems;
 }
@@ -211,6 +213,7 @@ BoardPose EstimateBoardPose(const std::vector<TagDetection>& detections, const B
   // Refine the best few distinct hypotheses: inliers at the loose gate, LM,
   // inliers at the outlier threshold, LM again until the set settles.
   std::vector<Refined> refined;
+  std::optional<Refined> collapsed;
   constexpr int kMaxRefined = 4;
   constexpr double kDistinctRad = 1.0 * kPi / 180.0;
   for (const Hypothesis& h : hypotheses) {
@@ -240,7 +243,13 @@ BoardPose EstimateBoardPose(const std::vector<TagDetection>& detections, const B
     bool same = false;
     for (const Refined& o : refined)
       same = same || RotationAngleBetween(o.T_camera_world.rotation, r.T_camera_world.rotation) < kDistinctRad;
-    if (!same) refined.push_back(std::move(r));
+    if (!same) {
+      refined.push_back(std::move(r));
+    } else if (!collapsed) {
+      // LM slid from this hypothesis into a kept solution (a shallow valley:
+      // one tag nearly face-on); the unrefined IPPE pose stays a candidate.
+      collapsed = Refined{h.T_camera_world, {}, 0};
+    }
   }
   std::stable_sort(refined.begin(), refined.end(), [](const Refined& a, const Refined& b) {
     return a.inliers.size() != b.inliers.size() ? a.inliers.size() > b.inliers.size() : a.rms_px < b.rms_px;
@@ -259,12 +268,18 @@ BoardPose EstimateBoardPose(const std::vector<TagDetection>& detections, const B
     const bool in = std::find(best.inliers.begin(), best.inliers.end(), static_cast<int>(i)) != best.inliers.end();
     (in ? result.inlier_ids : result.outlier_ids).push_back(tags[i].id);
   }
+  if (collapsed &&
+      RotationAngleBetween(collapsed->T_camera_world.rotation, best.T_camera_world.rotation) >= kDistinctRad) {
+    collapsed->inliers = best.inliers;
+    collapsed->rms_px = SubsetRms(tags, best.inliers, k, collapsed->T_camera_world);
+    refined.push_back(*collapsed);
+  }
   for (size_t j = 1; j < refined.size(); ++j) {
     const Refined& other = refined[j];
     if (other.inliers != best.inliers) continue;
-    // Noise floor: with near-perfect corners both RMS values are tiny and their
-    // ratio meaningless; 0.05 px is well below any detector's corner noise.
-    if (other.rms_px <= options.ambiguity_ratio * std::max(best.rms_px, 0.05)) {
+    // Noise floor: below the detector's corner noise both RMS values are
+    // equally good and their ratio meaningless.
+    if (other.rms_px <= options.ambiguity_ratio * std::max(best.rms_px, options.corner_noise_px)) {
       result.alternative = other.T_camera_world.Inverse();
       result.alternative_rms_px = other.rms_px;
     }

@@ -29,6 +29,10 @@ struct BoardPoseOptions {
   // (and whose rotation differs by more than 1 degree) is kept as the
   // alternative. 1 turns the ambiguity handling off.
   double ambiguity_ratio = 3.0;
+  // Corner noise of the detector (pixels): RMS values below it are not told
+  // apart, so a second solution within ambiguity_ratio times this level is
+  // ambiguous however small the best one's RMS.
+  double corner_noise_px = 0.25;
   // Levenberg-Marquardt iterations of the refinement (0: none, IPPE only).
   int refine_iterations = 30;
   // Fewest inlier tags for a pose.

@@ -14,6 +14,7 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <chrono>
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
@@ -136,6 +137,11 @@ const char* DetectStatusName(DetectStatus status) {
 // Sub-pixel edge refinement (see TagDetectorOptions::refine_corners).
 class EdgeRefiner {
  public:
+  // Half-width of a profile's window (pixels) and profiles per edge: beyond
+  // them a large tag costs more without a better line.
+  static constexpr double kWindowPx = 6.0;
+  static constexpr int kMaxProfiles = 48;
+
   EdgeRefiner(const cv::Mat& gray, const float* lut, int black_cells)
       : gray_(gray), lut_(lut), black_cells_(black_cells) {}
 
@@ -170,8 +176,10 @@ class EdgeRefiner {
       if (!(w - d > 0.1 * w)) return;  // no usable contrast
       // Crossings along profiles across the edge, away from the corners.
       std::vector<Vec2> points;
-      const double inner = 0.7 * cell, outer = 0.9 * cell, step = 0.25;
-      const int profiles = std::max(6, static_cast<int>(length / 0.5));
+      // The window spans the blurred step (a few pixels) and the detection's
+      // error, within the border cell and the white margin.
+      const double inner = std::min(0.7 * cell, kWindowPx), outer = std::min(0.9 * cell, kWindowPx), step = 0.25;
+      const int profiles = std::clamp(static_cast<int>(length / 0.5), 6, kMaxProfiles);
       for (int k = 0; k < profiles; ++k) {
         const double t = 0.12 + 0.76 * (k + 0.5) / profiles;
         const Vec2 p{a.x + (b.x - a.x) * t, a.y + (b.y - a.y) * t};
@@ -263,6 +271,7 @@ struct TagDetector::Impl {
   apriltag_detector_t* detector = nullptr;
   std::string last_error;
   cv::Mat gray, upsampled;
+  DetectTimings timings;
   float lut[256];  // 8-bit value -> relative linear intensity
   int black_cells = 8;
   bool can_refine = true;  // families with a reversed border have no ink-inside edge
@@ -319,8 +328,25 @@ const TagDetectorOptions& TagDetector::options() const { return impl_->options; 
 const std::string& TagDetector::last_error() const { return impl_->last_error; }
 
 DetectStatus TagDetector::Detect(const Image8& image, std::vector<TagDetection>& detections) {
+  return Run(image, nullptr, detections);
+}
+
+DetectStatus TagDetector::DetectInRegions(const Image8& image, const std::vector<SearchRect>& regions,
+                                          std::vector<TagDetection>& detections) {
+  return Run(image, &regions, detections);
+}
+
+const DetectTimings& TagDetector::last_timings() const { return impl_->timings; }
+
+DetectStatus TagDetector::Run(const Image8& image, const std::vector<SearchRect>* regions,
+                              std::vector<TagDetection>& detections) {
+  using Clock = std::chrono::steady_clock;
+  const auto ms_since = [](Clock::time_point t) {
+    return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
+  };
   detections.clear();
   impl_->last_error.clear();
+  impl_->timings = {};
   if ((image.channels != 1 && image.channels != 3 && image.channels != 4) || image.width <= 0 || image.height <= 0 ||
       image.pixels.size() != image.PixelCount() * static_cast<size_t>(image.channels)) {
     impl_->last_error = "frame of " + std::to_string(image.width) + "x" + std::to_string(image.height) + "x" +
@@ -335,63 +361,86 @@ DetectStatus TagDetector::Detect(const Image8& image, std::vector<TagDetection>&
                         " is below the detector's minimum of " + std::to_string(min_side) + " pixels a side";
     return DetectStatus::kImageTooSmall;
   }
+  auto t = Clock::now();
   cv::Mat view(image.height, image.width, CV_8UC(image.channels), const_cast<std::uint8_t*>(image.pixels.data()));
   if (image.channels == 1) {
     impl_->gray = view;
   } else {
     cv::cvtColor(view, impl_->gray, image.channels == 3 ? cv::COLOR_RGB2GRAY : cv::COLOR_RGBA2GRAY);
   }
-  cv::Mat* input = &impl_->gray;
-  if (o.upsample == 2) {
-    cv::resize(impl_->gray, impl_->upsampled, cv::Size(), 2.0, 2.0, cv::INTER_LINEAR);
-    input = &impl_->upsampled;
+  // The areas searched, in frame pixels.
+  std::vector<SearchRect> areas;
+  if (regions == nullptr) {
+    areas.push_back({0, 0, image.width, image.height});
+  } else {
+    for (SearchRect r : *regions) {
+      r.x0 = std::max(r.x0, 0);
+      r.y0 = std::max(r.y0, 0);
+      r.x1 = std::min(r.x1, image.width);
+      r.y1 = std::min(r.y1, image.height);
+      if (r.Width() >= min_side && r.Height() >= min_side) areas.push_back(r);
+    }
   }
-  if (!input->isContinuous()) *input = input->clone();
-  // The library reads rows through `stride`: ours is the true row length.
-  image_u8_t im{input->cols, input->rows, static_cast<int32_t>(input->step[0]), input->data};
-  errno = 0;
-  zarray_t* found = apriltag_detector_detect(impl_->detector, &im);
-  const int error = errno;
-  if (found == nullptr) {
-    impl_->last_error = std::string("detector returned nothing (") + std::strerror(error ? error : ENOMEM) + ")";
-    return DetectStatus::kResourceError;
-  }
-  const int count = zarray_size(found);
-  // Thread-pool creation failures return an empty list with errno set.
-  if (count == 0 && (error == EAGAIN || error == ENOMEM)) {
-    apriltag_detections_destroy(found);
-    impl_->last_error = std::string("detector could not start its threads (") + std::strerror(error) + ")";
-    return DetectStatus::kResourceError;
-  }
+  impl_->timings.prepare_ms = ms_since(t);
+
   std::map<int, TagDetection> by_id;
   const double scale = 1.0 / o.upsample;
-  for (int i = 0; i < count; ++i) {
-    apriltag_detection_t* det = nullptr;
-    zarray_get(found, i, &det);
-    if (det == nullptr) continue;
-    if (det->decision_margin < o.min_decision_margin) continue;
-    TagDetection d;
-    d.id = det->id;
-    d.hamming = det->hamming;
-    d.decision_margin = det->decision_margin;
-    bool finite = true;
-    for (int k = 0; k < 4; ++k) {
-      const double* p = det->p[kLibraryCorner[k]];
-      // Library pixel centres at integers (in the upsampled image) ->
-      // continuous coordinates of the original image.
-      d.corners[k] = {(p[0] + kLibraryPixelOffset) * scale, (p[1] + kLibraryPixelOffset) * scale};
-      finite = finite && std::isfinite(p[0]) && std::isfinite(p[1]);
+  for (const SearchRect& area : areas) {
+    t = Clock::now();
+    cv::Mat crop = impl_->gray(cv::Rect(area.x0, area.y0, area.Width(), area.Height()));
+    if (o.upsample == 2) {
+      cv::resize(crop, impl_->upsampled, cv::Size(), 2.0, 2.0, cv::INTER_LINEAR);
+      crop = impl_->upsampled;
     }
-    if (!finite) continue;
-    auto it = by_id.find(d.id);
-    if (it == by_id.end() || it->second.decision_margin < d.decision_margin) by_id[d.id] = d;
+    impl_->timings.prepare_ms += ms_since(t);
+    t = Clock::now();
+    // The library reads rows through `stride`: a crop of the frame needs no copy.
+    image_u8_t im{crop.cols, crop.rows, static_cast<int32_t>(crop.step[0]), crop.data};
+    errno = 0;
+    zarray_t* found = apriltag_detector_detect(impl_->detector, &im);
+    const int error = errno;
+    impl_->timings.search_ms += ms_since(t);
+    if (found == nullptr) {
+      impl_->last_error = std::string("detector returned nothing (") + std::strerror(error ? error : ENOMEM) + ")";
+      return DetectStatus::kResourceError;
+    }
+    const int count = zarray_size(found);
+    // Thread-pool creation failures return an empty list with errno set.
+    if (count == 0 && (error == EAGAIN || error == ENOMEM)) {
+      apriltag_detections_destroy(found);
+      impl_->last_error = std::string("detector could not start its threads (") + std::strerror(error) + ")";
+      return DetectStatus::kResourceError;
+    }
+    for (int i = 0; i < count; ++i) {
+      apriltag_detection_t* det = nullptr;
+      zarray_get(found, i, &det);
+      if (det == nullptr) continue;
+      if (det->decision_margin < o.min_decision_margin) continue;
+      TagDetection d;
+      d.id = det->id;
+      d.hamming = det->hamming;
+      d.decision_margin = det->decision_margin;
+      bool finite = true;
+      for (int k = 0; k < 4; ++k) {
+        const double* p = det->p[kLibraryCorner[k]];
+        // Library pixel centres at integers (in the upsampled crop) ->
+        // continuous coordinates of the frame.
+        d.corners[k] = {(p[0] + kLibraryPixelOffset) * scale + area.x0, (p[1] + kLibraryPixelOffset) * scale + area.y0};
+        finite = finite && std::isfinite(p[0]) && std::isfinite(p[1]);
+      }
+      if (!finite) continue;
+      auto it = by_id.find(d.id);
+      if (it == by_id.end() || it->second.decision_margin < d.decision_margin) by_id[d.id] = d;
+    }
+    apriltag_detections_destroy(found);
   }
-  apriltag_detections_destroy(found);
+  t = Clock::now();
   const EdgeRefiner refiner(impl_->gray, impl_->lut, impl_->black_cells);
   for (auto& [id, d] : by_id) {
     if (o.refine_corners && impl_->can_refine) refiner.Refine(d.corners);
     detections.push_back(d);
   }
+  impl_->timings.refine_ms = ms_since(t);
   return DetectStatus::kOk;
 }
 

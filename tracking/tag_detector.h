@@ -70,6 +70,20 @@ struct TagDetection {
 };
 
 // Why a frame produced no detections (besides "no tag in view").
+// Where the time of the last Detect went (milliseconds, wall clock).
+struct DetectTimings {
+  double prepare_ms = 0;  // grey conversion, upsampling
+  double search_ms = 0;   // the library: threshold, quads, decode, its edge snap
+  double refine_ms = 0;   // our sub-pixel edge re-fit
+};
+
+// A pixel rectangle [x0, x1) x [y0, y1) of the frame.
+struct SearchRect {
+  int x0 = 0, y0 = 0, x1 = 0, y1 = 0;
+  int Width() const { return x1 - x0; }
+  int Height() const { return y1 - y0; }
+};
+
 enum class DetectStatus {
   kOk,             // detection ran (the list may be empty)
   kImageTooSmall,  // below the detector's minimum size: nothing was attempted
@@ -91,10 +105,19 @@ class TagDetector {
   // Detections are sorted by id; a duplicated id keeps the one with the larger
   // decision margin (a board has each id once).
   DetectStatus Detect(const Image8& image, std::vector<TagDetection>& detections);
+  // The same, searching only inside `regions` (clipped to the frame; regions
+  // below the detector's minimum size are skipped). A tracker passes the
+  // neighbourhoods of the tags it expects; corners are in frame coordinates
+  // and refined on the whole frame. An empty list searches nothing.
+  DetectStatus DetectInRegions(const Image8& image, const std::vector<SearchRect>& regions,
+                               std::vector<TagDetection>& detections);
+  const DetectTimings& last_timings() const;
   // Message for the last non-kOk status.
   const std::string& last_error() const;
 
  private:
+  DetectStatus Run(const Image8& image, const std::vector<SearchRect>* regions, std::vector<TagDetection>& detections);
+
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };

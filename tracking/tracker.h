@@ -36,6 +36,22 @@ struct TrackerOptions {
   int history_frames = 15;
   // A pose whose reprojection RMS exceeds this (pixels) is not used.
   double max_rms_px = 2.0;
+  // A single tag seen face-on has two poses that fit (ambiguous): the tracker
+  // follows the one that continues the track, and switches once to the other
+  // when it explains the corners better by this log-likelihood (summed over
+  // the ambiguous frames; 4.6 = 100:1).
+  double branch_switch_evidence = 4.6;
+  // While tracking, search only around the tags the motion-extrapolated pose
+  // predicts (much less area than the frame); a frame whose region search
+  // gives no pose is searched whole at once. Off: every frame whole.
+  bool region_search = true;
+  // Whole-frame search at least every this many frames while tracking, so
+  // tags entering the view join the pose (1: every frame).
+  int full_search_every = 10;
+  // Margin around each predicted tag: this many pixels plus this fraction of
+  // the tag's predicted size (room for acceleration and the white border).
+  double region_margin_px = 16;
+  double region_margin_tag = 0.5;
 
   std::vector<std::string> Validate() const;
   // "fast", "balanced", "accurate": detector presets with the balanced filter.
@@ -57,6 +73,8 @@ struct TrackResult {
   DetectStatus detect_status = DetectStatus::kOk;
   std::string note;  // why a frame was lost, or what happened
   double detect_ms = 0, pose_ms = 0;
+  bool region_searched = false;  // only predicted regions were searched
+  double searched_fraction = 1;  // searched area / frame area
 };
 
 class Tracker {
@@ -68,6 +86,10 @@ class Tracker {
   // One frame. The camera is rescaled if the frame size differs from the
   // intrinsics' size with the same aspect ratio; otherwise the frame is lost.
   TrackResult Process(const Frame& frame);
+  // The same from detections made elsewhere (another detector, a replay)
+  // in a frame of width x height taken at t_ns (0: unknown).
+  TrackResult ProcessDetections(const std::vector<TagDetection>& detections, int width, int height,
+                                std::int64_t t_ns = 0);
   // A frame that never arrived (corrupt, device lost): the state becomes lost.
   TrackResult MarkLost(const std::string& why);
   void Reset();
@@ -75,6 +97,12 @@ class Tracker {
 
  private:
   TrackResult Lost(TrackResult result, const std::string& why);
+  // The camera for a frame size (rescaled for the same aspect ratio).
+  bool CameraFor(int width, int height, CameraIntrinsics& camera, std::string& why) const;
+  // Ambiguity, state and filter from a frame's board pose.
+  TrackResult Conclude(TrackResult result, const BoardPose& board_pose, std::int64_t t_ns);
+  // Regions around the tags predicted for this frame; empty if none.
+  std::vector<SearchRect> PredictRegions(const CameraIntrinsics& camera, int width, int height) const;
 
   Board board_;
   CameraIntrinsics camera_;
@@ -83,8 +111,13 @@ class Tracker {
   PoseFilter filter_;
   TrackingState state_ = TrackingState::kLost;
   bool has_good_ = false;
-  Pose last_good_;  // last reported (filtered) pose
-  Pose last_raw_;   // last measured pose
+  Pose last_good_;                  // last reported (filtered) pose
+  Pose last_raw_;                   // last measured pose
+  Pose prior_raw_;                  // the measured pose of the frame before last_raw_'s
+  bool prior_consecutive_ = false;  // prior_raw_ is from the frame just before
+  int frames_since_full_ = 1 << 20;
+  int last_tags_used_ = 0;
+  double branch_evidence_ = 0;  // log-likelihood of the followed branch over the other
   std::int64_t last_t_ns_ = 0;
   int frames_since_good_ = 1 << 20;
   int consistent_run_ = 0;
