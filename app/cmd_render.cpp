@@ -27,6 +27,7 @@ int RunRender(const CommandArgs& args) {
   parser.Option("--dataset", &dataset, "DIR", "dataset folder whose cameras to render (required)");
   parser.Option("--split", &options.split, "NAME", "split: test (default) or train");
   parser.Option("-o", &output, "OUT", "output folder (required)");
+  parser.Flag("--png", &options.write_png, "also write OUT/<name>.png: render beside reference, tone-mapped");
   parser.Option("--step-voxels", &step_voxels, "S", "sample spacing in voxels (default 0.5)");
   parser.Epilog("Writes OUT/<name>.exr, OUT/<name>_depth.exr, OUT/<name>_opacity.exr and OUT/report.json.");
   if (!parser.Parse(args)) return 0;

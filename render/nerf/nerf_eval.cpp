@@ -64,10 +64,12 @@ NerfEvaluation EvaluateNerf(const NerfField& field, const std::string& dataset_d
     score.psnr_dataset = PsnrTm(images.color, truth);
     sum_dataset += score.psnr_dataset;
     const std::string digits = IndexDigits(score.name);
+    ImageF preview_truth = truth;
     if (has_insert && !digits.empty()) {
       const fs::path bg = insert / ("bg_" + digits + ".exr");
       if (fs::is_regular_file(bg, error)) {
-        score.psnr_reference = PsnrTm(images.color, ReadExrRgb(bg.string()));
+        preview_truth = ReadExrRgb(bg.string());
+        score.psnr_reference = PsnrTm(images.color, preview_truth);
         sum_reference += score.psnr_reference;
         ++count_reference;
       }
@@ -96,6 +98,18 @@ NerfEvaluation EvaluateNerf(const NerfField& field, const std::string& dataset_d
       WriteExrRgb(color_path, images.color, ExrPixelType::kFloat);
       WriteExr((out / (score.name + "_depth.exr")).string(), images.depth, {"Y"}, ExrPixelType::kFloat);
       WriteExr((out / (score.name + "_opacity.exr")).string(), images.opacity, {"Y"}, ExrPixelType::kHalf);
+      if (options.write_png) {
+        const int w = images.color.width, h = images.color.height;
+        ImageF both(2 * w, h, 3);
+        for (int y = 0; y < h; ++y)
+          for (int x = 0; x < w; ++x)
+            for (int c = 0; c < 3; ++c) {
+              both.pixels[(size_t(y) * 2 * w + x) * 3 + c] = images.color.Pixel(x, y)[c];
+              both.pixels[(size_t(y) * 2 * w + w + x) * 3 + c] = preview_truth.Pixel(x, y)[c];
+            }
+        WriteImage8((out / (score.name + ".png")).string(),
+                    ToneMapToDisplay(both, ExposureForPercentile(preview_truth, 0.99)));
+      }
     }
     eval.views.push_back(score);
   }

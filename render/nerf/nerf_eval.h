@@ -32,6 +32,9 @@ struct NerfEvalOptions {
   std::string split = "test";  // dataset split to render
   std::string output_dir;      // where to write OUT/r_003.exr, _depth, _opacity ("" = nowhere)
   int max_views = 0;           // 0: all views of the split
+  // Also write OUT/<name>.png: the render (left) beside the reference or the
+  // split's image (right), tone-mapped with the truth's psnr_tm exposure.
+  bool write_png = false;
   NerfRenderOptions render;
 };
 

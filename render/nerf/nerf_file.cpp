@@ -230,7 +230,8 @@ NerfField ParseNerf(const std::string& bytes, const std::string& source) {
         f.color[s * kNerfColorCoeffs + m] = q;
       }
     }
-  // Every occupied cell must have all 8 corners stored (else the reader would invent empty corners).
+  // Every corner of an occupied cell that lies in a listed brick must be stored
+  // (else the reader would invent an empty corner where the field had a value).
   for (uint32_t b = 0; b < brick_count; ++b) {
     const uint64_t bits = f.occupancy[b];
     const int bx = f.brick_coords[3 * b], by = f.brick_coords[3 * b + 1], bz = f.brick_coords[3 * b + 2];
@@ -241,7 +242,8 @@ NerfField ParseNerf(const std::string& bytes, const std::string& source) {
         ThrowInputError(source, "brick " + std::to_string(b) + " marks a cell outside the grid as occupied");
       for (int n = 0; n < 8; ++n) {
         const int32_t s = f.Slot(i + (n & 1), j + ((n >> 1) & 1), k + (n >> 2));
-        if (s < 0 || !((masks[size_t(s) / kNerfBrickSlots] >> (s % kNerfBrickSlots)) & 1u))
+        // A corner in an unlisted brick is empty space, as it was in the saved field.
+        if (s >= 0 && !((masks[size_t(s) / kNerfBrickSlots] >> (s % kNerfBrickSlots)) & 1u))
           ThrowInputError(source,
                           "brick " + std::to_string(b) + " has an occupied cell with a corner that is not stored");
       }

@@ -74,7 +74,7 @@ inline int CellState(const NerfField& f, int i, int j, int k) {
 // of interval n lies at t_near + (n + offset)·step (offset in [0,1); the last,
 // shorter interval places it at the same fraction of its length). Calls
 // visit(t, dt, corners) for every sample in an occupied cell, in order, until
-// it returns false. Empty bricks are jumped over.
+// it returns false. Empty bricks and empty cells are jumped over.
 template <typename Visit>
 inline void MarchRay(const NerfField& f, const NerfRay& ray, float step, float offset, Visit&& visit) {
   const float t0 = ray.t_near, t1 = ray.t_far;
@@ -104,20 +104,20 @@ inline void MarchRay(const NerfField& f, const NerfRay& ray, float step, float o
       if (!LocateGrid(f, g, c)) break;
       if (!visit(t, dt, c)) return;
       ++n;
-    } else if (state == 1) {
-      ++n;
     } else {
-      // Jump to the first sample beyond this brick (exit point along the ray).
-      const int b[3] = {i >> 2, j >> 2, k >> 2};
+      // Jump to the first sample beyond this empty brick (state 0) or empty cell (state 1).
+      const int shift = state == 0 ? 2 : 0;
+      const int b[3] = {i >> shift, j >> shift, k >> shift};
       float t_exit = 1e30f;
       for (int axis = 0; axis < 3; ++axis) {
         const float dir = axis == 0 ? d.x : (axis == 1 ? d.y : d.z);
         const float org = axis == 0 ? o.x : (axis == 1 ? o.y : o.z);
         if (dir == 0.0f) continue;
-        const float plane = float(dir > 0.0f ? (b[axis] + 1) * kNerfBrickSide : b[axis] * kNerfBrickSide);
+        const float plane = float((dir > 0.0f ? b[axis] + 1 : b[axis]) << shift);
         t_exit = std::min(t_exit, (plane - org) * inv_d[axis]);
       }
-      const float next = std::ceil((t_exit - t0) / step - offset);
+      // 1e-3 of a step of slack: a sample that rounding puts on the exit plane is visited, never skipped.
+      const float next = std::ceil((t_exit - t0) / step - offset - 1e-3f);
       n = next > float(n + 1) ? (next < float(count) ? int64_t(next) : count) : n + 1;
     }
   }

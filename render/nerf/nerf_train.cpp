@@ -109,7 +109,8 @@ std::vector<std::string> NerfTrainOptions::Validate() const {
   check(background_weight >= 0, "background_weight: (expected >= 0)");
   check(loss_epsilon > 0, "loss_epsilon: (expected > 0)");
   check(occupancy_every >= 1, "occupancy_every: (expected >= 1)");
-  check(occupancy_alpha >= 0 && occupancy_alpha < 0.5, "occupancy_alpha: (expected 0..0.5)");
+  check(occupancy_sigma >= 0 && occupancy_sigma < 1e3, "occupancy_sigma: (expected 0..1000 per metre)");
+  check(prune_delay >= 0, "prune_delay: (expected >= 0)");
   check(initial_sigma > 0 && initial_sigma < 1e4, "initial_sigma: (expected 0..1e4 per metre)");
   check(max_seconds >= 0, "max_seconds: (expected >= 0)");
   check(eval_views >= 0, "eval_views: (expected >= 0)");
@@ -134,7 +135,8 @@ void VisitFields(NerfTrainOptions& o, Visit&& visit) {
   visit("background_weight", o.background_weight);
   visit("loss_epsilon", o.loss_epsilon);
   visit("occupancy_every", o.occupancy_every);
-  visit("occupancy_alpha", o.occupancy_alpha);
+  visit("occupancy_sigma", o.occupancy_sigma);
+  visit("prune_delay", o.prune_delay);
   visit("initial_sigma", o.initial_sigma);
   visit("seed", o.seed);
   visit("max_seconds", o.max_seconds);
@@ -230,8 +232,7 @@ struct NerfTrainer::State {
     if (l == 0) return 0.0;
     return options.last_level_start * double(l) / double(options.levels - 1);
   }
-  float OccupancySigmaFor(float voxel) const { return float(-std::log1p(-options.occupancy_alpha) / voxel); }
-  float OccupancySigma() const { return OccupancySigmaFor(field.voxel_m); }
+  float OccupancySigma() const { return float(options.occupancy_sigma); }
   void ResetOptimiser() {
     const size_t n = field.SlotCount();
     m_density.assign(n, 0.0f);
@@ -298,7 +299,7 @@ void NerfTrainer::State::Upsample() {
         }
       },
       16);
-  next.UpdateOccupancy(float(-std::log1p(-options.occupancy_alpha) / next.voxel_m));
+  next.UpdateOccupancy(OccupancySigma());
   field = std::move(next);
   ResetOptimiser();
 }
@@ -514,7 +515,7 @@ double NerfTrainer::State::DoStep() {
       4096);
 
   ++step;
-  if (step % options.occupancy_every == 0) field.UpdateOccupancy(OccupancySigma());
+  if (step % options.occupancy_every == 0 && adam_t > options.prune_delay) field.UpdateOccupancy(OccupancySigma());
   double loss = 0.0;
   for (double l : chunk_loss) loss += l;
   return loss / double(batch);
@@ -736,7 +737,7 @@ void NerfTrainer::LoadCheckpoint(const std::string& path) {
   s.v_color = r.GetVec<float>(slots * kNerfColorCoeffs);
   r.Get<uint64_t>();
   if (!r.AtEnd()) ThrowInputError(path, "checkpoint has trailing data");
-  f.occupancy_sigma = s.OccupancySigmaFor(f.voxel_m);
+  f.occupancy_sigma = s.OccupancySigma();
   const std::vector<std::string> problems = f.Validate();
   if (!problems.empty()) ThrowInputError(path, "checkpoint field: " + problems.front());
   s.field = std::move(f);
