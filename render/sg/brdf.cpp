@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "calib/core/error.h"
+#include "render/sg/fast_exp.h"
 
 namespace nerfar {
 
@@ -33,6 +34,39 @@ Vec3 F0Of(const SgMaterial& m) {
 Vec3 Schlick(const Vec3& f0, double cos_theta) {
   const double w = Pow5(1.0 - std::clamp(cos_theta, 0.0, 1.0));
   return f0 + (Vec3(1, 1, 1) - f0) * w;
+}
+
+// The per-view part of SpecularLobes, in T = double (reference) or float
+// (per pixel): the mirror direction, the sharpness per unit b_j (1/α²)/(4 n·v)
+// and the amplitude per unit c_j F·G/(4 n·v πα²) (RGB). False from behind.
+template <class T>
+struct SpecularView {
+  T rx = 0, ry = 0, rz = 1;           // mirror direction
+  T sharpness_unit = 1;               // × b_j: lobe j's sharpness
+  T amp_r = 0, amp_g = 0, amp_b = 0;  // × c_j: lobe j's amplitude
+};
+template <class T>
+SpecularView<T> MakeSpecularView(T f0r, T f0g, T f0b, T roughness, T nx, T ny, T nz, T vx, T vy, T vz) {
+  SpecularView<T> out;
+  const T nv_raw = nx * vx + ny * vy + nz * vz;
+  if (!(nv_raw > T(0))) {
+    out.rx = nx, out.ry = ny, out.rz = nz;
+    return out;
+  }
+  const T nv = std::max(nv_raw, T(1e-6));
+  const T alpha = std::max(roughness * roughness, T(kMinAlpha)), a2 = alpha * alpha;
+  const T rx = T(2) * nv_raw * nx - vx, ry = T(2) * nv_raw * ny - vy, rz = T(2) * nv_raw * nz - vz;
+  const T inv_len = T(1) / std::sqrt(rx * rx + ry * ry + rz * rz);
+  out.rx = rx * inv_len, out.ry = ry * inv_len, out.rz = rz * inv_len;
+  // Smith G1 at n·l = n·v, squared; Schlick at v·h = n·v.
+  const T g1 = T(2) * nv / (nv + std::sqrt(a2 + (T(1) - a2) * nv * nv));
+  const T w = T(1) - std::min(nv, T(1)), w2 = w * w, w5 = w2 * w2 * w;
+  const T common = g1 * g1 / (T(4) * nv * T(kPi) * a2);
+  out.amp_r = (f0r + (T(1) - f0r) * w5) * common;
+  out.amp_g = (f0g + (T(1) - f0g) * w5) * common;
+  out.amp_b = (f0b + (T(1) - f0b) * w5) * common;
+  out.sharpness_unit = T(1) / (a2 * T(4) * nv);
+  return out;
 }
 
 }  // namespace
@@ -68,32 +102,29 @@ Vec3 DisneyBrdf(const SgMaterial& m, const Vec3& n, const Vec3& v, const Vec3& l
   return diffuse + f * (d * g / (4.0 * nl * nv));
 }
 
-Sg SpecularLobe(const SgMaterial& m, const Vec3& n, const Vec3& v) {
-  const double nv_raw = Dot(n, v);
-  if (nv_raw <= 0.0) return {n, 1.0, Vec3()};  // viewed from behind: no specular
-  const double nv = std::max(nv_raw, 1e-6);
-  const double alpha = Alpha(m.roughness), a2 = alpha * alpha;
-  const double lambda_h = 2.0 / a2, mu_h = 1.0 / (kPi * a2);
-  const Vec3 r = Normalized(n * (2.0 * nv_raw) - v);
-  // At the mirror direction h = n, so n·l = n·v and v·h = n·v.
-  const double g = SmithG1(alpha, nv) * SmithG1(alpha, nv);
-  const Vec3 f = Schlick(F0Of(m), nv);
-  return {r, lambda_h / (4.0 * nv), f * (mu_h * g / (4.0 * nv))};
+std::array<Sg, kNdfLobes> SpecularLobes(const SgMaterial& m, const Vec3& n, const Vec3& v) {
+  const Vec3 f0 = F0Of(m);
+  const SpecularView<double> s = MakeSpecularView<double>(f0.x, f0.y, f0.z, m.roughness, n.x, n.y, n.z, v.x, v.y, v.z);
+  std::array<Sg, kNdfLobes> lobes;
+  for (int j = 0; j < kNdfLobes; ++j)
+    lobes[j] = {Vec3(s.rx, s.ry, s.rz), kNdfSharpness[j] * s.sharpness_unit,
+                Vec3(s.amp_r, s.amp_g, s.amp_b) * kNdfWeight[j]};
+  return lobes;
 }
 
 Vec3 ShadeSg(const SgMixture& light, const SgMaterial& m, const Vec3& n, const Vec3& v,
              const std::vector<double>& gamma) {
   NERFAR_CHECK(gamma.empty() || gamma.size() == light.size());
-  const Sg spec = SpecularLobe(m, n, v);
+  const std::array<Sg, kNdfLobes> spec = SpecularLobes(m, n, v);
   const Vec3 diffuse_albedo = m.base_color * ((1.0 - m.metallic) * kInvPi);
   Vec3 sum;
   for (size_t k = 0; k < light.size(); ++k) {
     const Sg& sg = light[k];
     const double g = gamma.empty() ? 1.0 : gamma[k];
     const double irradiance = UnitIrradiance(Dot(sg.axis, n), sg.sharpness);
-    const Vec3 diffuse = diffuse_albedo * (BurleyFactor(m.roughness, n, v, sg.axis) * irradiance);
-    const Vec3 specular = spec.amplitude * UnitInnerProduct(sg.axis, sg.sharpness, spec.axis, spec.sharpness);
-    sum += sg.amplitude * (diffuse + specular) * g;
+    Vec3 term = diffuse_albedo * (BurleyFactor(m.roughness, n, v, sg.axis) * irradiance);
+    for (const Sg& s : spec) term += s.amplitude * UnitInnerProduct(sg.axis, sg.sharpness, s.axis, s.sharpness);
+    sum += sg.amplitude * term * g;
   }
   return sum;
 }
@@ -101,8 +132,11 @@ Vec3 ShadeSg(const SgMixture& light, const SgMaterial& m, const Vec3& n, const V
 SgShader::SgShader(const SgMixture& light) {
   NERFAR_CHECK_LE(light.size(), static_cast<size_t>(kMaxSgLobes));
   count_ = static_cast<int>(light.size());
-  for (int k = 0; k < count_; ++k) {
-    const Sg& sg = light[k];
+  padded_ = (count_ + kSgLanes - 1) / kSgLanes * kSgLanes;
+  rows_.assign(static_cast<size_t>(std::max(padded_, 1)) * kIrradianceTableColumns, 0.0f);
+  for (int k = 0; k < padded_; ++k) {
+    // Padded lobes: zero amplitude and finite everything else, so they add 0.
+    const Sg sg = k < count_ ? light[k] : Sg{Vec3(0, 0, 1), 1.0, Vec3()};
     px_[k] = static_cast<float>(sg.axis.x);
     py_[k] = static_cast<float>(sg.axis.y);
     pz_[k] = static_cast<float>(sg.axis.z);
@@ -110,61 +144,184 @@ SgShader::SgShader(const SgMixture& light) {
     mr_[k] = static_cast<float>(sg.amplitude.x);
     mg_[k] = static_cast<float>(sg.amplitude.y);
     mb_[k] = static_cast<float>(sg.amplitude.z);
-    irradiance_[k] = PrepareIrradiance(sg.sharpness);
+    const SgTableRow row = PrepareIrradiance(sg.sharpness);
+    inv_width_[k] = row.inv_width;
+    scale_[k] = k < count_ ? row.scale : 0.0f;
+    slope_[k] = k < count_ ? row.cosine_slope : 0.0f;
+    BlendedIrradianceRow(row, &rows_[static_cast<size_t>(k) * kIrradianceTableColumns]);
   }
 }
 
-Vec3f SgShader::Shade(const SgMaterial& m, const Vec3f& n, const Vec3f& v, const float* gamma) const {
-  // Per pixel: the specular lobe (as SpecularLobe, in float).
-  const Sg spec = SpecularLobe(m, Vec3(n), Vec3(v));
-  const float sx = static_cast<float>(spec.axis.x), sy = static_cast<float>(spec.axis.y),
-              sz = static_cast<float>(spec.axis.z), sl = static_cast<float>(spec.sharpness);
-  const float nv = std::clamp(Dot(n, v), 0.0f, 1.0f);
-  const float rough = static_cast<float>(m.roughness);
-  const float view_term = [&] {
-    const float w = 1.0f - nv, w5 = w * w * w * w * w;
-    return w5;
-  }();
-  const bool has_diffuse = m.metallic < 1.0;
-  float dr = 0, dg = 0, db = 0, sr = 0, sg = 0, sb = 0;
-  constexpr float kTwoPiF = 6.28318530717958647692f;
-  for (int k = 0; k < count_; ++k) {
-    const float g = gamma != nullptr ? gamma[k] : 1.0f;
-    if (g <= 0.0f) continue;
-    const float wr = mr_[k] * g, wg = mg_[k] * g, wb = mb_[k] * g;
-    if (has_diffuse) {
-      const float c = px_[k] * n.x + py_[k] * n.y + pz_[k] * n.z;
-      const float e = UnitIrradiancePrepared(irradiance_[k], c);
-      const float pv = px_[k] * v.x + py_[k] * v.y + pz_[k] * v.z;
-      const float f90m1 = 0.5f + rough * (1.0f + pv) - 1.0f;
-      const float nl = std::clamp(c, 0.0f, 1.0f), w = 1.0f - nl, w5 = w * w * w * w * w;
-      const float burley = (1.0f + f90m1 * w5) * (1.0f + f90m1 * view_term);
-      const float s = e * burley;
-      dr += wr * s;
-      dg += wg * s;
-      db += wb * s;
+namespace {
+
+// The per-lobe loops of SgShader::Shade. Each loop body is straight-line
+// float arithmetic over structure-of-arrays inputs (FastExp, selects, one
+// table read pair), which the compiler vectorises over lobes; the sums use
+// `omp simd` reductions (-fopenmp-simd: the order of the float sum is the
+// vector lanes', fixed for a given build and CPU). Compiled twice and picked
+// once per process: AVX2 + FMA (8 lobes per instruction) where the CPU has
+// them, the build's baseline (x86-64: SSE2, 4 lobes) otherwise.
+struct LobeArrays {
+  const float* px;
+  const float* py;
+  const float* pz;
+  const float* lambda;
+  const float* mr;
+  const float* mg;
+  const float* mb;
+  const float* inv_width;
+  const float* scale;
+  const float* slope;
+  const float* rows;
+  int count;  // a multiple of kSgLanes
+};
+struct PixelTerms {
+  float nx, ny, nz, vx, vy, vz;
+  float rough, view_term;  // roughness; (1 − n·v)⁵ of Burley's factor
+  bool diffuse;            // metallic < 1
+  float sx, sy, sz;        // mirror direction
+  float sl[kNdfLobes];     // specular lobes' sharpness
+  const float* gamma;      // count factors
+};
+// out: diffuse RGB sums (Σ μ_k γ_k E_k Burley_k) then specular RGB sums per NDF lobe.
+constexpr int kSums = 3 + 3 * kNdfLobes;
+
+// ⟨G_k, S⟩ / 2π with unit amplitudes (sg.cpp's UnitInnerProduct, in float):
+// exp(−λ_k λ_s |p_k − s|²/(λ_k + λ_s + λ_m)) (1 − e^{−2λ_m})/λ_m, one
+// division for both quotients. (1 − e^{−2x})/x: FastExp above x = 1/64 (its
+// absolute error ~3e-7 over x: ≤ 2e-5 relative), the series
+// 2 − 2x + 4x²/3 − 2x³/3 below (truncation ≤ 1e-8). Terms below e^{−60}
+// (9e-27 of the lobe's scale) are dropped: the products they enter would
+// otherwise reach subnormal floats, ~100 cycles each.
+constexpr float kCut = -60.0f;
+// MinC/MaxC(c, x): min/max against a constant, by value, in the operand
+// order of the x86 min/max instructions (x unordered → c), so they compile
+// to one instruction instead of a NaN-preserving compare and blend.
+[[gnu::always_inline]] inline float MinC(float c, float x) { return x < c ? x : c; }
+[[gnu::always_inline]] inline float MaxC(float c, float x) { return c < x ? x : c; }
+[[gnu::always_inline]] inline int MinC(int c, int x) { return x < c ? x : c; }
+[[gnu::always_inline]] inline float UnitInnerProductF(float l, float sl, float d2, float ps) {
+  const float lm = std::sqrt(MaxC(0.0f, l * l + sl * sl + 2.0f * l * sl * ps));
+  const float lm_safe = MaxC(1.0f / 64.0f, lm);
+  const float sum = l + sl + lm;
+  const float inv = 1.0f / (sum * lm_safe);
+  const float log_scale = MinC(0.0f, -l * sl * d2 * lm_safe * inv);
+  const float big = (1.0f - FastExp(-2.0f * lm_safe)) * sum * inv;
+  const float small = 2.0f + lm * (-2.0f + lm * (4.0f / 3.0f - lm * (2.0f / 3.0f)));
+  return FastExpCut(log_scale, kCut) * (lm > 1.0f / 64.0f ? big : small);
+}
+
+// The lobe loops: the diffuse one (skipped for metals), then one per
+// specular lobe. Separate loops keep each body's live values within the 16
+// vector registers (one fused loop spilled a third of its instructions).
+[[gnu::always_inline]] inline void ShadeLobesBody(const LobeArrays& a, const PixelTerms& t, float* out) {
+  const int count = a.count;
+  const float* __restrict px = a.px;
+  const float* __restrict py = a.py;
+  const float* __restrict pz = a.pz;
+  const float* __restrict mr = a.mr;
+  const float* __restrict mg = a.mg;
+  const float* __restrict mb = a.mb;
+  const float* __restrict g = t.gamma;
+  for (int c = 0; c < kSums; ++c) out[c] = 0.0f;
+  if (t.diffuse) {
+    const float* __restrict inv_width = a.inv_width;
+    const float* __restrict scale = a.scale;
+    const float* __restrict slope = a.slope;
+    const float* __restrict rows = a.rows;
+    const float nx = t.nx, ny = t.ny, nz = t.nz, vx = t.vx, vy = t.vy, vz = t.vz;
+    const float rough = t.rough, view_term = t.view_term;
+    constexpr int kLast = kIrradianceTableColumns - 1;
+    float dr = 0, dg = 0, db = 0;
+#pragma omp simd reduction(+ : dr, dg, db)
+    for (int k = 0; k < count; ++k) {
+      // Exact clamped-cosine irradiance of the lobe (its table row, FastExp).
+      const float c = px[k] * nx + py[k] * ny + pz[k] * nz;
+      const float x = MinC(static_cast<float>(kLast), std::abs(c) * inv_width[k]);
+      const int j = MinC(kLast - 1, static_cast<int>(x));
+      const float f = x - static_cast<float>(j);
+      const int at = k * kIrradianceTableColumns + j;
+      const float lo = rows[at], hi = rows[at + 1];
+      const float e = MaxC(0.0f, c) * slope[k] + scale[k] * FastExpCut(lo + f * (hi - lo), kCut);
+      // Burley's factor with l = the lobe axis.
+      const float pv = px[k] * vx + py[k] * vy + pz[k] * vz;
+      const float f90m1 = rough * (1.0f + pv) - 0.5f;
+      const float nl = MinC(1.0f, MaxC(0.0f, c)), w = 1.0f - nl, w2 = w * w, w5 = w2 * w2 * w;
+      const float weight = g[k] * e * (1.0f + f90m1 * w5) * (1.0f + f90m1 * view_term);
+      dr += mr[k] * weight;
+      dg += mg[k] * weight;
+      db += mb[k] * weight;
     }
-    // ⟨G_k, spec⟩ with unit amplitudes (sg.cpp's MultiplyUnit, in float).
-    const float l = lambda_[k];
-    const float dx = px_[k] - sx, dy = py_[k] - sy, dz = pz_[k] - sz;
-    const float d2 = dx * dx + dy * dy + dz * dz;
-    // λ_m ≤ λ_k + λ_s bounds the product's scale by exp(−λ_k λ_s d²/(2(λ_k + λ_s))):
-    // below e^{−30} the lobes do not overlap (most lobes for a glossy
-    // surface); skip the sqrt and two exps.
-    if (l * sl * d2 > 60.0f * (l + sl)) continue;
-    const float ux = l * px_[k] + sl * sx, uy = l * py_[k] + sl * sy, uz = l * pz_[k] + sl * sz;
-    const float lm = std::sqrt(ux * ux + uy * uy + uz * uz);
-    const float log_scale = std::min(0.0f, -l * sl * d2 / (l + sl + lm));
-    const float integral = lm > 1e-6f ? -std::expm1(-2.0f * lm) / lm : 2.0f - 2.0f * lm;
-    const float s = kTwoPiF * std::exp(log_scale) * integral;
-    sr += wr * s;
-    sg += wg * s;
-    sb += wb * s;
+    out[0] = dr, out[1] = dg, out[2] = db;
   }
+  const float* __restrict lambda = a.lambda;
+  const float sx = t.sx, sy = t.sy, sz = t.sz;
+  constexpr float kTwoPiF = 6.28318530717958647692f;
+  for (int s = 0; s < kNdfLobes; ++s) {
+    const float sl = t.sl[s];
+    float sr = 0, sg = 0, sb = 0;
+#pragma omp simd reduction(+ : sr, sg, sb)
+    for (int k = 0; k < count; ++k) {
+      // |p − s|² from the difference (2 − 2p·s loses digits for close axes).
+      const float dx = px[k] - sx, dy = py[k] - sy, dz = pz[k] - sz;
+      const float d2 = dx * dx + dy * dy + dz * dz;
+      const float weight = g[k] * kTwoPiF * UnitInnerProductF(lambda[k], sl, d2, 1.0f - 0.5f * d2);
+      sr += mr[k] * weight;
+      sg += mg[k] * weight;
+      sb += mb[k] * weight;
+    }
+    out[3 + 3 * s] = sr, out[4 + 3 * s] = sg, out[5 + 3 * s] = sb;
+  }
+}
+
+void ShadeLobesBaseline(const LobeArrays& a, const PixelTerms& t, float* out) { ShadeLobesBody(a, t, out); }
+
+using ShadeLobesFn = void (*)(const LobeArrays&, const PixelTerms&, float*);
+#if defined(__x86_64__) && defined(__GNUC__)
+[[gnu::target("avx2,fma")]] void ShadeLobesAvx2(const LobeArrays& a, const PixelTerms& t, float* out) {
+  ShadeLobesBody(a, t, out);
+}
+ShadeLobesFn PickShadeLobes() {
+  __builtin_cpu_init();
+  return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma") ? ShadeLobesAvx2 : ShadeLobesBaseline;
+}
+#else
+ShadeLobesFn PickShadeLobes() { return ShadeLobesBaseline; }
+#endif
+const ShadeLobesFn kShadeLobes = PickShadeLobes();
+
+}  // namespace
+
+Vec3f SgShader::Shade(const SgMaterial& m, const Vec3f& n, const Vec3f& v, const float* gamma) const {
+  const float metallic = static_cast<float>(m.metallic);
+  const float f0r = kDielectricF0 + (static_cast<float>(m.base_color.x) - float(kDielectricF0)) * metallic;
+  const float f0g = kDielectricF0 + (static_cast<float>(m.base_color.y) - float(kDielectricF0)) * metallic;
+  const float f0b = kDielectricF0 + (static_cast<float>(m.base_color.z) - float(kDielectricF0)) * metallic;
+  const float rough = static_cast<float>(m.roughness);
+  const SpecularView<float> view = MakeSpecularView<float>(f0r, f0g, f0b, rough, n.x, n.y, n.z, v.x, v.y, v.z);
+
+  alignas(64) float g[kMaxSgLobes];
+  std::fill(g, g + padded_, 1.0f);
+  if (gamma != nullptr) std::copy(gamma, gamma + count_, g);
+
+  const float nv = std::clamp(Dot(n, v), 0.0f, 1.0f), wv = 1.0f - nv;
+  PixelTerms terms{n.x,     n.y,     n.z,     v.x, v.y, v.z, rough, wv * wv * wv * wv * wv, m.metallic < 1.0,
+                   view.rx, view.ry, view.rz, {},  g};
+  for (int j = 0; j < kNdfLobes; ++j) terms.sl[j] = static_cast<float>(kNdfSharpness[j]) * view.sharpness_unit;
+  const LobeArrays arrays{px_, py_, pz_, lambda_, mr_, mg_, mb_, inv_width_, scale_, slope_, rows_.data(), padded_};
+  float sums[kSums];
+  kShadeLobes(arrays, terms, sums);
+
   const float kd = static_cast<float>((1.0 - m.metallic) * kInvPi);
-  return {kd * static_cast<float>(m.base_color.x) * dr + static_cast<float>(spec.amplitude.x) * sr,
-          kd * static_cast<float>(m.base_color.y) * dg + static_cast<float>(spec.amplitude.y) * sg,
-          kd * static_cast<float>(m.base_color.z) * db + static_cast<float>(spec.amplitude.z) * sb};
+  Vec3f out(kd * static_cast<float>(m.base_color.x) * sums[0], kd * static_cast<float>(m.base_color.y) * sums[1],
+            kd * static_cast<float>(m.base_color.z) * sums[2]);
+  for (int j = 0; j < kNdfLobes; ++j) {
+    const float c = static_cast<float>(kNdfWeight[j]);
+    out.x += c * view.amp_r * sums[3 + 3 * j];
+    out.y += c * view.amp_g * sums[4 + 3 * j];
+    out.z += c * view.amp_b * sums[5 + 3 * j];
+  }
+  return out;
 }
 
 }  // namespace nerfar

@@ -6,6 +6,7 @@
 // towards the viewer, l towards the light. Radiance linear RGB.
 #pragma once
 
+#include <array>
 #include <string>
 #include <vector>
 
@@ -30,11 +31,23 @@ inline constexpr double kMinAlpha = 0.02 * 0.02;
 // v is below the horizon. For tests and error figures, not the live path.
 Vec3 DisneyBrdf(const SgMaterial& material, const Vec3& n, const Vec3& v, const Vec3& l);
 
-// The specular lobe for one view: the GGX distribution as an SG in the half
-// vector, D(h) ≈ exp((2/α²)(h·n − 1))/(πα²), warped to the mirror direction
-// r = 2(n·v)n − v with sharpness (2/α²)/(4 n·v), times F·G/(4 n·v) taken at r.
-// Its inner product with a light lobe is that lobe's specular radiance.
-Sg SpecularLobe(const SgMaterial& material, const Vec3& n, const Vec3& v);
+// The GGX distribution as two SGs in the half vector (the NDF's core and its
+// tail): D(h) ≈ Σ_j c_j/(πα²) · exp((b_j/α²)(h·n − 1)). GGX is
+// (1 + t²)^{−2}/(πα²) in t = θ_h/α for small α; (c_j, b_j) are the least-
+// squares fit of that profile over the plane (measure t dt): relative L2 error
+// 2 %, energy 0.459 of GGX's 0.5 (the rest is in the t⁻⁴ tail beyond t ≈ 4).
+// One SG with b = 2 (peak and energy of GGX) keeps all of the energy in the
+// core: up to 32 % too bright where a light lobe is about as wide as the
+// highlight; two SGs: ≤ 8 % (docs/SG.md "Glossy accuracy").
+inline constexpr int kNdfLobes = 2;
+inline constexpr double kNdfWeight[kNdfLobes] = {0.76493, 0.20441};
+inline constexpr double kNdfSharpness[kNdfLobes] = {3.98723, 0.76465};
+
+// The specular lobes for one view: each NDF SG warped to the mirror direction
+// r = 2(n·v)n − v with sharpness (b_j/α²)/(4 n·v), times F·G/(4 n·v) taken at
+// r (h = n there, so n·l = v·h = n·v). Their inner products with a light lobe
+// sum to that lobe's specular radiance. Viewed from behind: zero amplitudes.
+std::array<Sg, kNdfLobes> SpecularLobes(const SgMaterial& material, const Vec3& n, const Vec3& v);
 
 // Burley's diffuse factor (1 + (F90 − 1)(1 − n·l)⁵)(1 + (F90 − 1)(1 − n·v)⁵),
 // F90 = 0.5 + 2 r (l·h)², with the cosines clamped to [0, 1].
@@ -47,9 +60,13 @@ double BurleyFactor(double roughness, const Vec3& n, const Vec3& v, const Vec3& 
 Vec3 ShadeSg(const SgMixture& light, const SgMaterial& material, const Vec3& n, const Vec3& v,
              const std::vector<double>& gamma = {});
 
-// The same for many pixels: the light prepared once (per-lobe table rows,
-// float structure of arrays), then Shade per pixel. At most kMaxSgLobes lobes.
-// Agrees with ShadeSg to float precision (differential test).
+// The same for many pixels: the light prepared once per frame (float
+// structure of arrays padded to a multiple of kSgLanes lobes, each lobe's
+// irradiance table row blended for its sharpness), then Shade per pixel, a
+// loop over lobes that the compiler vectorises (FastExp, no branches per
+// lobe). At most kMaxSgLobes lobes. Agrees with ShadeSg to ~1e-4 relative
+// (differential test). docs/SG.md "Shading cost" counts its FLOPs.
+inline constexpr int kSgLanes = 8;
 class SgShader {
  public:
   explicit SgShader(const SgMixture& light);
@@ -59,10 +76,14 @@ class SgShader {
 
  private:
   int count_ = 0;
-  float px_[kMaxSgLobes], py_[kMaxSgLobes], pz_[kMaxSgLobes];  // axes
-  float lambda_[kMaxSgLobes];                                  // sharpness
-  float mr_[kMaxSgLobes], mg_[kMaxSgLobes], mb_[kMaxSgLobes];  // amplitudes
-  SgTableRow irradiance_[kMaxSgLobes];
+  int padded_ = 0;  // count_ rounded up to kSgLanes; padded lobes have zero amplitude
+  alignas(64) float px_[kMaxSgLobes], py_[kMaxSgLobes], pz_[kMaxSgLobes];  // axes
+  alignas(64) float lambda_[kMaxSgLobes];                                  // sharpness
+  alignas(64) float mr_[kMaxSgLobes], mg_[kMaxSgLobes], mb_[kMaxSgLobes];  // amplitudes
+  // Irradiance E(c) of lobe k at c = p·n: below(|c|) + max(c, 0)·slope, with
+  // below = scale · exp(row value interpolated at |c|·inv_width).
+  alignas(64) float inv_width_[kMaxSgLobes], scale_[kMaxSgLobes], slope_[kMaxSgLobes];
+  std::vector<float> rows_;  // padded_ × kIrradianceTableColumns log values (BlendedIrradianceRow)
 };
 
 }  // namespace nerfar

@@ -43,7 +43,7 @@ constexpr double kLogMin = -4.0, kLogMax = 4.0;
 constexpr int kRows = static_cast<int>((kLogMax - kLogMin) * kRowsPerDecade) + 1;
 constexpr int kGammaHalfColumns = 256;  // columns for t in [0, 1]; the table spans [−1, 1]
 constexpr int kGammaColumns = 2 * kGammaHalfColumns + 1;
-constexpr int kIrradianceColumns = 257;  // s in [0, 1]
+constexpr int kIrradianceColumns = kIrradianceTableColumns;  // s in [0, 1]
 constexpr double kQuadratureSigmas = 14.0;
 
 // e^{−x} I0(x) for x ≥ 0: Abramowitz & Stegun 9.8.1 / 9.8.2 polynomial
@@ -295,6 +295,12 @@ float UnitIrradiancePrepared(const SgTableRow& row, float cos_axis_normal) {
   const float below = row.scale * std::exp(Interpolate(GetTables().log_irradiance.data(), kIrradianceColumns, row,
                                                        std::abs(cos_axis_normal) * row.inv_width));
   return cos_axis_normal > 0.0f ? cos_axis_normal * row.cosine_slope + below : below;
+}
+
+void BlendedIrradianceRow(const SgTableRow& row, float* out) {
+  const float* a = GetTables().log_irradiance.data() + static_cast<size_t>(row.row) * kIrradianceColumns;
+  const float* b = a + kIrradianceColumns;
+  for (int j = 0; j < kIrradianceColumns; ++j) out[j] = a[j] + row.frac * (b[j] - a[j]);
 }
 
 double HalfSpaceIntegral(double theta_rad, double sharpness) {

@@ -50,6 +50,12 @@ SgTableRow PrepareGamma(double sharpness);
 float GammaPrepared(const SgTableRow& row, float ssd_rad);
 SgTableRow PrepareIrradiance(double sharpness);
 float UnitIrradiancePrepared(const SgTableRow& row, float cos_axis_normal);
+// The irradiance row of a prepared lobe with its two table rows already
+// blended (kIrradianceTableColumns log values over |c|·inv_width = 0..256):
+// UnitIrradiancePrepared is scale·exp(linear interpolation of these) plus
+// max(c, 0)·cosine_slope. For kernels that keep one row per lobe and frame.
+inline constexpr int kIrradianceTableColumns = 257;
+void BlendedIrradianceRow(const SgTableRow& row, float* out);
 
 // Shadow ratio κ (paper eqs. 8-9). First the light times the cosine about the
 // receiver normal as SGs, one lobe per light lobe (query the SSDF at their axes):

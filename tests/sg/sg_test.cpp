@@ -9,14 +9,18 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
+#include <limits>
 #include <random>
 
 #include "calib/core/error.h"
 #include "calib/core/exr.h"
 #include "calib/core/metrics.h"
 #include "render/sg/brdf.h"
+#include "render/sg/fast_exp.h"
 #include "render/sg/fit.h"
 #include "render/sg/sphere.h"
 #include "render/sg/visibility.h"
@@ -426,7 +430,7 @@ TEST(SgShading, SgIntegrandMatchesMonteCarlo) {
   const SgMixture light = {{UnitVec(0.3, 0.1, 1.0), 20.0, Vec3(3, 2, 1)},
                            {UnitVec(-1, 0.2, 0.3), 2.0, Vec3(0.4, 0.5, 0.6)}};
   for (const SgMaterial& m : {SgMaterial{Vec3(0.8, 0.35, 0.2), 0.7, 0.0}, SgMaterial{Vec3(0.9, 0.9, 0.9), 0.5, 1.0}}) {
-    const Sg spec = SpecularLobe(m, n, v);
+    const std::array<Sg, kNdfLobes> spec = SpecularLobes(m, n, v);
     const std::vector<double> gamma = {0.7, 1.0};
     std::mt19937_64 rng(12345);
     std::uniform_real_distribution<double> u(0.0, 1.0);
@@ -440,8 +444,9 @@ TEST(SgShading, SgIntegrandMatchesMonteCarlo) {
         const Sg& sg = light[k];
         const double diffuse = (1.0 - m.metallic) / kPi * m.base_color.x * BurleyFactor(m.roughness, n, v, sg.axis) *
                                std::max(0.0, Dot(l, n));
-        value += gamma[k] * sg.amplitude.x * SgShape(sg.axis, sg.sharpness, l) *
-                 (diffuse + spec.amplitude.x * SgShape(spec.axis, spec.sharpness, l));
+        double specular = 0.0;
+        for (const Sg& s : spec) specular += s.amplitude.x * SgShape(s.axis, s.sharpness, l);
+        value += gamma[k] * sg.amplitude.x * SgShape(sg.axis, sg.sharpness, l) * (diffuse + specular);
       }
       value *= 4.0 * kPi;  // 1/pdf
       sum += value;
@@ -453,49 +458,80 @@ TEST(SgShading, SgIntegrandMatchesMonteCarlo) {
   }
 }
 
+// ∫ L(l) f_r(l, v) (n·l) dl for an SG light by Monte Carlo, sampling each
+// lobe exactly (cos α = 1 + log(1 − ξ(1 − e^{−2λ}))/λ; fixed seed). Returns
+// the estimate of the red channel and its variance.
+std::pair<double, double> ReferenceShading(const SgMixture& light, const SgMaterial& m, const Vec3& n, const Vec3& v,
+                                           int samples) {
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  double total = 0.0, total_var = 0.0;
+  for (const Sg& sg : light) {
+    Vec3 t1, t2;
+    Frame(sg.axis, t1, t2);
+    double sum = 0.0, sum2 = 0.0;
+    for (int s = 0; s < samples; ++s) {
+      const double ca = 1.0 + std::log1p(-u(rng) * -std::expm1(-2.0 * sg.sharpness)) / sg.sharpness;
+      const double sa = std::sqrt(std::max(0.0, 1.0 - ca * ca)), phi = 2.0 * kPi * u(rng);
+      const Vec3 l = sg.axis * ca + (t1 * std::cos(phi) + t2 * std::sin(phi)) * sa;
+      const double value = DisneyBrdf(m, n, v, l).x * std::max(0.0, Dot(n, l));
+      sum += value;
+      sum2 += value * value;
+    }
+    // Estimator: ∫ G f cos = μ ∫G · E_pdf[f cos].
+    const double scale = sg.amplitude.x * SgUnitIntegral(sg.sharpness);
+    const double mean = sum / samples;
+    total += scale * mean;
+    total_var += scale * scale * (sum2 / samples - mean * mean) / samples;
+  }
+  return {total, total_var};
+}
+
 TEST(SgShading, ApproximatesTheReferenceBrdf) {
-  // Against the scenes' BRDF (Burley + GGX + Smith), Monte Carlo sampling the
-  // light's lobes exactly (fixed seed). The SG forms are approximations: the
-  // NDF as one SG and Burley's factor taken at the lobe axis. Measured errors
-  // under these lights: ≤ 8 % for the rough and diffuse materials (tolerance
-  // 12 %), 18.6 % for the glossy metal when its mirror direction meets the
-  // light's peak — one SG has none of GGX's long tails, so it keeps the
-  // reflected energy near the peak (tolerance 22 %); plus 4 standard errors.
+  // Against the scenes' BRDF (Burley + GGX + Smith). The SG forms are
+  // approximations: Burley's factor at the lobe axis, the NDF as two SGs,
+  // warped isotropically, F and G at the mirror direction. Rough and diffuse
+  // materials under a mixed light: measured ≤ 8 % (tolerance 12 %).
   const Vec3 n(0, 0, 1);
   const SgMixture light = {{UnitVec(0.4, 0.2, 1.0), 40.0, Vec3(5, 5, 5)},
                            {UnitVec(-0.3, 0.5, 0.8), 4.0, Vec3(1, 1, 1)}};
   const std::vector<Vec3> views = {UnitVec(-0.4, -0.2, 1.0), UnitVec(0.3, 0.4, 1.0)};
-  for (const SgMaterial& m : {SgMaterial{Vec3(0.8, 0.35, 0.2), 0.7, 0.0}, SgMaterial{Vec3(0.9, 0.9, 0.9), 0.25, 1.0},
-                              SgMaterial{Vec3(0.5, 0.5, 0.5), 0.5, 0.0}}) {
+  for (const SgMaterial& m : {SgMaterial{Vec3(0.8, 0.35, 0.2), 0.7, 0.0}, SgMaterial{Vec3(0.5, 0.5, 0.5), 0.5, 0.0}})
     for (const Vec3& v : views) {
-      std::mt19937_64 rng(7);
-      std::uniform_real_distribution<double> u(0.0, 1.0);
-      double total = 0.0, total_var = 0.0;
-      const int samples = 200000;
-      for (const Sg& sg : light) {
-        // Exact SG sampling: cos α = 1 + log(1 − ξ(1 − e^{−2λ}))/λ.
-        Vec3 t1, t2;
-        Frame(sg.axis, t1, t2);
-        double sum = 0.0, sum2 = 0.0;
-        for (int s = 0; s < samples; ++s) {
-          const double ca = 1.0 + std::log1p(-u(rng) * -std::expm1(-2.0 * sg.sharpness)) / sg.sharpness;
-          const double sa = std::sqrt(std::max(0.0, 1.0 - ca * ca)), phi = 2.0 * kPi * u(rng);
-          const Vec3 l = sg.axis * ca + (t1 * std::cos(phi) + t2 * std::sin(phi)) * sa;
-          const double value = DisneyBrdf(m, n, v, l).x * std::max(0.0, Dot(n, l));
-          sum += value;
-          sum2 += value * value;
-        }
-        // Estimator: ∫ G f cos = μ ∫G · E_pdf[f cos].
-        const double scale = sg.amplitude.x * SgUnitIntegral(sg.sharpness);
-        const double mean = sum / samples;
-        total += scale * mean;
-        total_var += scale * scale * (sum2 / samples - mean * mean) / samples;
-      }
-      const double shaded = ShadeSg(light, m, n, v).x;
-      const double approximation = m.metallic > 0.5 && m.roughness < 0.3 ? 0.22 : 0.12;
-      EXPECT_NEAR(shaded, total, approximation * total + 4.0 * std::sqrt(total_var))
+      const auto [total, var] = ReferenceShading(light, m, n, v, 100000);
+      EXPECT_NEAR(ShadeSg(light, m, n, v).x, total, 0.12 * total + 4.0 * std::sqrt(var))
           << "roughness " << m.roughness << " metallic " << m.metallic;
     }
+}
+
+TEST(SgShading, GlossyMetalMatchesTheReferencePerRoughness) {
+  // The hard case for SG shading: a metal whose highlight meets a light lobe
+  // near its mirror direction, light lobes from broad (λ 4) to about as sharp
+  // as the highlight (λ 400), views near normal and at 60°. The error is the
+  // NDF's shape: one SG with GGX's peak and energy was up to 32 % too bright
+  // (at roughness 0.3-0.7, where the light is as wide as the highlight); the
+  // two-SG NDF measures against dense quadrature (docs/SG.md "Glossy
+  // accuracy", 2M-point Fibonacci sphere, 3 views):
+  //   roughness  0.1    0.2    0.3    0.5    0.7    0.9
+  //   max error  7.9 %  6.6 %  4.5 %  7.2 %  6.2 %  6.5 %
+  // This test's Monte Carlo estimates (100k samples) read 11.6 / 5.4 / 6.6 /
+  // 3.5 % at 0.1 / 0.25 / 0.5 / 0.9, the sharpest highlight being the noisiest.
+  // Tolerance 10 % at every roughness, plus 4 standard errors of the estimate.
+  const Vec3 n(0, 0, 1);
+  for (double roughness : {0.1, 0.25, 0.5, 0.9}) {
+    const SgMaterial m{Vec3(0.9, 0.9, 0.9), roughness, 1.0};
+    double worst = 0.0;
+    for (const Vec3& v : {UnitVec(-0.4, -0.2, 1.0), UnitVec(-0.8, -0.4, 0.5)})
+      for (double sharpness : {4.0, 40.0, 400.0}) {
+        const Vec3 mirror = n * (2.0 * Dot(n, v)) - v;
+        const SgMixture light = {{Normalized(mirror + Vec3(0.05, 0.02, 0.0)), sharpness, Vec3(5, 5, 5)}};
+        const auto [total, var] = ReferenceShading(light, m, n, v, 100000);
+        const double shaded = ShadeSg(light, m, n, v).x;
+        worst = std::max(worst, std::abs(shaded / total - 1.0));
+        EXPECT_NEAR(shaded, total, 0.10 * total + 4.0 * std::sqrt(var))
+            << "roughness " << roughness << " light sharpness " << sharpness << " n.v " << Dot(n, v);
+      }
+    std::printf("glossy metal, roughness %.2f: worst relative error %.3f\n", roughness, worst);
   }
 }
 
@@ -517,6 +553,25 @@ TEST(SgShading, PreparedShaderAgreesWithTheReference) {
       const Vec3f got = shader.Shade(m, Vec3f(n), Vec3f(v), gamma_f.data());
       for (int c = 0; c < 3; ++c) EXPECT_NEAR(got[c], ref[c], 1e-4 * std::abs(ref[c]) + 1e-6);
     }
+}
+
+TEST(SgShading, FastExpIsAccurate) {
+  // Against std::exp (double) on a dense grid over the normal float range:
+  // measured maximum relative error < 4e-7 (the header's figure); tolerance
+  // 5e-7. Below −86.5 it returns exactly 0, and it never returns a subnormal.
+  double worst = 0.0;
+  for (int i = 0; i <= 2000000; ++i) {
+    const float x = -86.5f + 174.5f * static_cast<float>(i) / 2000000.0f;
+    const double ref = std::exp(static_cast<double>(x));
+    worst = std::max(worst, std::abs(FastExp(x) - ref) / ref);
+  }
+  std::printf("FastExp: max relative error %.3g\n", worst);
+  EXPECT_LT(worst, 5e-7);
+  EXPECT_EQ(FastExp(-86.6f), 0.0f);
+  EXPECT_EQ(FastExp(-1e30f), 0.0f);
+  EXPECT_GE(FastExp(-86.5f), std::numeric_limits<float>::min());
+  EXPECT_EQ(FastExpCut(-61.0f, -60.0f), 0.0f);
+  EXPECT_NEAR(FastExpCut(-59.0f, -60.0f), std::exp(-59.0), 5e-7 * std::exp(-59.0));
 }
 
 TEST(SgShading, MaterialValidationListsEveryProblem) {
