@@ -22,6 +22,7 @@
 #include "calib/core/image_io.h"
 #include "calib/core/json.h"
 #include "calib/core/log.h"
+#include "calib/core/media.h"
 #include "calib/core/parallel.h"
 #include "calib/dataset.h"
 #include "calib/object.h"
@@ -86,6 +87,29 @@ std::string IndexSuffix(const std::string& stem) {
   return underscore == std::string::npos ? stem : stem.substr(underscore + 1);
 }
 
+// Grey picture of a ratio image, 0 black to 1 white (above 1 clipped).
+Image8 RatioPicture(const ImageF& ratio) {
+  Image8 out(ratio.width, ratio.height, 3);
+  for (size_t p = 0; p < ratio.pixels.size(); ++p) {
+    const float v = std::isfinite(ratio.pixels[p]) ? std::clamp(ratio.pixels[p], 0.0f, 1.0f) : 1.0f;
+    for (int c = 0; c < 3; ++c) out.pixels[p * 3 + c] = static_cast<uint8_t>(std::lround(v * 255.0f));
+  }
+  return out;
+}
+
+// One row per view: ours, truth, |ours − truth| × 4 (same exposure), and the
+// shadow ratios κ of the metric (ours, truth).
+Image8 TruthSheet(const ImageF& ours, const ImageF& ours_without, const ImageF& truth, const ImageF& truth_without,
+                  float exposure) {
+  ImageF difference(ours.width, ours.height, 3);
+  for (size_t i = 0; i < difference.pixels.size(); ++i)
+    difference.pixels[i] = 4.0f * std::abs(ours.pixels[i] - truth.pixels[i]);
+  return ContactSheet(
+      {ToneMapToDisplay(ours, exposure), ToneMapToDisplay(truth, exposure), ToneMapToDisplay(difference, exposure),
+       RatioPicture(ShadowRatioImage(ours, ours_without)), RatioPicture(ShadowRatioImage(truth, truth_without))},
+      5, ours.width, {"ours", "truth", "|ours - truth| x4", "kappa ours", "kappa truth"});
+}
+
 }  // namespace
 
 int RunInsert(const CommandArgs& args) {
@@ -93,10 +117,12 @@ int RunInsert(const CommandArgs& args) {
   std::string preset = "balanced", light_source, truth_dir, light_probe;
   std::vector<std::string> object_paths, pose_paths, mesh_paths, material_paths;
   int light_directions = -1, sg_lobes = -1, kappa_step = -1;
-  double shadow_reach = -1;
-  bool no_self_shadow = false, no_shadows = false, paper_gamma = false;
+  double shadow_reach = -1, self_shadow_offset = -1;
+  bool no_self_shadow = false, no_shadows = false, paper_gamma = false, truth_geometry = false;
   ArgParser parser("insert", "Insert virtual objects into a captured scene: light, shade, occlude, shadow, composite.");
-  parser.Option("--nerf", &nerf_path, "FILE", "the scene's HDR NeRF (.nerf; required)");
+  parser.Option(
+      "--nerf", &nerf_path, "FILE",
+      "the scene's HDR NeRF (.nerf; required unless --truth-geometry with --light-probe: then nothing occludes)");
   parser.Option("--env", &env_path, "FILE", "environment SGs (env.json from `nerfar env`; default: none)");
   parser.Option("--object", &object_paths, "FILE", "an object's SSDF field (.ssdf from `nerfar bake`); repeatable");
   parser.Option("--pose", &pose_paths, "FILE", "the object's pose.json (object_to_world); one per --object");
@@ -114,6 +140,8 @@ int RunInsert(const CommandArgs& args) {
   parser.Option("--sg-lobes", &sg_lobes, "M", "SG lobes of the incident light (balanced: 32)");
   parser.Option("--kappa-step", &kappa_step, "S", "κ every S pixels, interpolated between (balanced: 2)");
   parser.Option("--shadow-reach", &shadow_reach, "R", "κ within R bounding radii of an object (balanced: 12)");
+  parser.Option("--self-shadow-offset", &self_shadow_offset, "R",
+                "self-shadow SSDF queried R bounding radii off the surface (balanced: 0.01)");
   parser.Option("--light-source", &light_source, "L", "full (default), near (NeRF only) or env (environment only)");
   parser.Flag("--no-self-shadow", &no_self_shadow, "objects do not shadow themselves or each other");
   parser.Flag("--no-shadows", &no_shadows, "no shadows on the scene (κ = 1)");
@@ -122,7 +150,9 @@ int RunInsert(const CommandArgs& args) {
   parser.Option("--light-probe", &light_probe, "FILE", "light every object with this panorama fitted with SGs instead");
   parser.Option("--truth", &truth_dir, "DIR",
                 "ground truth (scenes/*/insert/<object>): writes report.json with object psnr_tm, shadow and "
-                "lighting errors");
+                "lighting errors, and OUT/<name>_sheet.png (ours, truth, difference, both shadow ratios)");
+  parser.Flag("--truth-geometry", &truth_geometry,
+              "shadow receivers (and, without --nerf, occlusion) from the truth's depth maps instead of the NeRF");
   parser.Epilog(
       "outputs: OUT/<name>.exr and .png, OUT/<name>_object.exr, _alpha.exr, _kappa.exr, OUT/probe.exr\n"
       "(probe_<i>.exr for further objects), OUT/timings.json, OUT/options.json [, OUT/report.json]\n"
@@ -132,9 +162,12 @@ int RunInsert(const CommandArgs& args) {
       "      --dataset ../shared/scenes/lamps -o out/monkey\n");
   if (!parser.Parse(args)) return 0;
   Problems usage("nerfar insert");
-  if (nerf_path.empty()) usage.Add("--nerf", "missing (expected the scene's .nerf file)");
+  const bool without_nerf = nerf_path.empty() && truth_geometry && !light_probe.empty();
+  if (nerf_path.empty() && !without_nerf) usage.Add("--nerf", "missing (expected the scene's .nerf file)");
+  if (without_nerf && background == "nerf") usage.Add("--background", "nerf needs --nerf");
   if (dataset_dir.empty()) usage.Add("--dataset", "missing (expected the dataset folder)");
   if (output.empty()) usage.Add("-o", "missing (expected an output folder)");
+  if (truth_geometry && truth_dir.empty()) usage.Add("--truth-geometry", "needs --truth DIR");
   if (object_paths.empty()) usage.Add("--object", "missing (expected at least one .ssdf)");
   if (pose_paths.size() != object_paths.size())
     usage.Add("--pose", std::to_string(pose_paths.size()) + " given for " + std::to_string(object_paths.size()) +
@@ -152,6 +185,7 @@ int RunInsert(const CommandArgs& args) {
   if (sg_lobes != -1) options.light.fit.lobes = sg_lobes;
   if (kappa_step != -1) options.kappa_step = kappa_step;
   if (shadow_reach != -1) options.shadow_reach_radii = shadow_reach;
+  if (self_shadow_offset != -1) options.self_shadow_offset_radii = self_shadow_offset;
   if (!light_source.empty()) options.light.source = ParseLightSource(light_source);
   if (no_self_shadow) options.self_shadow = false;
   if (no_shadows) options.shadows = false;
@@ -164,8 +198,14 @@ int RunInsert(const CommandArgs& args) {
 
   // Inputs.
   const Dataset dataset = ReadDataset(DatasetSplitPath(dataset_dir, split));
-  const NerfField nerf = LoadNerf(nerf_path);
-  const NerfScene scene(nerf);
+  // Without a NeRF (ground-truth inputs) the scene is empty: nothing occludes.
+  const NerfField nerf = without_nerf ? NerfField{} : LoadNerf(nerf_path);
+  std::unique_ptr<SceneField> scene_field;
+  if (without_nerf)
+    scene_field = std::make_unique<EmptyScene>(dataset.aabb ? *dataset.aabb : Aabb{{-1, -1, -1}, {1, 1, 1}});
+  else
+    scene_field = std::make_unique<NerfScene>(nerf);
+  const SceneField& scene = *scene_field;
   EnvLight environment;
   if (!env_path.empty()) {
     environment = ReadEnvLight(env_path);
@@ -250,7 +290,18 @@ int RunInsert(const CommandArgs& args) {
     }
     const ImageF without = frame;
     InsertLayers layers;
-    const InsertTimings t = inserter.Render(camera, frame_info.T_world_camera, objects, frame, &layers);
+    ImageF receiver_distance, receiver_normal;
+    ReceiverOverride receivers;
+    if (truth_geometry) {
+      const fs::path depth_path = fs::path(truth_dir) / ("depth_" + IndexSuffix(stem) + ".exr");
+      const ImageF depth = ReadExrChannel(depth_path.string());
+      if (depth.width != camera.width || depth.height != camera.height)
+        ThrowInputError(depth_path.string(), "size differs from the frame (expected " + std::to_string(camera.width) +
+                                                 "x" + std::to_string(camera.height) + ")");
+      ReceiversFromDepth(depth, camera, frame_info.T_world_camera, receiver_distance, receiver_normal);
+      receivers = {&receiver_distance, &receiver_normal, without_nerf};
+    }
+    const InsertTimings t = inserter.Render(camera, frame_info.T_world_camera, objects, frame, &layers, receivers);
     const fs::path out(output);
     WriteExrRgb((out / (stem + ".exr")).string(), frame);
     WriteImage8((out / (stem + ".png")).string(), ToneMapToDisplay(frame, ExposureForPercentile(without)));
@@ -289,6 +340,15 @@ int RunInsert(const CommandArgs& args) {
         view["object_psnr_tm_db"] = std::isfinite(psnr) ? Json(psnr) : Json(nullptr);
         view["shadow_error"] = std::isfinite(shadow) ? Json(shadow) : Json(nullptr);
         view["shadow_region_pixels"] = se.region;
+        view["mean_kappa"] = se.mean_kappa;
+        view["mean_kappa_truth"] = se.mean_kappa_gt;
+        view["worst_shadow_pixel"] = {{"x", se.worst_x},
+                                      {"y", se.worst_y},
+                                      {"kappa", se.worst_kappa},
+                                      {"kappa_truth", se.worst_kappa_gt},
+                                      {"background", se.worst_background}};
+        WriteImage8((out / (stem + "_sheet.png")).string(),
+                    TruthSheet(frame, without, truth_with, truth_without, ExposureForPercentile(truth_without)));
         if (std::isfinite(psnr)) psnrs.push_back(psnr);
         if (std::isfinite(shadow)) shadow_errors.push_back(shadow);
       } else {

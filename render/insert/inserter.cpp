@@ -426,6 +426,13 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
             ++fixed_per_chunk[c];
           }
           opacity = std::clamp(opacity, 0.0f, 1.0f);
+          if (receivers.occlude_with_distance && receivers.distance) {
+            const float scene_t = receivers.distance->at(x, y);
+            if (scene_t > 0.0f && scene_t < 0.99f * g.t[i]) {  // the scene is in front: keep the frame
+              layers.alpha.pixels[i] = 0.0f;
+              continue;
+            }
+          }
           const float w = 1.0f - opacity;
           layers.alpha.pixels[i] = w;
           // Ĉ = I_α·I_c (opacity-weighted), so this is I_α·I_c + (1 − I_α)·I_v.

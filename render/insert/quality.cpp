@@ -88,6 +88,7 @@ ShadowError ComputeShadowError(const ImageF& ours_with, const ImageF& ours_witho
   CheckSameSize(mask, truth_with, "shadow mask");
   const int w = truth_with.width, h = truth_with.height;
   const std::vector<double> k_ours = KappaOf(ours_with, ours_without);
+  const std::vector<double> background = BlurredLuminance(truth_without);
   const std::vector<double> k_gt = KappaOf(truth_with, truth_without);
   std::vector<uint8_t> in_mask(k_gt.size()), seed(k_gt.size()), region(k_gt.size(), 0);
   for (size_t p = 0; p < k_gt.size(); ++p) {
@@ -105,10 +106,19 @@ ShadowError ComputeShadowError(const ImageF& ours_with, const ImageF& ours_witho
         }
     }
   ShadowError e;
-  double num = 0, den = 0, sum_k = 0, sum_gt = 0;
+  double num = 0, den = 0, sum_k = 0, sum_gt = 0, worst = -1;
   for (size_t p = 0; p < region.size(); ++p) {
     if (!region[p] || in_mask[p]) continue;
-    num += std::abs(k_ours[p] - k_gt[p]);
+    const double d = std::abs(k_ours[p] - k_gt[p]);
+    if (d > worst) {
+      worst = d;
+      e.worst_x = static_cast<int>(p % w);
+      e.worst_y = static_cast<int>(p / w);
+      e.worst_kappa = k_ours[p];
+      e.worst_kappa_gt = k_gt[p];
+      e.worst_background = background[p];
+    }
+    num += d;
     den += std::abs(1.0 - k_gt[p]);
     sum_k += k_ours[p];
     sum_gt += k_gt[p];
@@ -122,6 +132,14 @@ ShadowError ComputeShadowError(const ImageF& ours_with, const ImageF& ours_witho
   e.mean_kappa = sum_k / e.region;
   e.mean_kappa_gt = sum_gt / e.region;
   return e;
+}
+
+ImageF ShadowRatioImage(const ImageF& with, const ImageF& without) {
+  CheckSameSize(with, without, "shadow ratio");
+  const std::vector<double> k = KappaOf(with, without);
+  ImageF out(with.width, with.height, 1);
+  for (size_t p = 0; p < k.size(); ++p) out.pixels[p] = static_cast<float>(k[p]);
+  return out;
 }
 
 std::vector<Vec3> IrradianceAtNormals(const ImageF& panorama) {

@@ -17,6 +17,9 @@ struct ShadowError {
   double error = 0;   // mean |κ − κ_gt| / mean |1 − κ_gt| over the region (0 perfect, 1 no shadow)
   size_t region = 0;  // pixels in the region (κ_gt < 0.9, dilated 5 px, outside the mask)
   double mean_kappa_gt = 1, mean_kappa = 1;  // over the region
+  // The pixel contributing most to the numerator (diagnosis of outliers).
+  int worst_x = -1, worst_y = -1;
+  double worst_kappa = 1, worst_kappa_gt = 1, worst_background = 0;  // κ, κ_gt and Y(blur(truth_without)) there
 };
 // κ = Y(blur(with)) / Y(blur(without)) for ours and for the truth, outside
 // the object mask. `ours_with` / `ours_without`: our composite and the same
@@ -24,6 +27,10 @@ struct ShadowError {
 // whose blurred background luminance is ~0 count as κ = 1.
 ShadowError ComputeShadowError(const ImageF& ours_with, const ImageF& ours_without, const ImageF& truth_with,
                                const ImageF& truth_without, const ImageF& mask);
+
+// The metric's κ map: Y(blur(with)) / Y(blur(without)) per pixel (1
+// channel), 1 where the blurred background luminance is ~0.
+ImageF ShadowRatioImage(const ImageF& with, const ImageF& without);
 
 // Relative RMS over 64 Fibonacci normals of E(n) (RGB) from our panorama vs
 // the true one: sqrt(Σ|E − E_gt|² / Σ|E_gt|²).
