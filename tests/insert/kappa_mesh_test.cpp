@@ -8,7 +8,6 @@
 
 #include <cmath>
 #include <cstdio>
-#include <cstdlib>
 #include <memory>
 
 #include "render/insert/inserter.h"
@@ -83,8 +82,6 @@ SgMixture TestLight() {
   sky.axis = {0, 0, 1};
   sky.sharpness = 0.5;
   sky.amplitude = {0.3, 0.3, 0.3};
-  if (std::getenv("KT_SUN")) return {sun};
-  if (std::getenv("KT_SKY")) return {sky};
   return {sun, sky};
 }
 
@@ -108,7 +105,6 @@ struct Bakes {
     o.dirs = 16;
     o.components = 24;
     o.bisection_steps = 4;
-    if (std::getenv("KT_HI")) o.dirs = 32, o.components = 32, o.bisection_steps = 6;
     torus_field = BakeSsdf(torus, o, std::nullopt);
     box_field = BakeSsdf(box, o, std::nullopt);
   }
