@@ -20,6 +20,7 @@
 #include <string>
 
 #include "calib/core/error.h"
+#include "render/sg/fast_exp.h"
 
 namespace nerfar {
 
@@ -31,8 +32,9 @@ using Eigen::VectorXd;
 struct Data {
   int n = 0;
   std::vector<Vec3> d;
-  MatrixXd y;  // n × 3
-  VectorXd w;  // ω_i / (τ + Y_i)²
+  std::vector<float> dx, dy, dz;  // the directions again, float structure of arrays (Basis)
+  MatrixXd y;                     // n × 3
+  VectorXd w;                     // ω_i / (τ + Y_i)²
   VectorXd sqrt_w;
   double norm = 1.0;  // Σ ω_i
 };
@@ -58,6 +60,12 @@ Data MakeData(const RadianceSamples& s, double hdr_floor) {
     data.w[i] = t > 0.0 ? s.solid_angles[i] / (t * t) : 0.0;
   }
   data.sqrt_w = data.w.array().sqrt();
+  data.dx.resize(data.n), data.dy.resize(data.n), data.dz.resize(data.n);
+  for (int i = 0; i < data.n; ++i) {
+    data.dx[i] = static_cast<float>(data.d[i].x);
+    data.dy[i] = static_cast<float>(data.d[i].y);
+    data.dz[i] = static_cast<float>(data.d[i].z);
+  }
   data.norm = sum_omega;
   return data;
 }
@@ -70,19 +78,26 @@ struct State {
   int m() const { return static_cast<int>(axis.size()); }
 };
 
+// One column of the basis, b_i = exp(λ(d_i·p − 1)) = exp(−λ|d_i − p|²/2), in
+// float with FastExp (relative error < 4e-7, far below the fit's tolerance;
+// a loop over samples that vectorises), stored as double for the solves.
+// Below e^{−60} a lobe has no influence and the value is 0.
+void LobeColumn(const Data& data, const Vec3& axis, double lambda, double* __restrict out) {
+  const float* __restrict dx = data.dx.data();
+  const float* __restrict dy = data.dy.data();
+  const float* __restrict dz = data.dz.data();
+  const float px = static_cast<float>(axis.x), py = static_cast<float>(axis.y), pz = static_cast<float>(axis.z);
+  const float half_l = static_cast<float>(0.5 * lambda);
+  for (int i = 0; i < data.n; ++i) {
+    const float ex = dx[i] - px, ey = dy[i] - py, ez = dz[i] - pz;
+    out[i] = FastExpCut(-half_l * (ex * ex + ey * ey + ez * ez), -60.0f);
+  }
+}
+
+// B_ik for every lobe.
 void Basis(const Data& data, const State& st, MatrixXd& b) {
   b.resize(data.n, st.m());
-  for (int k = 0; k < st.m(); ++k) {
-    const Vec3 p = st.axis[k];
-    const double l = st.lambda[k];
-    double* col = b.col(k).data();
-    for (int i = 0; i < data.n; ++i) {
-      // Below e^{−40} (4e-18) a lobe has no influence: skip the exp (most
-      // samples for sharp lobes).
-      const double exponent = l * (Dot(data.d[i], p) - 1.0);
-      col[i] = exponent > -40.0 ? std::exp(std::min(0.0, exponent)) : 0.0;
-    }
-  }
+  for (int k = 0; k < st.m(); ++k) LobeColumn(data, st.axis[k], st.lambda[k], b.col(k).data());
 }
 
 double Loss(const Data& data, const MatrixXd& b, const MatrixXd& mu) {
@@ -161,14 +176,38 @@ void Nnls(const MatrixXd& g, const VectorXd& h, VectorXd& x) {
 }
 
 // Solves all amplitudes for the current geometry (warm-started from st.mu).
+// The Gram matrix is formed over each pair's common support: a sharp lobe is
+// zero (below e^{−60}) outside a band of the samples, which come in scan
+// order, so each column's nonzero range [lo, hi) is found once and a pair's
+// dot product runs over the overlap of two ranges (same sums as the dense
+// product, minus exact zeros; 2-3× fewer operations on window/env.exr).
 void SolveAmplitudes(const Data& data, const MatrixXd& b, State& st) {
+  const int m = st.m(), n = data.n;
   const MatrixXd bw = b.array().colwise() * data.sqrt_w.array();
-  MatrixXd g(st.m(), st.m());
-  g.setZero();
-  g.selfadjointView<Eigen::Lower>().rankUpdate(bw.transpose());
-  g = g.selfadjointView<Eigen::Lower>();
-  const MatrixXd yw = data.y.array().colwise() * data.w.array();
-  const MatrixXd h = b.transpose() * yw;  // M × 3
+  std::vector<int> lo(m, n), hi(m, 0);
+  for (int k = 0; k < m; ++k) {
+    const double* col = b.col(k).data();
+    int first = 0, last = n;
+    while (first < n && col[first] == 0.0) ++first;
+    while (last > first && col[last - 1] == 0.0) --last;
+    lo[k] = first, hi[k] = last;
+  }
+  MatrixXd g(m, m);
+  for (int k = 0; k < m; ++k)
+    for (int j = 0; j <= k; ++j) {
+      const int a = std::max(lo[j], lo[k]), e = std::min(hi[j], hi[k]);
+      const double v = a < e ? bw.col(j).segment(a, e - a).dot(bw.col(k).segment(a, e - a)) : 0.0;
+      g(k, j) = v, g(j, k) = v;
+    }
+  MatrixXd h(m, 3);  // Bᵀ W y
+  for (int k = 0; k < m; ++k) {
+    const int len = hi[k] - lo[k];
+    for (int c = 0; c < 3; ++c)
+      h(k, c) = len > 0 ? (b.col(k).segment(lo[k], len).array() * data.w.segment(lo[k], len).array() *
+                           data.y.col(c).segment(lo[k], len).array())
+                              .sum()
+                        : 0.0;
+  }
   for (int c = 0; c < 3; ++c) {
     VectorXd x = st.mu.col(c);
     Nnls(g, h.col(c), x);
@@ -271,10 +310,15 @@ struct Placement {
   Eigen::Vector3d mu = Eigen::Vector3d::Zero();
 };
 
-void RefineLobe(const Data& data, const MatrixXd& model, Placement& lobe, const SgFitOptions& options);
+void RefineLobe(const Data& data, const MatrixXd& model, Placement& lobe, const SgFitOptions& options, int iterations);
 constexpr int kRefineIterations = 8;  // a lobe placed on a sample is off by < 1 spacing; a few steps centre it
 
-Placement PlaceLobe(const Data& data, const MatrixXd& model, std::vector<char>& used, const SgFitOptions& options) {
+// `prior_sharpness` > 0 (warm fits: the dead lobe's own λ, most often right
+// for a feature that moved) replaces the ladder by {½, 1, 2}× that λ, and the
+// refinement takes kWarmRefineIterations: a quarter of the cost.
+constexpr int kWarmRefineIterations = 3;
+Placement PlaceLobe(const Data& data, const MatrixXd& model, std::vector<char>& used, const SgFitOptions& options,
+                    double prior_sharpness = 0.0) {
   int best_i = -1;
   double best_deficit = -1e300;
   for (int i = 0; i < data.n; ++i) {
@@ -292,12 +336,14 @@ Placement PlaceLobe(const Data& data, const MatrixXd& model, std::vector<char>& 
   Placement best;
   best.axis = data.d[best_i];
   double best_gain = -1.0;
+  std::vector<double> column(data.n);
   const auto try_lambda = [&](double ladder) {
     const double l = std::clamp(ladder, options.min_sharpness, options.max_sharpness);
     double bb = 0.0;
     Eigen::Vector3d br = Eigen::Vector3d::Zero();
+    LobeColumn(data, best.axis, l, column.data());
     for (int i = 0; i < data.n; ++i) {
-      const double bi = std::exp(std::min(0.0, l * (Dot(data.d[i], best.axis) - 1.0)));
+      const double bi = column[i];
       const double wb = data.w[i] * bi;
       bb += wb * bi;
       for (int c = 0; c < 3; ++c) br[c] += wb * (data.y(i, c) - model(i, c));
@@ -311,10 +357,15 @@ Placement PlaceLobe(const Data& data, const MatrixXd& model, std::vector<char>& 
       best.mu = mu;
     }
   };
+  if (prior_sharpness > 0.0) {
+    for (double f : {0.5, 1.0, 2.0}) try_lambda(prior_sharpness * f);
+    RefineLobe(data, model, best, options, kWarmRefineIterations);
+    return best;
+  }
   for (double ladder : {1.0, 3.0, 10.0, 30.0, 100.0, 300.0, 1000.0, 3000.0}) try_lambda(ladder);
   const double rung = best.lambda;
   for (double f : {0.5, 0.7, 1.4, 2.0}) try_lambda(rung * f);
-  RefineLobe(data, model, best, options);
+  RefineLobe(data, model, best, options, kRefineIterations);
   return best;
 }
 
@@ -324,9 +375,9 @@ double SingleLobeFit(const Data& data, const MatrixXd& model, Placement& lobe, V
   double bb = 0.0;
   Eigen::Vector3d br = Eigen::Vector3d::Zero();
   basis.resize(data.n);
+  LobeColumn(data, lobe.axis, lobe.lambda, basis.data());
   for (int i = 0; i < data.n; ++i) {
-    const double bi = std::exp(std::min(0.0, lobe.lambda * (Dot(data.d[i], lobe.axis) - 1.0)));
-    basis[i] = bi;
+    const double bi = basis[i];
     const double wb = data.w[i] * bi;
     bb += wb * bi;
     for (int c = 0; c < 3; ++c) br[c] += wb * (data.y(i, c) - model(i, c));
@@ -346,11 +397,11 @@ double SingleLobeFit(const Data& data, const MatrixXd& model, Placement& lobe, V
 // (damped Gauss-Newton on axis and log λ, amplitude in closed form): one lobe
 // has no coupling to get stuck on, so this centres it on the feature that the
 // sample grid only locates to within a sample spacing.
-void RefineLobe(const Data& data, const MatrixXd& model, Placement& lobe, const SgFitOptions& options) {
+void RefineLobe(const Data& data, const MatrixXd& model, Placement& lobe, const SgFitOptions& options, int iterations) {
   VectorXd basis;
   double loss = SingleLobeFit(data, model, lobe, basis);
   double damping = 1e-3;
-  for (int it = 0; it < kRefineIterations; ++it) {
+  for (int it = 0; it < iterations; ++it) {
     Vec3 t1, t2;
     Tangents(lobe.axis, t1, t2);
     Eigen::Matrix3d h = Eigen::Matrix3d::Zero();
@@ -399,10 +450,9 @@ void RefineLobe(const Data& data, const MatrixXd& model, Placement& lobe, const 
 }
 
 void AddToModel(const Data& data, const Placement& lobe, MatrixXd& model) {
-  for (int i = 0; i < data.n; ++i) {
-    const double bi = std::exp(std::min(0.0, lobe.lambda * (Dot(data.d[i], lobe.axis) - 1.0)));
-    model.row(i) += bi * lobe.mu.transpose();
-  }
+  std::vector<double> column(data.n);
+  LobeColumn(data, lobe.axis, lobe.lambda, column.data());
+  for (int i = 0; i < data.n; ++i) model.row(i) += column[i] * lobe.mu.transpose();
 }
 
 // Greedy placement (cold start): a deterministic matching pursuit.
@@ -422,7 +472,7 @@ State ColdStart(const Data& data, const SgFitOptions& options) {
     // Orthogonal matching pursuit: re-solve every amplitude so the next lobe
     // goes where the best k-lobe model (not the sum of greedy steps) falls short.
     b.conservativeResize(data.n, k + 1);
-    for (int i = 0; i < data.n; ++i) b(i, k) = std::exp(std::min(0.0, lobe.lambda * (Dot(data.d[i], lobe.axis) - 1.0)));
+    LobeColumn(data, lobe.axis, lobe.lambda, b.col(k).data());
     SolveAmplitudes(data, b, st);
     model = b * st.mu;
   }
@@ -431,7 +481,7 @@ State ColdStart(const Data& data, const SgFitOptions& options) {
 
 // Lobes the amplitude solve switched off (μ = 0) get no gradient and would
 // stay dead: move each to the largest remaining deficit. Returns how many.
-int ReseedDeadLobes(const Data& data, const MatrixXd& b, State& st, const SgFitOptions& options) {
+int ReseedDeadLobes(const Data& data, const MatrixXd& b, State& st, const SgFitOptions& options, bool warm) {
   std::vector<int> dead;
   for (int k = 0; k < st.m(); ++k)
     if (st.mu.row(k).maxCoeff() <= 0.0) dead.push_back(k);
@@ -439,7 +489,7 @@ int ReseedDeadLobes(const Data& data, const MatrixXd& b, State& st, const SgFitO
   MatrixXd model = b * st.mu;
   std::vector<char> used(data.n, 0);
   for (int k : dead) {
-    const Placement lobe = PlaceLobe(data, model, used, options);
+    const Placement lobe = PlaceLobe(data, model, used, options, warm ? st.lambda[k] : 0.0);
     AddToModel(data, lobe, model);
     st.axis[k] = lobe.axis;
     st.lambda[k] = lobe.lambda;
@@ -639,7 +689,7 @@ SgMixture FitPrepared(const Data& data, const SgFitOptions& options, const SgMix
     MatrixXd b_next;
     for (int it = 0; it < iterations; ++it) {
       ++local.iterations;
-      if (State seeded = st; ReseedDeadLobes(data, b, seeded, options) > 0) {
+      if (State seeded = st; ReseedDeadLobes(data, b, seeded, options, warm) > 0) {
         // Dead lobes moved to the largest deficits; kept if the re-solved loss fell.
         Basis(data, seeded, b_next);
         SolveAmplitudes(data, b_next, seeded);
