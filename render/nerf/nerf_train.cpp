@@ -107,6 +107,7 @@ std::vector<std::string> NerfTrainOptions::Validate() const {
   check(lr_final_factor > 0 && lr_final_factor <= 1, "lr_final_factor: (expected 0 < x <= 1)");
   check(tv_density >= 0 && tv_color >= 0, "tv_density, tv_color: (expected >= 0)");
   check(background_weight >= 0, "background_weight: (expected >= 0)");
+  check(distortion_weight >= 0 && distortion_weight < 1e3, "distortion_weight: (expected 0..1000 per metre)");
   check(loss_epsilon > 0, "loss_epsilon: (expected > 0)");
   check(occupancy_every >= 1, "occupancy_every: (expected >= 1)");
   check(occupancy_sigma >= 0 && occupancy_sigma < 1e3, "occupancy_sigma: (expected 0..1000 per metre)");
@@ -133,6 +134,7 @@ void VisitFields(NerfTrainOptions& o, Visit&& visit) {
   visit("tv_density", o.tv_density);
   visit("tv_color", o.tv_color);
   visit("background_weight", o.background_weight);
+  visit("distortion_weight", o.distortion_weight);
   visit("loss_epsilon", o.loss_epsilon);
   visit("occupancy_every", o.occupancy_every);
   visit("occupancy_sigma", o.occupancy_sigma);
@@ -184,8 +186,9 @@ constexpr float kTrainMinTransmittance = 1e-4f;
 
 struct Sample {
   Corners corners;
-  float sigma, alpha, dt;
+  float sigma, alpha, dt, t;
   Vec3f color;
+  float g_w;  // dL/dw of the distortion prior (w = T α, the sample's weight)
 };
 
 // The gradient a sample sends to its 8 corners.
@@ -322,6 +325,7 @@ double NerfTrainer::State::DoStep() {
   const float inv_batch = 1.0f / float(batch);
   const float eps = float(epsilon);
   const float bg_w = float(options.background_weight);
+  const float dist_w = float(options.distortion_weight);
   const uint64_t step_key = Mix64(options.seed * 0x9e37ull + uint64_t(step));
 
   ParallelForChunks(chunks, 1, [&](size_t chunk_begin, size_t chunk_end) {
@@ -360,9 +364,10 @@ double NerfTrainer::State::DoStep() {
         float transmittance = 1.0f;
         Vec3f color;
         const float offset = UnitFloat(h3);
-        nerf_detail::MarchRay(field, ray, step_m, offset, [&](float, float dt, const Corners& c) {
+        nerf_detail::MarchRay(field, ray, step_m, offset, [&](float t, float dt, const Corners& c) {
           Sample s;
           s.corners = c;
+          s.t = t;
           s.sigma = std::exp(nerf_detail::RawDensity(field, c));
           s.alpha = -std::expm1(-s.sigma * dt);
           s.dt = dt;
@@ -388,6 +393,36 @@ double NerfTrainer::State::DoStep() {
           loss_sum += double(bg_w) * opacity * opacity;
           g_o = 2.0f * bg_w * opacity * inv_batch;
         }
+        // Distortion prior: dL/dw_i = λ (2 Σ_j w_j |t_i - t_j| + 2 w_i δ_i / 3), the
+        // sum split at i into prefix and suffix sums of w and w·t (samples are in
+        // order of t). Its density gradient follows the colour's form with the
+        // per-sample "colour" dL/dw_i: suffix_w = Σ_{j>i} w_j dL/dw_j.
+        float suffix_w = 0.0f;
+        if (dist_w > 0.0f && !samples.empty()) {
+          double w_all = 0, wt_all = 0;
+          float tw = 1.0f;
+          for (Sample& s : samples) {
+            const double w = double(tw) * s.alpha;
+            s.g_w = float(w);  // the weight, for now
+            w_all += w;
+            wt_all += w * s.t;
+            tw *= 1.0f - s.alpha;
+          }
+          double w_before = 0, wt_before = 0, dist = 0;
+          for (Sample& s : samples) {
+            const double w = s.g_w;
+            const double w_after = w_all - w_before - w, wt_after = wt_all - wt_before - w * s.t;
+            const double spread = s.t * w_before - wt_before + wt_after - s.t * w_after;
+            dist += w * spread + w * w * s.dt / 3.0;
+            s.g_w = float(dist_w * (2.0 * spread + 2.0 * w * s.dt / 3.0) * inv_batch);
+            suffix_w += float(w) * s.g_w;
+            w_before += w;
+            wt_before += w * s.t;
+          }
+          loss_sum += double(dist_w) * dist;
+        } else {
+          for (Sample& s : samples) s.g_w = 0.0f;
+        }
         // Backward (front to back with the suffix colour S_i = C - prefix).
         float t_i = 1.0f;
         Vec3f prefix;
@@ -403,6 +438,8 @@ double NerfTrainer::State::DoStep() {
             rec.g_color[ch] = g_c[ch] * w * s.color[ch];
           }
           g_raw += g_o * transmittance;
+          suffix_w -= w * s.g_w;
+          g_raw += t_next * s.g_w - suffix_w;
           rec.g_density = g_raw * s.dt * s.sigma;
           std::memcpy(rec.slot, s.corners.slot, sizeof rec.slot);
           std::memcpy(rec.weight, s.corners.weight, sizeof rec.weight);

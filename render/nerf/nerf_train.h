@@ -71,6 +71,10 @@ struct NerfTrainOptions {
   double tv_density = 1e-8, tv_color = 1e-8;
   // Weight of the opacity penalty O² on rays whose pixel is exactly 0 (nothing hit).
   double background_weight = 0.1;
+  // Weight (1/m) of the distortion prior on every ray, Σ_ij w_i w_j |t_i - t_j| + Σ_i w_i² δ_i / 3
+  // (w_i = T_i α_i, t in metres): it gathers each ray's weights into one short
+  // interval, which removes fog in front of surfaces and sharpens depth.
+  double distortion_weight = 0.0;
   // ε of the relative loss in units of the training images' 99th-percentile luminance.
   double loss_epsilon = 0.5;
   // Steps between occupancy updates (empty-space skipping for the next steps).
