@@ -17,6 +17,9 @@ const std::vector<Command>& AllCommands() {
       {"render", "render a NeRF at a dataset's cameras: colour, depth, opacity EXR and psnr_tm report", RunRender},
       {"bake", "bake the SSDF visibility field of a virtual object (shadows, self-shadows)", RunBake},
       {"insert", "insert virtual objects into a scene's views: light, shade, occlude, shadow, composite", RunInsert},
+      {"live", "the live AR view: tracked frames with the object placed, lit and shadowed (window or files)", RunLive},
+      {"report", "the report of a live session: calibration, tracking, light, environment, SSDF, timings", RunReport},
+      {"demo", "from nothing to a running AR sequence on the built-in synthetic scene (resumable)", RunDemo},
       {"bench", "measure each stage's speed and accuracy; print a table and write JSON", RunBench},
   };
   return commands;

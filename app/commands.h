@@ -33,5 +33,8 @@ int RunTrain(const CommandArgs& args);
 int RunRender(const CommandArgs& args);
 int RunTrack(const CommandArgs& args);
 int RunCameras(const CommandArgs& args);
+int RunLive(const CommandArgs& args);
+int RunDemo(const CommandArgs& args);
+int RunReport(const CommandArgs& args);
 
 }  // namespace nerfar

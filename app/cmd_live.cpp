@@ -1,0 +1,299 @@
+// nerfar live --source S --scene SCENE [--object OBJ] [--camera C --board B]
+//             [--headless -o DIR] [--frames N]
+// The live AR view: frames from a camera (or the synthetic stream) tracked
+// from the board's AprilTags, the object inserted with the pose of that same
+// frame (app/live/pipeline.h). With a display: the window (click to place,
+// drag to move, keys and panel for the rest; app/live/live_ui.h). Without
+// one, or with --headless: the same views written to files. Every run ends
+// with the session report (SESSION/report.json and report.png).
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <ctime>
+#include <filesystem>
+#include <nlohmann/json.hpp>
+
+#include "app/cli.h"
+#include "app/commands.h"
+#include "app/live/live_ui.h"
+#include "app/live/pipeline.h"
+#include "app/live/report.h"
+#include "app/live/scene.h"
+#include "app/live/window.h"
+#include "app/sources.h"
+#include "calib/core/atomic_file.h"
+#include "calib/core/error.h"
+#include "calib/core/image_io.h"
+#include "calib/core/log.h"
+#include "calib/core/media.h"
+#include "calib/core/parallel.h"
+#include "render/synth/camera_stream.h"
+
+namespace nerfar {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+std::string SessionName() {
+  const std::time_t now = std::time(nullptr);
+  std::tm tm{};
+  gmtime_r(&now, &tm);
+  char name[64];
+  std::strftime(name, sizeof name, "%Y%m%d-%H%M%S", &tm);
+  return name;
+}
+
+bool ParseVec3(const std::string& text, Vec3& out) {
+  double v[3];
+  char tail = 0;
+  if (std::sscanf(text.c_str(), "%lf,%lf,%lf%c", &v[0], &v[1], &v[2], &tail) != 3) return false;
+  out = {v[0], v[1], v[2]};
+  return std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]);
+}
+
+}  // namespace
+
+int RunLive(const CommandArgs& args) {
+  std::string source_name, scene_dir, camera_path, board_path, output, preset = "fast", tracker_preset = "fast";
+  std::string response, views_text, anchor_text, video_path, sheet_path;
+  std::vector<std::string> object_paths;
+  int frames = 0, render_divisor = 0;
+  double scale = 1.0;
+  bool headless = false, realtime = false, auto_place = false, no_hud = false;
+  ArgParser parser("live", "The live AR view: tracked camera frames with the object inserted.");
+  parser.Option("--source", &source_name, "S",
+                "frames: synthetic:SCENE,..., v4l2:/dev/videoN, video:FILE, ... (required)");
+  parser.Option("--scene", &scene_dir, "SCENE",
+                "folder with scene.nerf, env.json, board.json, camera and *.ssdf (a `nerfar demo` output; required)");
+  parser.Option("--object", &object_paths, "OBJ",
+                "object .ssdf (or a mesh: no shadows); repeatable (default: SCENE/*.ssdf)");
+  parser.Option("--camera", &camera_path, "C",
+                "camera.json or transforms.json (default: SCENE's, or the synthetic stream's)");
+  parser.Option("--board", &board_path, "B", "board.json (default: SCENE's, or the synthetic stream's)");
+  parser.Flag("--headless", &headless, "no window even with a display: write the views to files");
+  parser.Option("-o", &output, "DIR", "session folder (default SCENE/sessions/<UTC time>)");
+  parser.Option("--frames", &frames, "N", "stop after N frames (headless default 150; window: until closed)");
+  parser.Option("--preset", &preset, "P", "insertion preset: fast (default) | balanced | accurate");
+  parser.Option("--tracker-preset", &tracker_preset, "P", "tag detector preset: fast (default) | balanced | accurate");
+  parser.Option("--response", &response, "R", "camera response: display (synthetic default) | srgb (cameras default)");
+  parser.Option("--views", &views_text, "LIST", "ar[,alongside][,layers] (window default ar; headless: all three)");
+  parser.Option("--anchor", &anchor_text, "X,Y,Z", "place the first object on this world point (metres) at start");
+  parser.Option("--render-divisor", &render_divisor, "D",
+                "composite at 1/D of the frame size, tracking at full size (1-4; default 2 for frames wider than "
+                "480 px, else 1)");
+  parser.Option("--scale", &scale, "S", "object scale at start (default 1)");
+  parser.Flag("--auto-place", &auto_place,
+              "place the first object on the surface under the image centre at the first tracked frame "
+              "(default in headless runs without --anchor)");
+  parser.Flag("--realtime", &realtime,
+              "headless: capture and processing threads with frame dropping, as in the window "
+              "(default: every frame processed in order)");
+  parser.Flag("--no-hud", &no_hud, "no HUD text in the AR view");
+  parser.Option("--video", &video_path, "FILE", "headless: the AR video (default SESSION/live.mp4)");
+  parser.Option("--contact-sheet", &sheet_path, "FILE",
+                "headless: views of four frames (default SESSION/contact_sheet.png)");
+  parser.Epilog(
+      "window keys: click place, drag move, A/D rotate, W/S scale, 1/2/3 preset, N alongside, L layers,\n"
+      "H HUD, R record (SESSION/recording.mp4), P screenshot, Esc quit.\n"
+      "session files: session.json, report.json, report.png, last_ar.png [, last_alongside.png, last_layers.png]\n"
+      "example:\n"
+      "  nerfar live --source synthetic:window,spp=1 --scene demo_out\n\n" +
+      SourceHelp());
+  if (!parser.Parse(args)) return 0;
+
+  Problems usage("nerfar live");
+  if (source_name.empty()) usage.Add("--source", "missing (expected a frame source, e.g. synthetic:window)");
+  if (scene_dir.empty()) usage.Add("--scene", "missing (expected a SCENE folder, e.g. a `nerfar demo` output)");
+  if (render_divisor < 0 || render_divisor > 4)
+    usage.Add("--render-divisor", std::to_string(render_divisor) + " (expected 1..4)");
+  if (frames < 0) usage.Add("--frames", std::to_string(frames) + " (expected >= 0)");
+  if (!(scale > 0 && scale < 100)) usage.Add("--scale", std::to_string(scale) + " (expected (0, 100))");
+  if (!response.empty() && response != "display" && response != "srgb")
+    usage.Add("--response", "'" + response + "' (expected display or srgb)");
+  Vec3 anchor;
+  if (!anchor_text.empty() && !ParseVec3(anchor_text, anchor))
+    usage.Add("--anchor", "'" + anchor_text + "' (expected X,Y,Z in metres)");
+  int views = 0;
+  if (!views_text.empty()) {
+    size_t start = 0;
+    while (start <= views_text.size()) {
+      const size_t comma = views_text.find(',', start);
+      const std::string v = views_text.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
+      if (v == "ar")
+        views |= kViewAr;
+      else if (v == "alongside")
+        views |= kViewAlongside;
+      else if (v == "layers")
+        views |= kViewLayers;
+      else
+        usage.Add("--views", "'" + v + "' (expected ar, alongside or layers)");
+      if (comma == std::string::npos) break;
+      start = comma + 1;
+    }
+  }
+  if (preset != "fast" && preset != "balanced" && preset != "accurate")
+    usage.Add("--preset", "'" + preset + "' (expected fast, balanced or accurate)");
+  if (tracker_preset != "fast" && tracker_preset != "balanced" && tracker_preset != "accurate")
+    usage.Add("--tracker-preset", "'" + tracker_preset + "' (expected fast, balanced or accurate)");
+  usage.ThrowIfAny();
+
+  // Scene, objects, source, camera, board.
+  const LiveScenePaths paths = FindLiveScene(scene_dir);
+  LiveSceneData scene = LoadLiveScene(paths);
+  if (object_paths.empty()) object_paths = paths.objects;
+  if (object_paths.empty())
+    throw InputError("nerfar live: no object: give --object OBJ (.ssdf or mesh), or bake one into " + scene_dir);
+  std::vector<LiveObjectAsset> objects;
+  for (const std::string& o : object_paths) objects.push_back(LoadLiveObject(o));
+  std::unique_ptr<FrameSource> source = OpenSource(source_name);
+  const auto* synthetic = dynamic_cast<const synth::SyntheticCameraSource*>(source.get());
+  CameraIntrinsics camera;
+  std::string used_camera;
+  if (!camera_path.empty()) {
+    camera = ReadCameraFile(camera_path).camera;
+    used_camera = camera_path;
+  } else if (synthetic != nullptr) {
+    camera = synthetic->camera();
+  } else if (scene.camera) {
+    camera = scene.camera->camera;
+    used_camera = paths.camera;
+  } else {
+    throw InputError("nerfar live: no camera: give --camera C (camera.json from `nerfar calibrate`)");
+  }
+  Board board;
+  if (!board_path.empty())
+    board = ReadBoard(board_path);
+  else if (scene.board)
+    board = *scene.board;
+  else if (synthetic != nullptr)
+    board = synthetic->board();
+  else
+    throw InputError("nerfar live: no board: give --board B (board.json), or put one into " + scene_dir);
+
+  LiveOptions options;
+  options.preset = preset;
+  options.tracker = TrackerOptions::Preset(tracker_preset);
+  options.response = !response.empty() ? response : (synthetic != nullptr ? "display" : "srgb");
+  options.hud = !no_hud;
+  options.render_divisor = render_divisor > 0 ? render_divisor : (camera.width > 480 ? 2 : 1);
+  std::vector<LiveAsset> assets;
+  for (const LiveObjectAsset& o : objects)
+    assets.push_back({o.name, &o.mesh, o.field ? &*o.field : nullptr, o.material});
+  LivePipeline pipeline(*source, board, camera, *scene.field, scene.env.lobes, assets, options);
+  if (!anchor_text.empty() || scale != 1.0) {
+    LiveObjectState s = pipeline.object(0);
+    s.placed = !anchor_text.empty();
+    s.anchor_world = anchor;
+    s.scale = scale;
+    pipeline.set_object(0, s);
+  }
+
+  const bool window_mode = !headless && LiveWindow::DisplayAvailable();
+  if (!window_mode && !headless) LogInfo("live: no display: running headless (views written to files)");
+  if (!window_mode && anchor_text.empty()) auto_place = true;
+  const std::string session_dir =
+      !output.empty() ? output : (fs::path(scene_dir) / "sessions" / SessionName()).string();
+  MakeDirectories(session_dir);
+  pipeline.set_views(views != 0 ? (views | kViewAr)
+                                : (window_mode ? kViewAr : (kViewAr | kViewAlongside | kViewLayers)));
+  LogInfo("live: " + source->Describe() + ", scene " + paths.nerf + ", " + std::to_string(objects.size()) +
+          " object(s), preset " + preset + ", response " + options.response + ", threads " +
+          std::to_string(ThreadCount()) + ", session " + session_dir);
+
+  // Places object 0 under the image centre once a frame has a pose.
+  const auto try_auto_place = [&](const LiveFrame& f) {
+    if (!auto_place || pipeline.object(0).placed || !f.has_pose) return;
+    if (const auto hit = pipeline.PickSurface(f, f.ar.width * 0.5, f.ar.height * 0.5)) {
+      LiveObjectState s = pipeline.object(0);
+      s.placed = true;
+      s.anchor_world = *hit;
+      pipeline.set_object(0, s);
+      LogInfo("live: placed " + objects[0].name + " at the surface under the image centre");
+    }
+  };
+
+  const auto t_start = LiveClock::now();
+  std::optional<LiveFrame> last;
+  if (window_mode) {
+    LiveWindow window("nerfar live - " + paths.dir, 1280, 720);
+    LiveUi ui(window, pipeline, session_dir);
+    pipeline.Start();
+    while (ui.Tick(std::chrono::milliseconds(30))) {
+      if (ui.shown()) try_auto_place(*ui.shown());
+      if (frames > 0 && ui.frames_shown() >= frames) break;
+    }
+    pipeline.Stop();
+    ui.StopRecording();
+    last = ui.shown();
+  } else {
+    const int limit = frames > 0 ? frames : 150;
+    const std::string video_file = !video_path.empty() ? video_path : (fs::path(session_dir) / "live.mp4").string();
+    std::unique_ptr<VideoWriter> video;
+    std::vector<Image8> sheet_tiles;
+    std::vector<std::string> captions;
+    const int sheet_every = std::max(1, limit / 4);
+    int n = 0;
+    const auto consume = [&](LiveFrame f) {
+      pipeline.MarkDisplayed(f);
+      try_auto_place(f);
+      if (!video) video = std::make_unique<VideoWriter>(video_file, f.ar.width, f.ar.height, 30.0);
+      video->Write(f.ar);
+      if (n % sheet_every == sheet_every - 1 && sheet_tiles.size() < 12) {
+        const std::string label = "frame " + std::to_string(f.index) + " " + TrackingStateName(f.state);
+        sheet_tiles.push_back(f.ar);
+        captions.push_back(label);
+        sheet_tiles.push_back(f.alongside.empty() ? Image8(f.ar.width / 2, f.ar.height / 2, 3, 30) : f.alongside);
+        captions.push_back("alongside (NeRF)");
+        sheet_tiles.push_back(f.layers.empty() ? Image8(f.ar.width, f.ar.height / 2, 3, 30) : f.layers);
+        captions.push_back("kappa | alpha | light");
+      }
+      ++n;
+      last = std::move(f);
+    };
+    if (realtime) {
+      pipeline.Start();
+      while (n < limit) {
+        std::optional<LiveFrame> f = pipeline.TakeLatest(std::chrono::milliseconds(200));
+        if (f)
+          consume(std::move(*f));
+        else if (pipeline.finished())
+          break;
+      }
+      pipeline.Stop();
+    } else {
+      while (n < limit) {
+        std::optional<LiveFrame> f = pipeline.Step();
+        if (!f) break;
+        consume(std::move(*f));
+      }
+    }
+    if (video) video->Close();
+    if (!sheet_tiles.empty())
+      WriteImage8(!sheet_path.empty() ? sheet_path : (fs::path(session_dir) / "contact_sheet.png").string(),
+                  ContactSheet(sheet_tiles, 3, 320, captions));
+    LogInfo("live: wrote " + std::to_string(n) + " frames to " + video_file);
+  }
+  const double wall_s = std::chrono::duration<double>(LiveClock::now() - t_start).count();
+  if (last) {
+    WriteImage8((fs::path(session_dir) / "last_ar.png").string(), last->ar);
+    if (!last->alongside.empty()) WriteImage8((fs::path(session_dir) / "last_alongside.png").string(), last->alongside);
+    if (!last->layers.empty()) WriteImage8((fs::path(session_dir) / "last_layers.png").string(), last->layers);
+  }
+  SessionInfo info;
+  info.scene_dir = scene_dir;
+  info.source = source_name;
+  info.camera_path = used_camera;
+  info.objects = object_paths;
+  info.mode = window_mode ? "window" : (realtime ? "headless-realtime" : "headless");
+  info.wall_s = wall_s;
+  info.threads = ThreadCount();
+  WriteSession(session_dir, info, pipeline);
+  std::string report_dir;
+  const Json report = BuildReport(session_dir, &report_dir);
+  WriteReport(report, report_dir);
+  LogInfo("live: session report " + report_dir + "/report.json and report.png");
+  return 0;
+}
+
+}  // namespace nerfar

@@ -1,0 +1,563 @@
+#include "app/live/pipeline.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+
+#include "calib/core/error.h"
+#include "calib/core/image_io.h"
+#include "calib/core/log.h"
+#include "calib/core/media.h"
+#include "calib/core/metrics.h"
+#include "calib/core/parallel.h"
+#include "render/insert/ssdf_visibility.h"
+#include "render/sg/fit.h"
+#include "render/sg/sg.h"
+
+namespace nerfar {
+
+namespace {
+
+double MsSince(LiveClock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(LiveClock::now() - t0).count();
+}
+
+// The display value a linear value stands for under the "display" response
+// is capped here: y/(1 − y) diverges at white, and a clipped pixel says only
+// "at least this bright".
+constexpr float kDisplayCap = 0.995f;
+
+// A ray "meets a surface" at this scene opacity: a fast-preset NeRF reaches
+// only ~0.6 on its solid table top, so 0.5 would miss half of it.
+constexpr float kSurfaceOpacity = 0.3f;
+
+// 8-bit frame (grey or RGB) -> linear RGB under the response.
+ImageF Linearise(const Image8& image, bool display_response) {
+  float table[256];
+  for (int i = 0; i < 256; ++i) {
+    float v = SrgbToLinear(static_cast<float>(i) / 255.0f);
+    if (display_response) {
+      v = std::min(v, kDisplayCap);
+      v = v / (1.0f - v);
+    }
+    table[i] = v;
+  }
+  ImageF out(image.width, image.height, 3);
+  const int channels = image.channels;
+  for (size_t p = 0; p < image.PixelCount(); ++p)
+    for (int c = 0; c < 3; ++c) out.pixels[p * 3 + c] = table[image.pixels[p * channels + (channels >= 3 ? c : 0)]];
+  return out;
+}
+
+std::uint8_t ToDisplayValue(float x, bool display_response) {
+  if (!std::isfinite(x)) return 0;
+  x = std::max(0.0f, x);
+  if (display_response) x = x / (1.0f + x);
+  return static_cast<std::uint8_t>(std::lround(LinearToSrgb(std::min(1.0f, x)) * 255.0f));
+}
+
+// Linear (scene units) -> the camera's display encoding, times `gain`.
+Image8 ToDisplay(const ImageF& linear, double gain, bool display_response) {
+  Image8 out(linear.width, linear.height, 3);
+  for (size_t p = 0; p < linear.PixelCount(); ++p)
+    for (int c = 0; c < 3; ++c)
+      out.pixels[p * 3 + c] = ToDisplayValue(
+          static_cast<float>(linear.pixels[p * linear.channels + std::min(c, linear.channels - 1)] * gain),
+          display_response);
+  return out;
+}
+
+// Box-filtered 1/divisor size (edges that do not fill a box are dropped).
+Image8 Downsample(const Image8& image, int divisor) {
+  if (divisor == 1) return image;
+  Image8 out(image.width / divisor, image.height / divisor, image.channels);
+  const int area = divisor * divisor;
+  for (int y = 0; y < out.height; ++y)
+    for (int x = 0; x < out.width; ++x)
+      for (int c = 0; c < image.channels; ++c) {
+        int sum = 0;
+        for (int dy = 0; dy < divisor; ++dy)
+          for (int dx = 0; dx < divisor; ++dx) sum += image.at(x * divisor + dx, y * divisor + dy, c);
+        out.at(x, y, c) = static_cast<std::uint8_t>((sum + area / 2) / area);
+      }
+  return out;
+}
+
+Image8 ToRgb(const Image8& image) {
+  if (image.channels == 3) return image;
+  Image8 rgb(image.width, image.height, 3);
+  for (size_t p = 0; p < image.PixelCount(); ++p)
+    for (int c = 0; c < 3; ++c)
+      rgb.pixels[p * 3 + c] = image.pixels[p * image.channels + (image.channels >= 3 ? c : 0)];
+  return rgb;
+}
+
+// Nearest-neighbour resample of a 1-channel layer in [0, 1] to an RGB tile.
+Image8 LayerTile(const ImageF& layer, int width, int height) {
+  Image8 tile(width, height, 3);
+  for (int y = 0; y < height; ++y)
+    for (int x = 0; x < width; ++x) {
+      const int sx = std::min(layer.width - 1, x * layer.width / width);
+      const int sy = std::min(layer.height - 1, y * layer.height / height);
+      const float v = layer.empty() ? 0.0f : layer.at(sx, sy, 0);
+      const auto g = static_cast<std::uint8_t>(std::lround(std::clamp(v, 0.0f, 1.0f) * 255.0f));
+      for (int c = 0; c < 3; ++c) tile.at(x, y, c) = g;
+    }
+  return tile;
+}
+
+// The incident light as seen on a mirror ball from the camera (a light probe):
+// pixel -> ball normal n (camera frame) -> reflected view direction in the world.
+Image8 LightSphereTile(const SgMixture& light, const Pose& T_world_camera, int width, int height) {
+  ImageF sphere(width, height, 3, 0.0f);
+  const double radius = 0.45 * std::min(width, height);
+  const double cx = 0.5 * width, cy = 0.5 * height;
+  double peak = 0;
+  for (int y = 0; y < height; ++y)
+    for (int x = 0; x < width; ++x) {
+      const double u = (x + 0.5 - cx) / radius, v = (y + 0.5 - cy) / radius;
+      const double r2 = u * u + v * v;
+      if (r2 > 1) continue;
+      const Vec3 n_camera{u, v, -std::sqrt(1 - r2)};  // facing the camera (OpenCV: z forward)
+      const Vec3 view{0, 0, 1};
+      const Vec3 reflected = view - n_camera * (2 * Dot(view, n_camera));
+      const Vec3 d_world = T_world_camera.Rotate(reflected);
+      const Vec3 L = Evaluate(light, Normalized(d_world));
+      for (int c = 0; c < 3; ++c) sphere.at(x, y, c) = static_cast<float>(L[c]);
+      peak = std::max(peak, 0.2126 * L.x + 0.7152 * L.y + 0.0722 * L.z);
+    }
+  return ToneMapToDisplay(sphere, peak > 0 ? static_cast<float>(2.0 / peak) : 1.0f);
+}
+
+Image8 SideBySide(const std::vector<Image8>& tiles) {
+  int width = 0, height = 0;
+  for (const Image8& t : tiles) {
+    width += t.width;
+    height = std::max(height, t.height);
+  }
+  Image8 out(width, height, 3, 30);
+  int x0 = 0;
+  for (const Image8& t : tiles) {
+    for (int y = 0; y < t.height; ++y)
+      for (int x = 0; x < t.width; ++x)
+        for (int c = 0; c < 3; ++c) out.at(x0 + x, y, c) = t.at(x, y, c);
+    x0 += t.width;
+  }
+  return out;
+}
+
+}  // namespace
+
+std::vector<std::string> LiveOptions::Validate() const {
+  std::vector<std::string> p;
+  if (preset != "fast" && preset != "balanced" && preset != "accurate")
+    p.push_back("preset: '" + preset + "' (expected fast, balanced or accurate)");
+  if (response != "display" && response != "srgb")
+    p.push_back("response: '" + response + "' (expected display or srgb)");
+  if (!(alongside_scale > 0.05 && alongside_scale <= 1))
+    p.push_back("alongside_scale: " + std::to_string(alongside_scale) + " (expected (0.05, 1])");
+  if (render_divisor < 1 || render_divisor > 4)
+    p.push_back("render_divisor: " + std::to_string(render_divisor) + " (expected 1..4)");
+  if (gain_every < 1) p.push_back("gain_every: " + std::to_string(gain_every) + " (expected >= 1)");
+  if (gain_grid_step < 1 || gain_grid_step > 64)
+    p.push_back("gain_grid_step: " + std::to_string(gain_grid_step) + " (expected 1..64)");
+  for (const std::string& s : tracker.Validate()) p.push_back("tracker." + s);
+  return p;
+}
+
+std::vector<std::pair<std::string, double>> StageList(const LiveStageTimes& t) {
+  return {{"capture", t.capture_ms},    {"track", t.track_ms},
+          {"expose", t.expose_ms},      {"light", t.insert.light_ms},
+          {"fit", t.insert.fit_ms},     {"raster", t.insert.raster_ms},
+          {"shade", t.insert.shade_ms}, {"occlusion", t.insert.occlusion_ms},
+          {"kappa", t.insert.kappa_ms}, {"alongside", t.alongside_ms},
+          {"layers", t.layers_ms},      {"display", t.display_ms},
+          {"process", t.process_ms}};
+}
+
+LivePipeline::LivePipeline(FrameSource& source, const Board& board, const CameraIntrinsics& camera,
+                           const SceneField& scene, SgMixture environment, std::vector<LiveAsset> assets,
+                           LiveOptions options)
+    : source_(source), camera_(camera), scene_(scene), assets_(std::move(assets)), options_(std::move(options)) {
+  {
+    Problems problems("live options");
+    for (const std::string& p : options_.Validate()) problems.Add("", p);
+    for (size_t i = 0; i < assets_.size(); ++i)
+      if (assets_[i].mesh == nullptr) problems.Add("objects[" + std::to_string(i) + "]", "no mesh");
+    problems.ThrowIfAny();
+  }
+  tracker_ = std::make_unique<Tracker>(board, camera_, options_.tracker);
+  inserter_ = std::make_unique<Inserter>(scene_, std::move(environment), InsertOptions::Preset(options_.preset));
+  preset_ = options_.preset;
+  hud_.store(options_.hud);
+  for (const LiveAsset& a : assets_) {
+    LiveObjectState s;
+    s.material = a.material;
+    states_.push_back(s);
+  }
+}
+
+LivePipeline::~LivePipeline() { Stop(); }
+
+LiveObjectState LivePipeline::object(size_t i) const {
+  std::lock_guard<std::mutex> lock(edit_mutex_);
+  return states_.at(i);
+}
+
+void LivePipeline::set_object(size_t i, const LiveObjectState& state) {
+  std::lock_guard<std::mutex> lock(edit_mutex_);
+  states_.at(i) = state;
+}
+
+void LivePipeline::set_preset(const std::string& preset) {
+  (void)InsertOptions::Preset(preset);  // InputError for an unknown name
+  std::lock_guard<std::mutex> lock(edit_mutex_);
+  if (preset != preset_) preset_changed_ = true;
+  preset_ = preset;
+}
+
+std::string LivePipeline::preset() const {
+  std::lock_guard<std::mutex> lock(edit_mutex_);
+  return preset_;
+}
+
+Pose LivePipeline::ObjectPose(size_t i, const LiveObjectState& state) const {
+  const Bounds bounds = ComputeBounds(*assets_.at(i).mesh);
+  Pose pose;
+  pose.rotation = RotationFromAxisAngle({0, 0, 1}, state.yaw_rad);
+  // The mesh's lowest point (local z = bounds.min.z, scaled) rests on the anchor.
+  pose.translation = state.anchor_world - Vec3{0, 0, bounds.min.z * state.scale};
+  return pose;
+}
+
+std::optional<Vec3> LivePipeline::PickSurface(const LiveFrame& frame, double x, double y) const {
+  if (!frame.has_pose) return std::nullopt;
+  const Vec3 d_camera = Unproject(frame.camera, {x, y});
+  const Vec3 origin = frame.T_world_camera.translation;
+  const Vec3 direction = Normalized(frame.T_world_camera.Rotate(d_camera));
+  const auto range = IntersectBox(scene_.Box(), origin, direction);
+  if (!range) return std::nullopt;
+  SceneRays rays;
+  rays.Add(Vec3f(origin), Vec3f(direction), static_cast<float>(range->first), static_cast<float>(range->second));
+  SceneSamples samples;
+  scene_.RenderRays(rays, samples);
+  if (!(samples.opacity[0] >= kSurfaceOpacity) || !std::isfinite(samples.depth[0])) return std::nullopt;
+  return origin + direction * static_cast<double>(samples.depth[0]);
+}
+
+std::optional<LivePipeline::Captured> LivePipeline::Capture(bool& end) {
+  end = false;
+  Captured c;
+  const auto t0 = LiveClock::now();
+  const FrameStatus status = source_.Next(c.frame, 100);
+  c.capture_ms = MsSince(t0);
+  if (status == FrameStatus::kEndOfStream) {
+    end = true;
+    return std::nullopt;
+  }
+  if (status == FrameStatus::kTimeout) return std::nullopt;
+  if (status != FrameStatus::kOk) {
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    ++counters_.source_errors;
+    return std::nullopt;
+  }
+  {
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    if (!have_start_) {
+      have_start_ = true;
+      start_ = LiveClock::now();
+      first_t_ns_ = c.frame.t_ns;
+    }
+  }
+  if (options_.pace) {
+    const auto due = start_ + std::chrono::nanoseconds(c.frame.t_ns - first_t_ns_);
+    if (due > LiveClock::now()) std::this_thread::sleep_until(due);
+  }
+  c.captured = LiveClock::now();
+  std::lock_guard<std::mutex> lock(stats_mutex_);
+  ++counters_.captured;
+  return c;
+}
+
+LiveFrame LivePipeline::Process(Captured captured) {
+  const auto t_start = LiveClock::now();
+  const bool display_response = options_.response == "display";
+  LiveFrame out;
+  out.index = captured.frame.index;
+  out.captured = captured.captured;
+  out.times.capture_ms = captured.capture_ms;
+  out.T_world_camera_true = captured.frame.T_world_camera_true;
+  // Tracking: the pose of this very frame (at its full size).
+  auto t0 = LiveClock::now();
+  const TrackResult track = tracker_->Process(captured.frame);
+  out.times.track_ms = MsSince(t0);
+  const Image8 image = Downsample(captured.frame.image, options_.render_divisor);
+  out.has_pose = track.has_pose;
+  out.T_world_camera = track.T_world_camera;
+  out.state = track.state;
+  out.tags_used = track.tags_used;
+  out.camera = (image.width == camera_.width && image.height == camera_.height)
+                   ? camera_
+                   : camera_.Scaled(image.width, image.height);
+
+  // The user's edits as of now.
+  std::vector<LiveObjectState> states;
+  {
+    std::lock_guard<std::mutex> lock(edit_mutex_);
+    states = states_;
+    if (preset_changed_) {
+      inserter_->set_options(InsertOptions::Preset(preset_));
+      preset_changed_ = false;
+    }
+  }
+  const int views = views_.load();
+
+  // Linear frame and the exposure gain camera / scene field.
+  t0 = LiveClock::now();
+  ImageF linear = Linearise(image, display_response);
+  if (out.has_pose && (!gain_valid_ || ++frames_since_gain_ >= options_.gain_every)) {
+    frames_since_gain_ = 0;
+    const int step = options_.gain_grid_step;
+    SceneRays rays;
+    std::vector<float> camera_lum;
+    for (int y = step / 2; y < image.height; y += step)
+      for (int x = step / 2; x < image.width; x += step) {
+        const float* px = linear.Pixel(x, y);
+        const float lum = Luminance(px, 3);
+        // Skip clipped and near-black pixels: the ratio there says little.
+        const float white = display_response ? kDisplayCap / (1 - kDisplayCap) : 1.0f;
+        if (!(lum > 1e-3f && px[0] < 0.9f * white && px[1] < 0.9f * white && px[2] < 0.9f * white)) continue;
+        const Vec3 d = Normalized(out.T_world_camera.Rotate(Unproject(out.camera, {x + 0.5, y + 0.5})));
+        const auto range = IntersectBox(scene_.Box(), out.T_world_camera.translation, d);
+        if (!range) continue;
+        rays.Add(Vec3f(out.T_world_camera.translation), Vec3f(d), static_cast<float>(range->first),
+                 static_cast<float>(range->second));
+        camera_lum.push_back(lum);
+      }
+    SceneSamples samples;
+    scene_.RenderRays(rays, samples);
+    std::vector<double> ratios;
+    for (size_t i = 0; i < rays.size(); ++i) {
+      // Rays that met a surface, compared by their radiance Ĉ/Ô (a fast NeRF
+      // often stays below full opacity on solid surfaces).
+      const float o = samples.opacity[i];
+      if (!(o >= kSurfaceOpacity)) continue;
+      const float c[3] = {samples.colour[i].x / o, samples.colour[i].y / o, samples.colour[i].z / o};
+      const float scene_lum = Luminance(c, 3);
+      if (scene_lum > 1e-6f && std::isfinite(scene_lum)) ratios.push_back(std::log(camera_lum[i] / scene_lum));
+    }
+    LogVerbose("live: exposure gain from " + std::to_string(ratios.size()) + " of " + std::to_string(rays.size()) +
+               " rays");
+    if (ratios.size() >= 8) {
+      std::nth_element(ratios.begin(), ratios.begin() + ratios.size() / 2, ratios.end());
+      const double g = std::exp(ratios[ratios.size() / 2]);
+      gain_ = gain_valid_ ? std::exp(0.7 * std::log(gain_) + 0.3 * std::log(g)) : g;
+      gain_valid_ = true;
+    }
+  }
+  out.exposure_gain = gain_;
+  const float inv_gain = static_cast<float>(1.0 / gain_);
+  for (float& v : linear.pixels) v *= inv_gain;
+  out.times.expose_ms = MsSince(t0);
+
+  // Objects of this frame.
+  std::vector<std::unique_ptr<SsdfVisibility>> visibility;
+  std::vector<InsertObject> objects;
+  std::vector<size_t> object_index;
+  for (size_t i = 0; i < states.size(); ++i) {
+    if (!states[i].placed) continue;
+    InsertObject o;
+    o.mesh = assets_[i].mesh;
+    o.T_world_object = ObjectPose(i, states[i]);
+    o.scale = states[i].scale;
+    o.material = states[i].material;
+    if (assets_[i].field != nullptr) {
+      visibility.push_back(std::make_unique<SsdfVisibility>(*assets_[i].field, o.T_world_object, o.scale));
+      o.visibility = visibility.back().get();
+    }
+    objects.push_back(o);
+    object_index.push_back(i);
+  }
+
+  // AR: the objects over the camera frame; pixels outside the touched boxes
+  // keep the camera's own values exactly.
+  out.ar = ToRgb(image);
+  InsertLayers layers;
+  double fit_loss = -1;
+  if (out.has_pose && !objects.empty()) {
+    ImageF composite = linear;
+    out.times.insert = inserter_->Render(out.camera, out.T_world_camera, objects, composite, &layers);
+    if (out.times.insert.lights_recomputed > 0) {
+      const IncidentLight& cache = inserter_->LightCache(0);
+      if (cache.valid() && !cache.samples().directions.empty())
+        fit_loss = SgFitLoss(cache.samples(), cache.light(), inserter_->options().light.fit.hdr_floor);
+    }
+    t0 = LiveClock::now();
+    const PixelRect touched = Union(layers.gbuffer.rect, layers.kappa_rect);
+    for (int y = std::max(0, touched.y0); y < std::min(image.height, touched.y1); ++y)
+      for (int x = std::max(0, touched.x0); x < std::min(image.width, touched.x1); ++x)
+        for (int c = 0; c < 3; ++c)
+          out.ar.at(x, y, c) = ToDisplayValue(static_cast<float>(composite.at(x, y, c) * gain_), display_response);
+    out.times.display_ms += MsSince(t0);
+  }
+
+  const int side_w = std::max(16, static_cast<int>(std::lround(image.width * options_.alongside_scale)));
+  const int side_h = std::max(16, static_cast<int>(std::lround(image.height * options_.alongside_scale)));
+  if (views & kViewAlongside) {
+    t0 = LiveClock::now();
+    if (out.has_pose) {
+      const CameraIntrinsics small = out.camera.Scaled(side_w, side_h);
+      ImageF background = inserter_->RenderBackground(small, out.T_world_camera);
+      if (!objects.empty()) inserter_->Render(small, out.T_world_camera, objects, background);
+      out.alongside = ToDisplay(background, gain_, display_response);
+    } else {
+      out.alongside = Image8(side_w, side_h, 3, 40);
+      DrawText(out.alongside, "no pose yet", 4, 4);
+    }
+    out.times.alongside_ms = MsSince(t0);
+  }
+  if (views & kViewLayers) {
+    t0 = LiveClock::now();
+    const int w = image.width, h = image.height;
+    Image8 kappa = LayerTile(ExpandLayer(layers.kappa, layers.kappa_rect, w, h, 1.0f), side_w, side_h);
+    Image8 alpha = LayerTile(ExpandLayer(layers.alpha, layers.gbuffer.rect, w, h, 0.0f), side_w, side_h);
+    Image8 sphere = !objects.empty() && out.has_pose
+                        ? LightSphereTile(inserter_->Light(0), out.T_world_camera, side_h, side_h)
+                        : Image8(side_h, side_h, 3, 20);
+    DrawText(kappa, "kappa", 3, 3);
+    DrawText(alpha, "alpha", 3, 3);
+    DrawText(sphere, objects.empty() ? "light (place an object)" : "incident light", 3, 3);
+    out.layers = SideBySide({kappa, alpha, sphere});
+    out.times.layers_ms = MsSince(t0);
+  }
+
+  // HUD (in the image itself, so the window and the files show the same).
+  t0 = LiveClock::now();
+  if (hud_.load()) {
+    double fps = 0, latency = -1;
+    {
+      std::lock_guard<std::mutex> lock(stats_mutex_);
+      if (recent_display_s_.size() >= 2)
+        fps = (recent_display_s_.size() - 1) / std::max(1e-9, recent_display_s_.back() - recent_display_s_.front());
+      for (auto it = records_.rbegin(); it != records_.rend(); ++it)
+        if (it->latency_ms >= 0) {
+          latency = it->latency_ms;
+          break;
+        }
+    }
+    char line[256];
+    std::snprintf(line, sizeof line, "%.1f fps  latency %.0f ms  %s  tags %d", fps, latency,
+                  TrackingStateName(out.state), out.tags_used);
+    DrawText(out.ar, line, 4, 4);
+    const InsertTimings& it = out.times.insert;
+    std::snprintf(line, sizeof line, "ms: track %.1f  insert %.1f (kappa %.1f)  views %.1f", out.times.track_ms,
+                  it.total_ms, it.kappa_ms, out.times.alongside_ms + out.times.layers_ms);
+    DrawText(out.ar, line, 4, 17);
+  }
+  out.times.display_ms += MsSince(t0);
+  out.times.process_ms = MsSince(t_start);
+  out.finished = LiveClock::now();
+
+  LiveFrameRecord record;
+  record.index = out.index;
+  record.state = out.state;
+  record.measured = track.measured;
+  record.has_pose = out.has_pose;
+  record.T_world_camera = out.T_world_camera;
+  record.T_world_camera_true = out.T_world_camera_true;
+  record.times = out.times;
+  record.light_fit_loss = fit_loss;
+  {
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    record.t_s = std::chrono::duration<double>(out.captured - start_).count();
+    records_.push_back(record);
+    ++counters_.processed;
+  }
+  return out;
+}
+
+void LivePipeline::MarkDisplayed(const LiveFrame& frame) {
+  const auto now = LiveClock::now();
+  std::lock_guard<std::mutex> lock(stats_mutex_);
+  ++counters_.displayed;
+  const double t = std::chrono::duration<double>(now - start_).count();
+  recent_display_s_.push_back(t);
+  if (recent_display_s_.size() > 30) recent_display_s_.erase(recent_display_s_.begin());
+  for (auto it = records_.rbegin(); it != records_.rend(); ++it)
+    if (it->index == frame.index) {
+      it->latency_ms = std::chrono::duration<double, std::milli>(now - frame.captured).count();
+      break;
+    }
+}
+
+std::optional<LiveFrame> LivePipeline::Step() {
+  for (;;) {
+    bool end = false;
+    std::optional<Captured> c = Capture(end);
+    if (end) {
+      source_ended_.store(true);
+      return std::nullopt;
+    }
+    if (c) return Process(std::move(*c));
+  }
+}
+
+void LivePipeline::CaptureLoop() {
+  while (!stop_.load()) {
+    bool end = false;
+    std::optional<Captured> c = Capture(end);
+    if (end) break;
+    if (c) input_.Push(std::move(*c));
+  }
+  source_ended_.store(true);
+  input_.Close();
+}
+
+void LivePipeline::ProcessLoop() {
+  while (!stop_.load()) {
+    std::optional<Captured> c = input_.Pop(std::chrono::milliseconds(100));
+    if (!c) {
+      if (input_.closed()) break;
+      continue;
+    }
+    output_.Push(Process(std::move(*c)));
+  }
+  output_.Close();
+}
+
+void LivePipeline::Start() {
+  if (capture_thread_.joinable()) return;
+  stop_.store(false);
+  capture_thread_ = std::thread([this] { CaptureLoop(); });
+  process_thread_ = std::thread([this] { ProcessLoop(); });
+}
+
+void LivePipeline::Stop() {
+  stop_.store(true);
+  if (capture_thread_.joinable()) capture_thread_.join();
+  if (process_thread_.joinable()) process_thread_.join();
+}
+
+std::optional<LiveFrame> LivePipeline::TakeLatest(std::chrono::milliseconds timeout) { return output_.Pop(timeout); }
+
+LiveCounters LivePipeline::counters() const {
+  std::lock_guard<std::mutex> lock(stats_mutex_);
+  LiveCounters c = counters_;
+  c.dropped_before_process = input_.dropped();
+  c.dropped_before_display = output_.dropped();
+  return c;
+}
+
+std::vector<LiveFrameRecord> LivePipeline::records() const {
+  std::lock_guard<std::mutex> lock(stats_mutex_);
+  return records_;
+}
+
+double LivePipeline::mean_fps() const {
+  std::lock_guard<std::mutex> lock(stats_mutex_);
+  if (counters_.displayed < 2 || !have_start_) return 0;
+  const double seconds = std::chrono::duration<double>(LiveClock::now() - start_).count();
+  return seconds > 0 ? counters_.displayed / seconds : 0;
+}
+
+}  // namespace nerfar

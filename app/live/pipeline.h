@@ -1,0 +1,230 @@
+// The live AR pipeline, shared by the window and the headless path (every
+// view the window shows is an 8-bit image made here): capture -> tracking
+// (the pose of that same frame) -> exposure match -> insertion (render/insert)
+// -> views (AR overlay, the NeRF "alongside" view, layers κ | α | incident
+// light sphere) with per-stage milliseconds. Threaded: a capture thread and a
+// processing thread joined by latest-value queues, so capture never waits for
+// a slow stage (stale frames are dropped and counted); or stepped (Step(),
+// every frame processed in order, for files). No GL here. World frame = the
+// board's (metres, z up); OpenCV camera axes; frames in the camera's 8-bit
+// display encoding, composited in the scene field's linear radiance units.
+#pragma once
+
+#include <atomic>
+#include <chrono>
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "app/live/latest_queue.h"
+#include "calib/board.h"
+#include "calib/camera.h"
+#include "calib/core/frame_source.h"
+#include "calib/core/image.h"
+#include "calib/core/math.h"
+#include "render/insert/inserter.h"
+#include "render/insert/scene_field.h"
+#include "render/mesh/mesh.h"
+#include "render/sg/brdf.h"
+#include "render/ssdf/ssdf.h"
+#include "tracking/tracker.h"
+
+namespace nerfar {
+
+using LiveClock = std::chrono::steady_clock;
+
+// A virtual object the user can place: its mesh (local frame, +z up) and, if
+// baked, its SSDF field (shadows). Loans to the pipeline.
+struct LiveAsset {
+  std::string name;
+  const TriangleMesh* mesh = nullptr;
+  const SsdfField* field = nullptr;  // nullptr: no shadows, no self-shadows
+  SgMaterial material;               // initial material
+};
+
+// What the user edits, per object.
+struct LiveObjectState {
+  bool placed = false;
+  Vec3 anchor_world;   // surface point the object stands on (its lowest point), world
+  double yaw_rad = 0;  // rotation about the world z axis
+  double scale = 1.0;  // uniform scale of the mesh
+  SgMaterial material;
+};
+
+struct LiveOptions {
+  std::string preset = "fast";  // insertion preset (render/insert): fast | balanced | accurate
+  TrackerOptions tracker = TrackerOptions::Preset("fast");
+  // How 8-bit frames map to linear light: "display" (the synthetic camera's
+  // sRGB of Reinhard x/(1+x), inverted) or "srgb" (a plain sRGB camera).
+  std::string response = "srgb";
+  // Release frames at their time stamps (files and the synthetic stream,
+  // which would otherwise run as fast as they render); live cameras pace themselves.
+  bool pace = true;
+  // The AR composite is made at the frame size divided by this (1-4; box
+  // filter): tracking keeps the full frame (small tags need the pixels),
+  // insertion costs 1/divisor² as much.
+  int render_divisor = 1;
+  double alongside_scale = 0.5;  // size of the alongside and layers views relative to the frame
+  int gain_every = 15;           // frames between exposure-gain updates (NeRF vs camera, coarse grid)
+  int gain_grid_step = 8;        // pixel step of that grid
+  bool hud = true;               // HUD text drawn into the AR view (fps, stages, state, latency)
+
+  std::vector<std::string> Validate() const;
+};
+
+// Views (bit flags): the pipeline only renders what is shown.
+enum LiveView : int { kViewAr = 1, kViewAlongside = 2, kViewLayers = 4 };
+
+// Milliseconds spent on one frame by each stage.
+struct LiveStageTimes {
+  double capture_ms = 0;  // the source's Next() (for the synthetic camera: its rendering)
+  double track_ms = 0;    // tag detection + pose + filter
+  double expose_ms = 0;   // linearising the frame and the exposure gain
+  InsertTimings insert;   // light, fit, raster, shade, occlusion, κ (render/insert)
+  double alongside_ms = 0;
+  double layers_ms = 0;
+  double display_ms = 0;  // tone mapping back to display, HUD
+  double process_ms = 0;  // everything after capture, up to the finished views
+};
+
+// One processed frame with its views.
+struct LiveFrame {
+  std::int64_t index = 0;
+  Image8 ar;                // camera frame with the objects (always)
+  Image8 alongside;         // NeRF rendering from the same pose with the objects (kViewAlongside)
+  Image8 layers;            // κ | α | incident-light sphere side by side (kViewLayers)
+  CameraIntrinsics camera;  // at the AR view's size
+  bool has_pose = false;
+  Pose T_world_camera;
+  std::optional<Pose> T_world_camera_true;  // synthetic sources
+  TrackingState state = TrackingState::kLost;
+  int tags_used = 0;
+  double exposure_gain = 1;  // camera linear / scene-field radiance
+  LiveStageTimes times;
+  LiveClock::time_point captured;  // when the frame arrived from the source
+  LiveClock::time_point finished;  // when its views were done
+};
+
+// Per-frame record kept for the session report.
+struct LiveFrameRecord {
+  std::int64_t index = 0;
+  TrackingState state = TrackingState::kLost;
+  bool measured = false;
+  bool has_pose = false;
+  Pose T_world_camera;
+  std::optional<Pose> T_world_camera_true;
+  LiveStageTimes times;
+  double latency_ms = -1;      // capture to display (-1: never displayed)
+  double t_s = 0;              // capture time since the start
+  double light_fit_loss = -1;  // SG fit loss of object 0's light when it was refitted this frame (-1: not)
+};
+
+struct LiveCounters {
+  std::uint64_t captured = 0;                // frames the source delivered
+  std::uint64_t dropped_before_process = 0;  // captured but superseded before processing
+  std::uint64_t processed = 0;
+  std::uint64_t dropped_before_display = 0;  // processed but superseded before display
+  std::uint64_t displayed = 0;
+  std::uint64_t source_errors = 0;  // corrupt / lost frames
+};
+
+class LivePipeline {
+ public:
+  // Loans: source, scene, assets outlive the pipeline. `camera` is the
+  // source's intrinsics (rescaled to frame sizes of the same aspect).
+  LivePipeline(FrameSource& source, const Board& board, const CameraIntrinsics& camera, const SceneField& scene,
+               SgMixture environment, std::vector<LiveAsset> assets, LiveOptions options);
+  ~LivePipeline();
+  LivePipeline(const LivePipeline&) = delete;
+  LivePipeline& operator=(const LivePipeline&) = delete;
+
+  // Threaded mode: capture and processing threads; TakeLatest() returns the
+  // newest finished frame (older ones are dropped and counted).
+  void Start();
+  void Stop();
+  std::optional<LiveFrame> TakeLatest(std::chrono::milliseconds timeout);
+  bool finished() const { return source_ended_.load() && output_.closed(); }
+  // Stepped mode (no threads): the next frame from the source, processed.
+  // nullopt at the end of the stream.
+  std::optional<LiveFrame> Step();
+  // The caller showed (or wrote) this frame now: records its latency.
+  void MarkDisplayed(const LiveFrame& frame);
+
+  // Placement: the scene surface under view pixel (x, y) of the AR view of
+  // `frame` (NeRF opacity-weighted depth along the pixel ray); nullopt where
+  // the ray meets no surface (opacity below 0.3).
+  std::optional<Vec3> PickSurface(const LiveFrame& frame, double x, double y) const;
+
+  // Edits (thread-safe; applied from the next processed frame).
+  size_t object_count() const { return assets_.size(); }
+  LiveObjectState object(size_t i) const;
+  void set_object(size_t i, const LiveObjectState& state);
+  void set_preset(const std::string& preset);  // InputError for an unknown name
+  std::string preset() const;
+  void set_views(int views) { views_.store(views); }
+  int views() const { return views_.load(); }
+  void set_hud(bool on) { hud_.store(on); }
+
+  // World pose of object i for a state (lowest point on the anchor, yaw about z).
+  Pose ObjectPose(size_t i, const LiveObjectState& state) const;
+
+  LiveCounters counters() const;
+  std::vector<LiveFrameRecord> records() const;
+  const LiveOptions& options() const { return options_; }
+  double mean_fps() const;  // displayed frames / seconds since the first capture
+
+ private:
+  struct Captured {
+    Frame frame;
+    LiveClock::time_point captured;
+    double capture_ms = 0;
+  };
+  std::optional<Captured> Capture(bool& end);  // one frame from the source (paced)
+  LiveFrame Process(Captured captured);
+  void CaptureLoop();
+  void ProcessLoop();
+
+  FrameSource& source_;
+  CameraIntrinsics camera_;
+  const SceneField& scene_;
+  std::vector<LiveAsset> assets_;
+  LiveOptions options_;
+  std::unique_ptr<Tracker> tracker_;
+  std::unique_ptr<Inserter> inserter_;
+
+  mutable std::mutex edit_mutex_;
+  std::vector<LiveObjectState> states_;
+  std::string preset_;
+  bool preset_changed_ = false;
+  std::atomic<int> views_{kViewAr};
+  std::atomic<bool> hud_{true};
+
+  // Exposure gain (processing thread only).
+  double gain_ = 1;
+  bool gain_valid_ = false;
+  std::int64_t frames_since_gain_ = 0;
+
+  // Pacing and statistics.
+  bool have_start_ = false;
+  LiveClock::time_point start_;
+  std::int64_t first_t_ns_ = 0;
+  mutable std::mutex stats_mutex_;
+  LiveCounters counters_;
+  std::vector<LiveFrameRecord> records_;
+  std::vector<double> recent_display_s_;  // display times of the last frames (fps in the HUD)
+
+  LatestQueue<Captured> input_;
+  LatestQueue<LiveFrame> output_;
+  std::atomic<bool> stop_{false};
+  std::atomic<bool> source_ended_{false};
+  std::thread capture_thread_, process_thread_;
+};
+
+// Stage names and values of LiveStageTimes in a fixed order (tables, JSON).
+std::vector<std::pair<std::string, double>> StageList(const LiveStageTimes& times);
+
+}  // namespace nerfar

@@ -1,0 +1,44 @@
+// The session of a live run and its report. `nerfar live` writes
+// SESSION/session.json (options, counters, one record per processed frame:
+// tracking state, pose, true pose where the source knows it, per-stage ms,
+// capture-to-display latency) and the last views (last_ar.png, ...); the
+// report is computed from those and the SCENE's files: calibration RMS,
+// tracking jitter and loss (and error against the truth), light-fit error,
+// environment energy, SSDF error estimate (field against brute-force ray
+// casting), fps and per-stage times. Written as SESSION/report.json and a
+// one-page SESSION/report.png.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "app/live/pipeline.h"
+#include "calib/core/json.h"
+
+namespace nerfar {
+
+struct SessionInfo {
+  std::string scene_dir;             // SCENE ("" for none)
+  std::string source;                // the source string
+  std::string camera_path;           // camera.json / transforms.json used ("" = the source's own)
+  std::vector<std::string> objects;  // object files
+  std::string mode;                  // "window" or "headless"
+  double wall_s = 0;                 // seconds from start to end
+  int threads = 0;
+  std::string load;  // /proc/loadavg at the end (others' work inflates times)
+};
+
+// SESSION/session.json (atomic).
+void WriteSession(const std::string& session_dir, const SessionInfo& info, const LivePipeline& pipeline);
+
+// The report of a session folder (with session.json), or of a SCENE folder
+// (scene items only, plus its newest sessions/* if any). InputError when
+// the folder is neither.
+Json BuildReport(const std::string& dir, std::string* report_dir = nullptr);
+// Writes report.json and report.png into report_dir and prints a table.
+void WriteReport(const Json& report, const std::string& report_dir);
+
+// Median and 90th percentile of values (NaN for none).
+double PercentileOf(std::vector<double> values, double q);
+
+}  // namespace nerfar
