@@ -114,6 +114,8 @@ InsertOptions InsertOptions::Preset(const std::string& name) {
     o.shadow_reach_radii = 20.0;
     o.shadow_epsilon = 5e-4;
     o.kappa_step = 1;
+    o.kappa_coarse_factor = 2;
+    o.kappa_refine_delta = 0.01;
   } else {
     ThrowInputError("preset", "unknown preset '" + name + "' (expected fast, balanced or accurate)");
   }
@@ -132,6 +134,9 @@ std::vector<std::string> InsertOptions::Validate() const {
   check(std::isfinite(shadow_epsilon) && shadow_epsilon >= 0 && shadow_epsilon < 1,
         "shadow_epsilon: out of range (expected 0 <= value < 1)");
   check(kappa_step >= 1 && kappa_step <= 64, "kappa_step: out of range (expected 1 to 64)");
+  check(kappa_coarse_factor >= 1 && kappa_coarse_factor <= 64, "kappa_coarse_factor: out of range (expected 1 to 64)");
+  check(std::isfinite(kappa_refine_delta) && kappa_refine_delta >= 0 && kappa_refine_delta <= 1,
+        "kappa_refine_delta: out of range (expected 0 to 1)");
   check(std::isfinite(receiver_min_opacity) && receiver_min_opacity >= 0 && receiver_min_opacity <= 1,
         "receiver_min_opacity: out of range (expected 0 to 1)");
   return problems;
@@ -152,6 +157,8 @@ std::string InsertOptions::ToJson() const {
   j["shadow_reach_radii"] = shadow_reach_radii;
   j["shadow_epsilon"] = shadow_epsilon;
   j["kappa_step"] = kappa_step;
+  j["kappa_coarse_factor"] = kappa_coarse_factor;
+  j["kappa_refine_delta"] = kappa_refine_delta;
   j["receiver_min_opacity"] = receiver_min_opacity;
   return j.dump();
 }
@@ -475,98 +482,150 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
       const float reach = static_cast<float>(options_.shadow_reach_radii);
       const float min_opacity = static_cast<float>(options_.receiver_min_opacity);
       const double one_minus_eps = 1.0 - options_.shadow_epsilon;
+      // κ at the grid nodes (row, cols[j]) of one row.
+      const auto eval_row = [&](size_t row, const std::vector<size_t>& cols) {
+        if (cols.empty()) return;
+        const int y = ys[row];
+        const size_t nc = cols.size();
+        SceneRays rays;
+        SceneSamples out;
+        std::vector<Vec3f> points(nc), normals;
+        std::vector<float> opacity(nc, 0.0f);
+        std::vector<Vec3f> dirs(nc);
+        for (size_t ix = 0; ix < nc; ++ix) dirs[ix] = CameraRayDirection(camera, T_world_camera, xs[cols[ix]], y);
+        if (receivers.distance) {
+          for (size_t ix = 0; ix < nc; ++ix) {
+            const float t = receivers.distance->at(xs[cols[ix]], y);
+            opacity[ix] = t > 0.0f && std::isfinite(t) ? 1.0f : 0.0f;
+            points[ix] = eye + dirs[ix] * (opacity[ix] > 0 ? t : 0.0f);
+          }
+        } else {
+          rays.Reserve(nc);
+          for (size_t ix = 0; ix < nc; ++ix) {
+            const auto range = IntersectBox(box, Vec3(eye), Vec3(dirs[ix]));
+            rays.Add(eye, dirs[ix], range ? static_cast<float>(range->first) : 0.0f,
+                     range ? static_cast<float>(range->second) : 0.0f);
+          }
+          scene_.RenderRays(rays, out);
+          for (size_t ix = 0; ix < nc; ++ix) {
+            opacity[ix] = std::isfinite(out.opacity[ix]) ? out.opacity[ix] : 0.0f;
+            const float t = std::isfinite(out.depth[ix]) ? out.depth[ix] : 0.0f;
+            points[ix] = eye + dirs[ix] * t;
+          }
+        }
+        if (receivers.normal) {
+          normals.resize(nc);
+          for (size_t ix = 0; ix < nc; ++ix)
+            normals[ix] = {receivers.normal->at(xs[cols[ix]], y, 0), receivers.normal->at(xs[cols[ix]], y, 1),
+                           receivers.normal->at(xs[cols[ix]], y, 2)};
+        } else {
+          scene_.Normals(points, normals);
+        }
+        std::vector<double> s_bound, s_exact, cap;
+        std::vector<float> ssd;
+        for (size_t ix = 0; ix < nc; ++ix) {
+          float& kappa = kappa_grid[row * nx + cols[ix]];
+          if (opacity[ix] < min_opacity || !Finite(points[ix])) continue;
+          Vec3f n = normals[ix];
+          if (!Finite(n) || Dot(n, n) < 0.25f) continue;
+          n = Normalized(n);
+          const Vec3f x = points[ix];
+          // The owner of the light: the caster nearest in units of its radius.
+          size_t owner = casters[0];
+          float best = std::numeric_limits<float>::infinity();
+          for (size_t j : casters) {
+            const float rel = Length(x - spheres[j].center) / spheres[j].radius;
+            if (rel < best) {
+              best = rel;
+              owner = j;
+            }
+          }
+          if (best > reach) continue;
+          const LightPrep& p = preps[owner];
+          const size_t m = p.axes.size();
+          if (m == 0) continue;
+          const SgMixture cw = CosineWeightedLight(used_lights_[owner], Vec3(n));
+          // Lower bound of S from the bounding spheres: if even that
+          // leaves κ ≥ 1 − ε, nothing needs the SSDF.
+          s_bound.assign(m, kPi);
+          for (size_t j : casters)
+            for (size_t l = 0; l < m; ++l)
+              s_bound[l] =
+                  std::min<double>(s_bound[l], BallSsdLowerBound(spheres[j].center, spheres[j].radius, x, p.axes[l]));
+          if (ShadowRatio(cw, Vec3(n), s_bound) >= one_minus_eps) continue;
+          ++queries_per_row[row];
+          s_exact.assign(m, kPi);
+          cap.assign(m, 0.0);
+          ssd.resize(m);
+          for (size_t j : casters) {
+            if (!p.queries[j]) continue;
+            p.queries[j]->Ssd(&x, 1, ssd.data());
+            const float dist = Length(x - spheres[j].center);
+            const double alpha =
+                dist > spheres[j].radius ? std::asin(std::min(1.0f, spheres[j].radius / dist)) : 0.5 * kPi;
+            for (size_t l = 0; l < m; ++l) {
+              if (ssd[l] < s_exact[l]) {
+                s_exact[l] = ssd[l];
+                cap[l] = alpha;
+              }
+            }
+          }
+          const double k = ShadowRatioCapped(cw, Vec3(n), s_exact, cap);
+          kappa = std::isfinite(k) ? static_cast<float>(std::clamp(k, 0.0, 1.0)) : 1.0f;
+        }
+      };
+      // Coarse to fine: κ at every coarse_factor-th node; cells whose corners
+      // differ by more than kappa_refine_delta get all their nodes, the
+      // others are interpolated (κ varies slowly away from edges).
+      size_t factor = static_cast<size_t>(std::max(1, options_.kappa_coarse_factor));
+      if (nx < 2 * factor || ny < 2 * factor) factor = 1;  // too small a grid to coarsen
+      const auto coarse_axis = [factor](size_t n) {
+        std::vector<size_t> c;
+        for (size_t i = 0; i < n; i += factor) c.push_back(i);
+        if (c.back() != n - 1) c.push_back(n - 1);
+        return c;
+      };
+      const std::vector<size_t> cx = coarse_axis(nx), cy = coarse_axis(ny);
+      std::vector<uint8_t> is_coarse_row(ny, 0);
+      for (size_t r : cy) is_coarse_row[r] = 1;
       ParallelFor(
-          ny,
-          [&](size_t row) {
-            const int y = ys[row];
-            SceneRays rays;
-            SceneSamples out;
-            std::vector<Vec3f> points(nx), normals;
-            std::vector<float> opacity(nx, 0.0f);
-            std::vector<Vec3f> dirs(nx);
-            for (size_t ix = 0; ix < nx; ++ix) dirs[ix] = CameraRayDirection(camera, T_world_camera, xs[ix], y);
-            if (receivers.distance) {
-              for (size_t ix = 0; ix < nx; ++ix) {
-                const float t = receivers.distance->at(xs[ix], y);
-                opacity[ix] = t > 0.0f && std::isfinite(t) ? 1.0f : 0.0f;
-                points[ix] = eye + dirs[ix] * (opacity[ix] > 0 ? t : 0.0f);
+          cy.size(), [&](size_t i) { eval_row(cy[i], cx); }, 1);
+      if (factor > 1) {
+        // Nodes that need their own κ: those of cells with differing corners.
+        std::vector<uint8_t> need(nx * ny, 0);
+        const float delta = static_cast<float>(options_.kappa_refine_delta);
+        for (size_t j = 0; j + 1 < cy.size(); ++j)
+          for (size_t i = 0; i + 1 < cx.size(); ++i) {
+            const float a = kappa_grid[cy[j] * nx + cx[i]], b = kappa_grid[cy[j] * nx + cx[i + 1]];
+            const float c = kappa_grid[cy[j + 1] * nx + cx[i]], d = kappa_grid[cy[j + 1] * nx + cx[i + 1]];
+            if (std::max({a, b, c, d}) - std::min({a, b, c, d}) <= delta) continue;
+            for (size_t r = cy[j]; r <= cy[j + 1]; ++r)
+              for (size_t q = cx[i]; q <= cx[i + 1]; ++q) need[r * nx + q] = 1;
+          }
+        std::vector<uint8_t> is_coarse_col(nx, 0);
+        for (size_t q : cx) is_coarse_col[q] = 1;
+        ParallelFor(
+            ny,
+            [&](size_t r) {
+              std::vector<size_t> cols;
+              for (size_t q = 0; q < nx; ++q)
+                if (need[r * nx + q] && !(is_coarse_row[r] && is_coarse_col[q])) cols.push_back(q);
+              eval_row(r, cols);
+              // The rest: bilinear in their coarse cell.
+              const size_t j = std::min<size_t>(r / factor, cy.size() - 2);
+              const float wy = float(r - cy[j]) / float(cy[j + 1] - cy[j]);
+              for (size_t q = 0; q < nx; ++q) {
+                if (need[r * nx + q] || (is_coarse_row[r] && is_coarse_col[q])) continue;
+                const size_t i = std::min<size_t>(q / factor, cx.size() - 2);
+                const float wx = float(q - cx[i]) / float(cx[i + 1] - cx[i]);
+                kappa_grid[r * nx + q] = (1 - wx) * (1 - wy) * kappa_grid[cy[j] * nx + cx[i]] +
+                                         wx * (1 - wy) * kappa_grid[cy[j] * nx + cx[i + 1]] +
+                                         (1 - wx) * wy * kappa_grid[cy[j + 1] * nx + cx[i]] +
+                                         wx * wy * kappa_grid[cy[j + 1] * nx + cx[i + 1]];
               }
-            } else {
-              rays.Reserve(nx);
-              for (size_t ix = 0; ix < nx; ++ix) {
-                const auto range = IntersectBox(box, Vec3(eye), Vec3(dirs[ix]));
-                rays.Add(eye, dirs[ix], range ? static_cast<float>(range->first) : 0.0f,
-                         range ? static_cast<float>(range->second) : 0.0f);
-              }
-              scene_.RenderRays(rays, out);
-              for (size_t ix = 0; ix < nx; ++ix) {
-                opacity[ix] = std::isfinite(out.opacity[ix]) ? out.opacity[ix] : 0.0f;
-                const float t = std::isfinite(out.depth[ix]) ? out.depth[ix] : 0.0f;
-                points[ix] = eye + dirs[ix] * t;
-              }
-            }
-            if (receivers.normal) {
-              normals.resize(nx);
-              for (size_t ix = 0; ix < nx; ++ix)
-                normals[ix] = {receivers.normal->at(xs[ix], y, 0), receivers.normal->at(xs[ix], y, 1),
-                               receivers.normal->at(xs[ix], y, 2)};
-            } else {
-              scene_.Normals(points, normals);
-            }
-            std::vector<double> s_bound, s_exact, cap;
-            std::vector<float> ssd;
-            for (size_t ix = 0; ix < nx; ++ix) {
-              float& kappa = kappa_grid[row * nx + ix];
-              if (opacity[ix] < min_opacity || !Finite(points[ix])) continue;
-              Vec3f n = normals[ix];
-              if (!Finite(n) || Dot(n, n) < 0.25f) continue;
-              n = Normalized(n);
-              const Vec3f x = points[ix];
-              // The owner of the light: the caster nearest in units of its radius.
-              size_t owner = casters[0];
-              float best = std::numeric_limits<float>::infinity();
-              for (size_t j : casters) {
-                const float rel = Length(x - spheres[j].center) / spheres[j].radius;
-                if (rel < best) {
-                  best = rel;
-                  owner = j;
-                }
-              }
-              if (best > reach) continue;
-              const LightPrep& p = preps[owner];
-              const size_t m = p.axes.size();
-              if (m == 0) continue;
-              const SgMixture cw = CosineWeightedLight(used_lights_[owner], Vec3(n));
-              // Lower bound of S from the bounding spheres: if even that
-              // leaves κ ≥ 1 − ε, nothing needs the SSDF.
-              s_bound.assign(m, kPi);
-              for (size_t j : casters)
-                for (size_t l = 0; l < m; ++l)
-                  s_bound[l] = std::min<double>(s_bound[l],
-                                                BallSsdLowerBound(spheres[j].center, spheres[j].radius, x, p.axes[l]));
-              if (ShadowRatio(cw, Vec3(n), s_bound) >= one_minus_eps) continue;
-              ++queries_per_row[row];
-              s_exact.assign(m, kPi);
-              cap.assign(m, 0.0);
-              ssd.resize(m);
-              for (size_t j : casters) {
-                if (!p.queries[j]) continue;
-                p.queries[j]->Ssd(&x, 1, ssd.data());
-                const float dist = Length(x - spheres[j].center);
-                const double alpha =
-                    dist > spheres[j].radius ? std::asin(std::min(1.0f, spheres[j].radius / dist)) : 0.5 * kPi;
-                for (size_t l = 0; l < m; ++l) {
-                  if (ssd[l] < s_exact[l]) {
-                    s_exact[l] = ssd[l];
-                    cap[l] = alpha;
-                  }
-                }
-              }
-              const double k = ShadowRatioCapped(cw, Vec3(n), s_exact, cap);
-              kappa = std::isfinite(k) ? static_cast<float>(std::clamp(k, 0.0, 1.0)) : 1.0f;
-            }
-          },
-          1);
+            },
+            1);
+      }
       for (size_t q : queries_per_row) layers.kappa_queries += q;
       // Bilinear from the sample grid to every pixel; multiply the background
       // where no object covers it.

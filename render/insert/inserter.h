@@ -47,7 +47,12 @@ struct InsertOptions {
   // Receivers whose κ, bounded from below through each object's bounding
   // sphere, cannot fall under 1 − shadow_epsilon keep κ = 1 (no SSDF query).
   double shadow_epsilon = 2e-3;
-  int kappa_step = 2;                 // κ at every kappa_step-th pixel, bilinear in between (1: every pixel)
+  int kappa_step = 2;  // κ at every kappa_step-th pixel, bilinear in between (1: every pixel)
+  // κ first at every kappa_coarse_factor-th node of that grid; a coarse cell
+  // whose corners differ by more than kappa_refine_delta gets all its nodes,
+  // the others are interpolated (1: every node of the grid).
+  int kappa_coarse_factor = 4;
+  double kappa_refine_delta = 0.02;
   double receiver_min_opacity = 0.5;  // pixels whose scene opacity is below this have no surface: κ = 1
 
   // "fast", "balanced" (the defaults) or "accurate"; InputError otherwise.

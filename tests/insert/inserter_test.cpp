@@ -274,6 +274,38 @@ TEST(Shadow, KappaStepInterpolatesNearTheExactField) {
   EXPECT_LT(sum / shadow, 0.2);
 }
 
+TEST(Shadow, CoarseToFineMatchesEveryNode) {
+  const AnalyticScene scene(TableOnly());
+  const SphereObject object({0.0, 0.0, 0.06}, 0.05);
+  const CameraIntrinsics camera = testing::TestCamera(160, 120);
+  const Pose cam = LookAt({0.25, -0.3, 0.35}, {0.02, 0.0, 0.0});
+  SgMixture light = OneLobe({0.4, 0.1, 1.0}, 40.0, 5.0);
+  light.push_back(OneLobe({0, 0, 1}, 0.5, 0.3)[0]);
+  InsertOptions every, coarse;
+  every.kappa_step = coarse.kappa_step = 1;
+  every.kappa_coarse_factor = 1;
+  coarse.kappa_coarse_factor = 4;
+  ImageF fa(camera.width, camera.height, 3, 1.0f), fb = fa;
+  InsertLayers la, lb;
+  Inserter(scene, {}, every).Render(camera, cam, {object.Object(&light)}, fa, &la);
+  Inserter(scene, {}, coarse).Render(camera, cam, {object.Object(&light)}, fb, &lb);
+  ASSERT_EQ(la.kappa.pixels.size(), lb.kappa.pixels.size());
+  double sum = 0, shadow = 0, worst = 0;
+  for (size_t i = 0; i < la.kappa.pixels.size(); ++i) {
+    const double d = std::abs(la.kappa.pixels[i] - lb.kappa.pixels[i]);
+    sum += d;
+    worst = std::max(worst, d);
+    shadow += 1 - la.kappa.pixels[i];
+  }
+  ASSERT_GT(shadow, 10.0);
+  // Cells are refined wherever their corners differ by more than 0.02, so
+  // the interpolated cells are off by about that at most; summed, a few
+  // percent of the shadow (the soft ambient tail is the interpolated part).
+  EXPECT_LT(sum / shadow, 0.05);
+  EXPECT_LT(worst, 0.1);
+  EXPECT_LT(lb.kappa_queries, la.kappa_queries);  // fewer SSDF queries: the point of it
+}
+
 // ----------------------------------------------------- shading, self-shadow
 
 TEST(Shading, ConvexObjectIsNotDarkenedByItsOwnField) {
