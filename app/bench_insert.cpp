@@ -156,7 +156,8 @@ void GroundTruthQuality(const std::string& scenes_dir, const std::string& scene_
     ImageF distance, normal;
     ReceiversFromDepth(depth, dataset.camera, dataset.frames[v].T_world_camera, distance, normal);
     ImageF frame = bg;
-    inserter.Render(dataset.camera, dataset.frames[v].T_world_camera, {object}, frame, nullptr, {&distance, &normal});
+    inserter.Render(dataset.camera, dataset.frames[v].T_world_camera, {object}, frame, nullptr,
+                    {&distance, &normal, true});
     const double psnr = ObjectPsnrTm(frame, gt, mask);
     const ShadowError se = ComputeShadowError(frame, bg, gt, bg, mask);
     if (std::isfinite(psnr)) psnr_sum += psnr, ++psnr_n;
@@ -164,7 +165,8 @@ void GroundTruthQuality(const std::string& scenes_dir, const std::string& scene_
   }
   const std::string key = scene_name + "_" + object_name;
   const std::string note =
-      "balanced, SSDF baked fast; GT inputs: true probe fitted (32 SGs), true depth as receivers, bg_XXX frames";
+      "balanced, SSDF baked fast; GT inputs: true probe fitted (32 SGs), true depth as receivers and occluder, "
+      "bg_XXX frames";
   figures.push_back({"psnr_obj_" + key + "_db", psnr_n ? psnr_sum / psnr_n : NAN, "dB", note});
   figures.push_back({"shadow_err_" + key, shadow_n ? shadow_sum / shadow_n : NAN, "", note});
   figures.push_back({"light_err_fit_" + key, LightingError(light, probe), "", "32-SG fit of the true probe"});
