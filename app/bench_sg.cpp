@@ -95,6 +95,17 @@ std::vector<BenchFigure> BenchSg(const BenchOptions& options) {
       {"fit_warm_ms",
        MedianMilliseconds([&] { FitSg(moved, fit_options, &cold, &warm_report); }, repeats * 3, min_seconds), "ms",
        condition + ", 32 lobes, light turned 2 deg (budget 3)"});
+  {
+    // The fastest of 30 warm fits: on a shared machine the median carries the
+    // other processes' load, the minimum is the least disturbed run.
+    double best = 1e300;
+    for (int r = 0; r < (options.quick ? 5 : 30); ++r) {
+      const double t0 = NowSeconds();
+      FitSg(moved, fit_options, &cold);
+      best = std::min(best, (NowSeconds() - t0) * 1e3);
+    }
+    figures.push_back({"fit_warm_ms_best", best, "ms", condition + ", 32 lobes, light turned 2 deg, fastest of 30"});
+  }
   SgFitReport moved_cold_report;
   FitSg(moved, fit_options, nullptr, &moved_cold_report);
   figures.push_back({"fit_warm_loss_ratio", warm_report.final_loss / moved_cold_report.final_loss, "",
@@ -147,8 +158,10 @@ std::vector<BenchFigure> BenchSg(const BenchOptions& options) {
           },
           repeats, min_seconds);
       if (!std::isfinite(sink)) figures.push_back({"shade_nonfinite", 1, "", name});
-      figures.push_back({std::string("shade_ns_per_pixel_32_lobes") + (std::string(name) == "diffuse" ? "" : "_glossy"),
-                         ms * 1e6 / pixels, "ns", std::string(name) + " material, with gamma, 1 thread"});
+      figures.push_back({std::string("shade_ns_per_pixel") + (std::string(name) == "diffuse" ? "" : "_glossy"),
+                         ms * 1e6 / pixels, "ns",
+                         std::string(name) + " material, 32 lobes, with gamma, 1 thread (insertion budget: ~65 ns "
+                                             "on 2 cores, 6 ms for 92k pixels)"});
     }
     // γ for 32 lobes per pixel (the SSDF values given).
     std::vector<SgTableRow> rows;
