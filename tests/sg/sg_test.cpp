@@ -555,6 +555,27 @@ TEST(SgShading, PreparedShaderAgreesWithTheReference) {
     }
 }
 
+TEST(SgShading, PreparedShaderHandlesAnyLobeCountAndNoGamma) {
+  // Lobe counts that are not a multiple of the 8 lanes (padding) and the
+  // extremes 1 and 64, with γ absent (all 1), against the double reference;
+  // same 1e-4 relative tolerance as above (float rounding and FastExp).
+  for (int count : {1, 5, 13, 64}) {
+    SgMixture light;
+    const std::vector<Vec3> axes = FibonacciSphere(count);
+    for (int k = 0; k < count; ++k)
+      light.push_back({axes[k], std::pow(10.0, -1.0 + 4.0 * k / std::max(1, count - 1)), Vec3(1.0 + k, 2.0, 0.5)});
+    const SgShader shader(light);
+    EXPECT_EQ(shader.lobe_count(), count);
+    for (const SgMaterial& m : {SgMaterial{Vec3(0.8, 0.35, 0.2), 0.7, 0.0}, SgMaterial{Vec3(0.9, 0.9, 0.9), 0.1, 1.0}})
+      for (const Vec3& n : FibonacciSphere(8)) {
+        const Vec3 v = Normalized(n + Vec3(-0.2, 0.3, 0.2));
+        const Vec3 ref = ShadeSg(light, m, n, v);
+        const Vec3f got = shader.Shade(m, Vec3f(n), Vec3f(v));
+        for (int c = 0; c < 3; ++c) EXPECT_NEAR(got[c], ref[c], 1e-4 * std::abs(ref[c]) + 1e-6) << count;
+      }
+  }
+}
+
 TEST(SgShading, FastExpIsAccurate) {
   // Against std::exp (double) on a dense grid over the normal float range:
   // measured maximum relative error < 4e-7 (the header's figure); tolerance
