@@ -50,7 +50,7 @@ int RunDemo(const CommandArgs& args) {
   parser.Flag("--headless", &headless, "no window even with a display: write demo.mp4, contact_sheet.png, timing.json");
   parser.Flag("--quick", &quick, "tiny everything (tests, a first look): a worse NeRF in well under a minute");
   parser.Option("--minutes", &minutes, "M", "training budget in minutes (default 3; --quick 0.3)");
-  parser.Option("--frames", &frames, "N", "live frames (headless default 150, --quick 12; window: until closed)");
+  parser.Option("--frames", &frames, "N", "live frames (headless default 60, --quick 12; window: until closed)");
   parser.Option("--size", &size, "WxH",
                 "synthetic camera size (default 640x480: tracked at that size, composited at half)");
   parser.Flag("--restart", &restart, "run every stage again (ignore DIR/stages/*.done)");
@@ -78,7 +78,7 @@ int RunDemo(const CommandArgs& args) {
   if (quick && minutes == 3.0) minutes = 0.3;
   if (size.empty()) size = quick ? "480x360" : "640x480";
   const bool window_mode = !headless && LiveWindow::DisplayAvailable();
-  if (frames == 0 && !window_mode) frames = quick ? 12 : 150;
+  if (frames == 0 && !window_mode) frames = quick ? 12 : 60;
 
   const fs::path dir(output);
   MakeDirectories((dir / "stages").string());
@@ -97,11 +97,12 @@ int RunDemo(const CommandArgs& args) {
        RunTrain,
        {dataset, "-o", (dir / "scene.nerf").string(), "--preset", "fast", "--minutes", minutes_text},
        (dir / "scene.nerf").string()},
-      {"env",
-       "the distant light the NeRF does not hold",
-       RunEnv,
-       {(dir / "scene.nerf").string(), "-o", (dir / "env.json").string(), "--preview", (dir / "env.exr").string(),
-        "--preset", "fast"},
+      {"env", "the distant light the NeRF does not hold", RunEnv,
+       quick ? CommandArgs{(dir / "scene.nerf").string(), "-o", (dir / "env.json").string(), "--preview",
+                           (dir / "env.exr").string(), "--preset", "fast", "--set", "views=12", "--set",
+                           "pixels_per_view=32", "--set", "rays_per_point=64", "--set", "iterations=4"}
+             : CommandArgs{(dir / "scene.nerf").string(), "-o", (dir / "env.json").string(), "--preview",
+                           (dir / "env.exr").string(), "--preset", "fast"},
        (dir / "env.json").string()},
       {"bake", "the torus's visibility field (shadows)", RunBake,
        quick ? CommandArgs{(dir / "dataset" / "objects" / "torus_diffuse.obj").string(), "--material",

@@ -73,7 +73,7 @@ int RunLive(const CommandArgs& args) {
   parser.Option("--board", &board_path, "B", "board.json (default: SCENE's, or the synthetic stream's)");
   parser.Flag("--headless", &headless, "no window even with a display: write the views to files");
   parser.Option("-o", &output, "DIR", "session folder (default SCENE/sessions/<UTC time>)");
-  parser.Option("--frames", &frames, "N", "stop after N frames (headless default 150; window: until closed)");
+  parser.Option("--frames", &frames, "N", "stop after N frames (headless default 60; window: until closed)");
   parser.Option("--preset", &preset, "P", "insertion preset: fast (default) | balanced | accurate");
   parser.Option("--tracker-preset", &tracker_preset, "P", "tag detector preset: fast (default) | balanced | accurate");
   parser.Option("--response", &response, "R", "camera response: display (synthetic default) | srgb (cameras default)");
@@ -195,8 +195,9 @@ int RunLive(const CommandArgs& args) {
   const std::string session_dir =
       !output.empty() ? output : (fs::path(scene_dir) / "sessions" / SessionName()).string();
   MakeDirectories(session_dir);
-  pipeline.set_views(views != 0 ? (views | kViewAr)
-                                : (window_mode ? kViewAr : (kViewAr | kViewAlongside | kViewLayers)));
+  const int requested_views =
+      views != 0 ? (views | kViewAr) : (window_mode ? kViewAr : (kViewAr | kViewAlongside | kViewLayers));
+  pipeline.set_views(requested_views);
   LogInfo("live: " + source->Describe() + ", scene " + paths.nerf + ", " + std::to_string(objects.size()) +
           " object(s), preset " + preset + ", response " + options.response + ", threads " +
           std::to_string(ThreadCount()) + ", session " + session_dir);
@@ -227,7 +228,7 @@ int RunLive(const CommandArgs& args) {
     ui.StopRecording();
     last = ui.shown();
   } else {
-    const int limit = frames > 0 ? frames : 150;
+    const int limit = frames > 0 ? frames : 60;
     const std::string video_file = !video_path.empty() ? video_path : (fs::path(session_dir) / "live.mp4").string();
     std::unique_ptr<VideoWriter> video;
     std::vector<Image8> sheet_tiles;
@@ -263,6 +264,9 @@ int RunLive(const CommandArgs& args) {
       pipeline.Stop();
     } else {
       while (n < limit) {
+        // The extra views cost more than the AR frame: made for the frames
+        // that go into the contact sheet (the video holds the AR view).
+        pipeline.set_views(n % sheet_every == sheet_every - 1 ? requested_views : kViewAr);
         std::optional<LiveFrame> f = pipeline.Step();
         if (!f) break;
         consume(std::move(*f));
