@@ -12,6 +12,7 @@
 #include "calib/core/image_io.h"
 #include "calib/dataset.h"
 #include "render/synth/camera_stream.h"
+#include "tracking/aruco_reference.h"
 #include "tracking/tracker.h"
 
 namespace nerfar {
@@ -24,6 +25,51 @@ double CpuSeconds() {
   timespec ts{};
   clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
   return ts.tv_sec + ts.tv_nsec * 1e-9;
+}
+
+// Our detector against OpenCV's aruco (DICT_APRILTAG_36h11) on the same
+// frames, both through the same board pose: time (CPU ms per frame) and
+// median pose error.
+void BenchAruco(const std::vector<Image8>& frames, const std::vector<Pose>& truth, const Board& board,
+                const CameraIntrinsics& camera, const std::string& label, std::vector<BenchFigure>& figures) {
+  if (!ArucoAvailable()) return;
+  struct Method {
+    const char* name;
+    int kind;  // 0, 4, 5: ours fast, accurate, accurate with the edge re-fit; 1..3: aruco refine none, subpix, apriltag
+  };
+  for (const Method& m : {Method{"ours_fast", 0}, Method{"ours_accurate", 4}, Method{"ours_accurate_edgefit", 5},
+                          Method{"aruco_none", 1}, Method{"aruco_subpix", 2}, Method{"aruco_apriltag", 3}}) {
+    TagDetectorOptions ours_options = TagDetectorOptions::Preset(m.kind >= 4 ? "accurate" : "fast");
+    ours_options.response = "display";  // both frame sets are display tone-mapped
+    ours_options.refine_corners = m.kind == 5;
+    TagDetector ours(ours_options);
+    TrackerOptions o;
+    o.filter.kind = FilterKind::kNone;
+    o.confirm_frames = 0;
+    std::vector<double> rot, trans, cpu;
+    for (size_t i = 0; i < frames.size(); ++i) {
+      Tracker tracker(board, camera, o);
+      const double c0 = CpuSeconds();
+      std::vector<TagDetection> found;
+      if (m.kind == 0 || m.kind >= 4) {
+        ours.Detect(frames[i], found);
+      } else {
+        found = DetectWithAruco(frames[i], m.kind == 1   ? ArucoRefine::kNone
+                                           : m.kind == 2 ? ArucoRefine::kSubpix
+                                                         : ArucoRefine::kAprilTag);
+      }
+      const TrackResult r = tracker.ProcessDetections(found, frames[i].width, frames[i].height);
+      cpu.push_back((CpuSeconds() - c0) * 1e3);
+      if (!r.measured) continue;
+      rot.push_back(RotationAngleBetween(r.T_world_camera.rotation, truth[i].rotation) * 180 / kPi);
+      trans.push_back(Length(r.T_world_camera.translation - truth[i].translation) * 1e3);
+    }
+    const std::string name = label + "_" + m.name;
+    figures.push_back({name + "_cpu_ms", MedianOf(cpu), "ms",
+                       std::to_string(rot.size()) + "/" + std::to_string(frames.size()) + " posed, 1 thread"});
+    figures.push_back({name + "_rot_deg", MedianOf(rot), "deg", "median vs truth"});
+    figures.push_back({name + "_trans_mm", MedianOf(trans), "mm", "median vs truth"});
+  }
 }
 
 // A tracked 1280x720 synthetic stream (render/synth, lamps scene, handheld
@@ -47,11 +93,18 @@ void BenchStream(const BenchOptions& options, std::vector<BenchFigure>& figures)
     std::vector<Frame> stream;
     // From 9 s on, 3 to 5 tags are in view (fewer at the start).
     for (int i = 0; i < frames; ++i) stream.push_back(source.RenderFrame(9.0 + i / so.fps, i));
+    if (std::string(c.name) == "clean") {
+      std::vector<Image8> images;
+      std::vector<Pose> truth;
+      for (const Frame& f : stream) images.push_back(f.image), truth.push_back(*f.T_world_camera_true);
+      BenchAruco(images, truth, source.board(), source.camera(), "synth1280", figures);
+    }
     for (const char* preset : {"fast", "balanced"}) {
       for (bool regions : {false, true}) {
         if (regions && std::string(c.name) != "clean") continue;
         TrackerOptions o = TrackerOptions::Preset(preset);
         o.detector.threads = 2;
+        o.detector.response = "display";  // the stream's frames are display tone-mapped
         o.filter.kind = FilterKind::kNone;
         o.region_search = regions;
         Tracker tracker(source.board(), source.camera(), o);
@@ -84,11 +137,72 @@ void BenchStream(const BenchOptions& options, std::vector<BenchFigure>& figures)
   }
 }
 
+// Static camera: jitter (standard deviation about the mean, position in mm and
+// rotation in degrees) of the tracked pose over frames that differ only in
+// sensor noise, per filter preset; and each filter's latency: frames to
+// reach 90% of a 10 mm step, and lag behind a steady 1 mm/frame motion.
+void BenchJitter(const BenchOptions& options, std::vector<BenchFigure>& figures) {
+  synth::CameraStreamOptions so;
+  so.width = 1280;
+  so.height = 720;
+  so.samples_per_pixel = 1;
+  so.noise_sigma = 2;
+  synth::SyntheticCameraSource source(so);
+  const int frames = options.quick ? 10 : 40;
+  std::vector<Frame> stream;
+  for (int i = 0; i < frames; ++i) {
+    stream.push_back(source.RenderFrame(9.3, i));  // same instant, new noise each frame
+    stream.back().t_ns = (i + 1) * 33333333LL;
+  }
+  for (const char* preset : {"none", "responsive", "balanced", "smooth"}) {
+    TrackerOptions o = TrackerOptions::Preset("fast");
+    o.detector.response = "display";
+    o.filter = PoseFilterOptions::Preset(preset);
+    Tracker tracker(source.board(), source.camera(), o);
+    std::vector<Pose> poses;
+    for (size_t i = 0; i < stream.size(); ++i) {
+      const TrackResult r = tracker.Process(stream[i]);
+      if (r.measured && i >= stream.size() / 4) poses.push_back(r.T_world_camera);  // after the filter settles
+    }
+    double pos2 = 0, rot2 = 0;
+    Vec3 mean{0, 0, 0};
+    for (const Pose& p : poses) mean += p.translation * (1.0 / poses.size());
+    for (const Pose& p : poses) pos2 += std::pow(Length(p.translation - mean) * 1e3, 2) / poses.size();
+    // Rotation spread: mean squared angle over all pairs is twice the variance.
+    for (size_t i = 0; i < poses.size(); ++i)
+      for (size_t j = i + 1; j < poses.size(); ++j)
+        rot2 += std::pow(RotationAngleBetween(poses[i].rotation, poses[j].rotation) * 180 / kPi, 2) /
+                (poses.size() * (poses.size() - 1.0));
+    // Latency, on the filter alone.
+    int settle = 0;
+    {
+      PoseFilter f(PoseFilterOptions::Preset(preset));
+      f.Update(Pose{}, 1.0 / 30);
+      for (settle = 1; settle < 100; ++settle)
+        if (f.Update({Mat3::Identity(), {0.01, 0, 0}}, 1.0 / 30).translation.x >= 0.009) break;
+    }
+    double lag = 0;
+    {
+      PoseFilter f(PoseFilterOptions::Preset(preset));
+      Pose out;
+      for (int i = 0; i < 200; ++i) out = f.Update({Mat3::Identity(), {1e-3 * i, 0, 0}}, 1.0 / 30);
+      lag = (0.199 - out.translation.x) / 1e-3;
+    }
+    const std::string name = std::string("static_filter_") + preset;
+    figures.push_back({name + "_jitter_mm", std::sqrt(pos2), "mm",
+                       std::to_string(poses.size()) + " frames, 1280x720, noise 2 levels, fast preset"});
+    figures.push_back({name + "_jitter_deg", std::sqrt(rot2), "deg", "rotation standard deviation"});
+    figures.push_back({name + "_step90_frames", static_cast<double>(settle), "frames", "to 90% of a 10 mm step"});
+    figures.push_back({name + "_ramp_lag_frames", lag, "frames", "behind a steady 1 mm/frame motion"});
+  }
+}
+
 }  // namespace
 
 std::vector<BenchFigure> BenchTracking(const BenchOptions& options) {
   std::vector<BenchFigure> figures;
   BenchStream(options, figures);
+  BenchJitter(options, figures);
   if (options.scenes_dir.empty()) return figures;
   const std::string dir = options.scenes_dir + "/lamps";
   const Board board = ReadBoard(dir + "/board.json");
@@ -154,6 +268,18 @@ std::vector<BenchFigure> BenchTracking(const BenchOptions& options) {
                        std::to_string(rot.size()) + "/8 views, 400x300 upsampled 2x"});
     figures.push_back({std::string("lamps_test_median_trans_") + preset + "_mm", MedianOf(trans), "mm", ""});
   }
+  // Against aruco on the same views, upsampled 2x beforehand for both.
+  std::vector<Image8> up2;
+  std::vector<Pose> truth;
+  for (size_t i = 0; i < small.size(); ++i) {
+    cv::Mat in(small[i].height, small[i].width, CV_8UC3, small[i].pixels.data()), out;
+    cv::resize(in, out, cv::Size(), 2.0, 2.0, cv::INTER_LINEAR);
+    Image8 big(out.cols, out.rows, 3);
+    std::copy(out.data, out.data + big.pixels.size(), big.pixels.begin());
+    up2.push_back(std::move(big));
+    truth.push_back(dataset.frames[i].T_world_camera);
+  }
+  BenchAruco(up2, truth, board, dataset.camera.Scaled(up2[0].width, up2[0].height), "lamps_test_up2", figures);
   return figures;
 }
 

@@ -7,6 +7,7 @@
 #include "calib/core/error.h"
 #include "render/synth/camera_stream.h"
 #include "tracking/frame_sources.h"
+#include "tracking/simulated_exposure.h"
 
 namespace nerfar {
 namespace {
@@ -66,9 +67,17 @@ void RegisterAppSchemes() {
     RegisterFrameSourceScheme(
         "synthetic",
         [](const std::string& argument, const SourceOptions&) -> std::unique_ptr<FrameSource> {
-          return std::make_unique<synth::SyntheticCameraSource>(ParseSyntheticOptions(argument));
+          // ",exposure-control": brackets through the frames' display response
+          // (tracking/simulated_exposure.h), as if taken at 10 ms.
+          std::string rest = argument;
+          const std::string flag = ",exposure-control";
+          const size_t at = rest.find(flag);
+          if (at != std::string::npos) rest.erase(at, flag.size());
+          auto source = std::make_unique<synth::SyntheticCameraSource>(ParseSyntheticOptions(rest));
+          if (at == std::string::npos) return source;
+          return SimulateExposureControl(std::move(source), CameraResponse::Display8(3), 10000.0);
         },
-        "synthetic[:SCENE][,seed=K,frames=N,size=WxH,fps=F,noise=S,blur=T,exposure=V,speed=X,spp=P]: "
+        "synthetic[:SCENE][,seed=K,frames=N,size=WxH,fps=F,noise=S,blur=T,exposure=V,speed=X,spp=P,exposure-control]: "
         "a rendered tag scene with known poses (scenes: lamps, window)");
   });
 }

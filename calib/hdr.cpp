@@ -6,6 +6,7 @@
 #include <random>
 
 #include "calib/core/error.h"
+#include "calib/core/image_io.h"
 
 namespace nerfar {
 namespace {
@@ -81,6 +82,19 @@ CameraResponse CameraResponse::Linear8(int channels) {
   for (auto& g : r.log_exposure)
     for (int z = 0; z < kResponseLevels; ++z) g[z] = static_cast<float>(std::log(std::max(z, 1) / 128.0));
   // Value 0 shares value 1's exposure: below that a linear camera says nothing.
+  return r;
+}
+
+CameraResponse CameraResponse::Display8(int channels) {
+  CameraResponse r;
+  r.log_exposure.resize(channels);
+  for (auto& g : r.log_exposure)
+    for (int z = 0; z < kResponseLevels; ++z) {
+      const double s = SrgbToLinear(static_cast<float>(std::clamp(z, 0, 255) == 0 ? 0.5 / 255
+                                                       : z == kResponseLevels - 1 ? 254.5 / 255
+                                                                                  : z / 255.0));
+      g[z] = static_cast<float>(std::log(s / (1 - s)));
+    }
   return r;
 }
 

@@ -32,6 +32,10 @@ struct CameraResponse {
   std::vector<std::string> Validate() const;
   // The response of a linear camera (g(z) = ln(z / 128), black clamped to 0.5).
   static CameraResponse Linear8(int channels);
+  // The response of frames made by ToneMapToDisplay (Reinhard x/(1+x), then
+  // sRGB, 8 bits): g(z) = ln(s/(1-s)), s the linear value of z; the ends
+  // (0 and 255, which stand for a range) use 0.5 and 254.5.
+  static CameraResponse Display8(int channels);
 };
 
 // One exposure of a bracket: an 8-bit frame (1 or 3 channels, as the camera

@@ -11,6 +11,7 @@
 #include <sys/mman.h>
 
 #include <chrono>
+#include <cmath>
 #include <condition_variable>
 #include <cstring>
 #include <deque>
@@ -133,7 +134,40 @@ class LibcameraSource : public FrameSource {
            format_.toString();
   }
 
+  // Exposure brackets: AE and AWB are switched off (held) for the rest of
+  // the session, the time goes into the next queued requests, and Next()
+  // drops frames until one reports the new exposure in its metadata.
+  bool SetExposure(double exposure_us) override {
+    const lc::ControlInfoMap& info = camera_->controls();
+    if (info.find(&lc::controls::ExposureTime) == info.end()) return false;
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (!locked_) {
+      LogInfo(camera_->id() + ": auto exposure and auto white balance locked for the session");
+      locked_ = true;
+    }
+    pending_exposure_us_ = static_cast<int32_t>(std::lround(exposure_us));
+    awaiting_exposure_ = true;
+    return true;
+  }
+
   FrameStatus Next(Frame& frame, int timeout_ms) override {
+    // Frames exposed before an exposure change are dropped (a bounded number:
+    // a camera that ignores the control still delivers).
+    for (int dropped = 0;; ++dropped) {
+      const FrameStatus status = NextAny(frame, timeout_ms);
+      if (status != FrameStatus::kOk || !awaiting_exposure_) return status;
+      if (std::abs(last_exposure_us_ - pending_exposure_us_) <= 0.05 * pending_exposure_us_ + 1 ||
+          dropped >= static_cast<int>(requests_.size()) + 4) {
+        if (dropped >= static_cast<int>(requests_.size()) + 4)
+          LogWarning(camera_->id() + ": frames do not report the exposure asked for; using the next one");
+        awaiting_exposure_ = false;
+        return status;
+      }
+    }
+  }
+
+ private:
+  FrameStatus NextAny(Frame& frame, int timeout_ms) {
     lc::Request* request = nullptr;
     {
       std::unique_lock<std::mutex> lock(mutex_);
@@ -174,11 +208,19 @@ class LibcameraSource : public FrameSource {
       frame.name.clear();
       frame.T_world_camera_true.reset();
     }
+    const auto exposure = request->metadata().get(lc::controls::ExposureTime);
+    last_exposure_us_ = exposure ? *exposure : -1;
     request->reuse(lc::Request::ReuseBuffers);
+    if (locked_) {
+      request->controls().set(lc::controls::AeEnable, false);
+      request->controls().set(lc::controls::AwbEnable, false);
+      request->controls().set(lc::controls::ExposureTime, pending_exposure_us_);
+    }
     camera_->queueRequest(request);
     return status;
   }
 
+ public:
   std::string LastError() const override { return error_; }
 
  private:
@@ -210,6 +252,10 @@ class LibcameraSource : public FrameSource {
   std::condition_variable ready_;
   std::deque<lc::Request*> completed_;
   bool lost_ = false;
+  bool locked_ = false;             // AE/AWB held since the first SetExposure
+  bool awaiting_exposure_ = false;  // drop frames until one has pending_exposure_us_
+  int32_t pending_exposure_us_ = 0;
+  int32_t last_exposure_us_ = -1;  // from the last frame's metadata
   std::int64_t index_ = 0;
   std::string error_;
 };

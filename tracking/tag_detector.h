@@ -50,7 +50,7 @@ struct TagDetectorOptions {
   // crossing between ink and paper along profiles, in linear intensity) and
   // intersect the lines. Removes the library's bias of a few tenths of a
   // pixel; needed for the accuracy targets on small tags.
-  bool refine_corners = true;
+  bool refine_corners = false;
   // How frame values relate to light, for the 50% crossing: "srgb" (cameras),
   // "display" (sRGB after Reinhard x/(1+x): frames from ToneMapToDisplay,
   // e.g. tone-mapped EXR), "linear".

@@ -75,6 +75,18 @@ class V4l2Source : public FrameSource {
   }
 
   FrameStatus Next(Frame& frame, int timeout_ms) override {
+    while (drain_ > 0) {
+      --drain_;
+      const FrameStatus status = NextAny(frame, timeout_ms);
+      if (status == FrameStatus::kLost || status == FrameStatus::kTimeout) {
+        drain_ = 0;
+        return status;
+      }
+    }
+    return NextAny(frame, timeout_ms);
+  }
+
+  FrameStatus NextAny(Frame& frame, int timeout_ms) {
     if (fd_ < 0) {
       // Lost earlier: try to come back, at most twice a second.
       const auto now = std::chrono::steady_clock::now();
@@ -125,9 +137,55 @@ class V4l2Source : public FrameSource {
     return status;
   }
 
+  // Exposure brackets: the first call switches auto exposure, auto gain and
+  // auto white balance off (held at their current values) for the session;
+  // every call drops the frames already queued, which were exposed before
+  // the change, so the next frame Next() returns has the new exposure.
+  bool SetExposure(double exposure_us) override {
+    if (fd_ < 0) return false;
+    if (!locked_) {
+      std::vector<std::string> failed;
+      auto note = [&](const std::string& r) {
+        if (!r.empty()) failed.push_back(r);
+      };
+      note(SetControl(fd_, V4L2_CID_EXPOSURE_AUTO, V4L2_EXPOSURE_MANUAL, "manual exposure"));
+      if (HasControl(V4L2_CID_AUTOGAIN)) note(SetControl(fd_, V4L2_CID_AUTOGAIN, 0, "manual gain"));
+      if (HasControl(V4L2_CID_AUTO_WHITE_BALANCE)) {
+        // Hold the white balance the camera has settled on.
+        v4l2_control current{};
+        current.id = V4L2_CID_WHITE_BALANCE_TEMPERATURE;
+        const bool known = Xioctl(fd_, VIDIOC_G_CTRL, &current) == 0;
+        note(SetControl(fd_, V4L2_CID_AUTO_WHITE_BALANCE, 0, "manual white balance"));
+        if (known) note(SetControl(fd_, V4L2_CID_WHITE_BALANCE_TEMPERATURE, current.value, "white balance"));
+      }
+      for (const std::string& f : failed) LogWarning(device_ + ": cannot set " + f);
+      LogInfo(device_ + ": auto exposure, gain and white balance locked for the session");
+      locked_ = true;
+    }
+    // V4L2_CID_EXPOSURE_ABSOLUTE counts 100 microsecond units, within the device's range.
+    int units = std::max(1, static_cast<int>(std::lround(exposure_us / 100)));
+    v4l2_queryctrl range{};
+    range.id = V4L2_CID_EXPOSURE_ABSOLUTE;
+    if (Xioctl(fd_, VIDIOC_QUERYCTRL, &range) == 0) units = std::clamp(units, range.minimum, range.maximum);
+    const std::string failed = SetControl(fd_, V4L2_CID_EXPOSURE_ABSOLUTE, units, "exposure");
+    if (!failed.empty()) {
+      LogWarning(device_ + ": cannot set " + failed);
+      return false;
+    }
+    // Every queued buffer, and the one the sensor is reading out.
+    drain_ = static_cast<int>(buffers_.size()) + 1;
+    return true;
+  }
+
   std::string LastError() const override { return error_; }
 
  private:
+  bool HasControl(uint32_t id) const {
+    v4l2_queryctrl q{};
+    q.id = id;
+    return Xioctl(fd_, VIDIOC_QUERYCTRL, &q) == 0 && !(q.flags & V4L2_CTRL_FLAG_DISABLED);
+  }
+
   struct Buffer {
     void* start = MAP_FAILED;
     size_t length = 0;
@@ -254,6 +312,8 @@ class V4l2Source : public FrameSource {
   std::int64_t index_ = 0;
   std::string error_;
   std::chrono::steady_clock::time_point last_reopen_{};
+  bool locked_ = false;  // AE, auto gain, AWB held since the first SetExposure
+  int drain_ = 0;        // frames still to drop after an exposure change
 };
 
 std::string Range(const v4l2_queryctrl& q) {
