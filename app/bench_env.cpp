@@ -2,16 +2,30 @@
 // grid whose radiance is computed here from a known environment (a Lambertian
 // floor and a floating ball, analytic visibility, albedo 0.5): time and the
 // relative RMS irradiance error over upper-hemisphere normals, for each preset
-// and for the pixels x rays trade (paper figure rays_pixels). End-to-end
-// figures on the shared scenes need a trained NeRF (`nerfar env` on it).
+// and for the pixels x rays trade (paper figure rays_pixels).
+// End to end on the shared scenes, with NeRFs trained beforehand and named in
+// $NERFAR_BENCH_ENV_MODELS ("window=/tmp/w.nerf,lamps=/tmp/l.nerf"; preset
+// $NERFAR_BENCH_ENV_PRESET, default balanced): the estimate against env.exr
+// (window) and against the near field (lamps), the total irradiance at each
+// object centre against probe.exr for the estimate and the two baselines
+// (near field alone; environment fitted ignoring the near field and NeRF
+// visibility, PhySG-like) and for env.exr itself seen through the NeRF (what
+// the NeRF alone limits). $NERFAR_BENCH_ENV_TRADE=1 adds the pixels x rays
+// table on the window scene.
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
+#include <filesystem>
 #include <map>
+#include <sstream>
 #include <string>
 
 #include "app/bench.h"
+#include "calib/core/exr.h"
 #include "calib/core/log.h"
+#include "calib/object.h"
 #include "render/lighting/env_estimate.h"
+#include "render/nerf/nerf_file.h"
 #include "render/sg/sphere.h"
 #include "render/sg/visibility.h"
 
@@ -86,11 +100,132 @@ double IrradianceError(const SgMixture& estimate) {
   return RelativeIrradianceRms(a, b);
 }
 
+// Nearest-pixel radiance of an equirect panorama (scenes/README.md convention).
+Vec3 PanoramaLookup(const ImageF& pano, const Vec3& d) {
+  double u = 0, v = 0;
+  EquirectCoordinates(d, &u, &v);
+  const int x = std::clamp(static_cast<int>(u * pano.width), 0, pano.width - 1);
+  const int y = std::clamp(static_cast<int>(v * pano.height), 0, pano.height - 1);
+  return {pano.at(x, y, 0), pano.at(x, y, 1), pano.at(x, y, 2)};
+}
+
+std::map<std::string, std::string> ModelsFromEnvironment() {
+  std::map<std::string, std::string> models;
+  const char* list = std::getenv("NERFAR_BENCH_ENV_MODELS");
+  if (list == nullptr) return models;
+  std::stringstream in(list);
+  std::string item;
+  while (std::getline(in, item, ',')) {
+    const size_t eq = item.find('=');
+    if (eq != std::string::npos) models[item.substr(0, eq)] = item.substr(eq + 1);
+  }
+  return models;
+}
+
+// One shared scene end to end (see the file comment).
+void SharedScene(const std::string& scenes_dir, const std::string& scene, const std::string& model,
+                 const std::string& preset, std::vector<BenchFigure>& figures) {
+  namespace fs = std::filesystem;
+  const fs::path dir = fs::path(scenes_dir) / scene;
+  const NerfField field = LoadNerf(model);
+  const std::string note = scene + ", " + model + ", preset " + preset;
+  EnvEstimateOptions o = EnvEstimateOptions::Preset(preset);
+  double t0 = NowSeconds();
+  const EnvLight est = EstimateEnvironment(field, o);
+  figures.push_back({"env_" + scene + "_s", NowSeconds() - t0, "s", note});
+  o.ignore_near_field = true;
+  t0 = NowSeconds();
+  const EnvLight physg = EstimateEnvironment(field, o);
+  figures.push_back({"env_" + scene + "_physg_s", NowSeconds() - t0, "s", note + ", PhySG-like baseline"});
+  figures.push_back({"env_" + scene + "_negligible", est.negligible ? 1.0 : 0.0, "", note});
+  figures.push_back({"env_" + scene + "_env_to_near_surface", est.env_to_near_surface, "", note});
+  figures.push_back({"env_" + scene + "_env_to_near_center", est.env_to_near_center, "", note});
+
+  const ImageF truth_env = ReadExrRgb((dir / "env.exr").string());
+  std::vector<Vec3> upper, all = FibonacciSphere(128);
+  for (const Vec3& n : all)
+    if (n.z > 0) upper.push_back(n);
+  // The distant light alone (unoccluded) over upper-hemisphere normals.
+  std::vector<Vec3> e_true, e_est, e_physg, e_none(upper.size());
+  for (const Vec3& n : upper) {
+    e_true.push_back(PanoramaIrradiance(truth_env, n));
+    e_est.push_back(Irradiance(est.lobes, n));
+    e_physg.push_back(Irradiance(physg.lobes, n));
+  }
+  double true_energy = 0;
+  for (const Vec3& e : e_true) true_energy += LuminanceOf(e);
+  if (true_energy > 0) {
+    figures.push_back({"env_" + scene + "_env_rel_rms", RelativeIrradianceRms(e_est, e_true), "",
+                       note + "; irradiance of the estimate vs env.exr, 64 upper normals"});
+    figures.push_back({"env_" + scene + "_physg_env_rel_rms", RelativeIrradianceRms(e_physg, e_true), "",
+                       note + "; PhySG-like baseline vs env.exr"});
+    figures.push_back({"env_" + scene + "_nearonly_env_rel_rms", RelativeIrradianceRms(e_none, e_true), "",
+                       note + "; near field alone (no environment) vs env.exr"});
+  }
+  // Total irradiance at each object centre (all 128 normals) against probe.exr.
+  for (const char* object : {"sphere_glossy", "monkey_diffuse"}) {
+    const fs::path obj_dir = dir / "insert" / object;
+    if (!fs::exists(obj_dir / "pose.json")) continue;
+    const ObjectPlacement placement = ReadObjectPlacement((obj_dir / "pose.json").string());
+    const Vec3 centre = placement.center_world ? *placement.center_world : placement.T_world_object.translation;
+    const ImageF probe = ReadExrRgb((obj_dir / "probe.exr").string());
+    const NerfIncident in = NerfIncidentAt(field, centre, 4096, o.render);
+    const auto sg_light = [](const SgMixture& m) { return [&m](const Vec3& d) { return Evaluate(m, d); }; };
+    const auto pano_light = [&truth_env](const Vec3& d) { return PanoramaLookup(truth_env, d); };
+    std::vector<Vec3> truth, with_est, near_only, with_physg, oracle;
+    double env_sum = 0, physg_sum = 0, near_sum = 0;
+    for (const Vec3& n : all) {
+      truth.push_back(PanoramaIrradiance(probe, n));
+      const Vec3 near = in.NearIrradiance(n), env = in.DistantIrradiance(sg_light(est.lobes), n);
+      near_only.push_back(near);
+      with_est.push_back(near + env);
+      with_physg.push_back(Irradiance(physg.lobes, n));
+      oracle.push_back(near + in.DistantIrradiance(pano_light, n));
+      env_sum += LuminanceOf(env);
+      physg_sum += LuminanceOf(in.DistantIrradiance(sg_light(physg.lobes), n));
+      near_sum += LuminanceOf(near);
+    }
+    const std::string at = "env_" + scene + "_" + object + "_";
+    const std::string on = note + "; at the " + std::string(object) + " centre, 128 normals vs probe.exr";
+    figures.push_back({at + "total_rel_rms", RelativeIrradianceRms(with_est, truth), "", on + ", E_nerf + E_env"});
+    figures.push_back({at + "nearonly_total_rel_rms", RelativeIrradianceRms(near_only, truth), "", on});
+    figures.push_back({at + "physg_total_rel_rms", RelativeIrradianceRms(with_physg, truth), "", on});
+    figures.push_back({at + "oracle_total_rel_rms", RelativeIrradianceRms(oracle, truth), "",
+                       on + ", E_nerf + env.exr through NeRF visibility (the NeRF's share of the error)"});
+    figures.push_back({at + "env_to_near", near_sum > 0 ? env_sum / near_sum : 0.0, "", note + ", E_env/E_nerf"});
+    figures.push_back(
+        {at + "physg_env_to_near", near_sum > 0 ? physg_sum / near_sum : 0.0, "", note + ", PhySG-like E_env/E_nerf"});
+  }
+  if (scene == "window" && std::getenv("NERFAR_BENCH_ENV_TRADE") != nullptr) {
+    for (int pixels : {16, 64})
+      for (int rays : {64, 256}) {
+        EnvEstimateOptions t = EnvEstimateOptions::Preset(preset);
+        t.pixels_per_view = pixels;
+        t.rays_per_point = rays;
+        const double start = NowSeconds();
+        const EnvLight env = EstimateEnvironment(field, t);
+        const std::string label = "env_window_px" + std::to_string(pixels) + "_rays" + std::to_string(rays);
+        const std::string tn = note + "; " + std::to_string(pixels) + " px/view, " + std::to_string(rays) + " rays";
+        figures.push_back({label + "_s", NowSeconds() - start, "s", tn});
+        std::vector<Vec3> e;
+        for (const Vec3& n : upper) e.push_back(Irradiance(env.lobes, n));
+        figures.push_back({label + "_env_rel_rms", RelativeIrradianceRms(e, e_true), "", tn});
+      }
+  }
+}
+
 }  // namespace
 
 std::vector<BenchFigure> BenchEnv(const BenchOptions& options) {
-  const NerfField field = SyntheticScene(options.quick ? 0.05 : 0.025);
   std::vector<BenchFigure> figures;
+  const std::map<std::string, std::string> models = ModelsFromEnvironment();
+  if (!models.empty() && !options.scenes_dir.empty()) {
+    const char* preset = std::getenv("NERFAR_BENCH_ENV_PRESET");
+    for (const auto& [scene, model] : models)
+      SharedScene(options.scenes_dir, scene, model, preset != nullptr ? preset : "balanced", figures);
+    return figures;
+  }
+  const NerfField field = SyntheticScene(options.quick ? 0.05 : 0.025);
   const std::string scene = "synthetic floor+ball, known env";
   auto run = [&](const std::string& label, EnvEstimateOptions o) {
     o.brisque_max = 100;  // synthetic flat renders are not natural images

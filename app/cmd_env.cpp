@@ -18,12 +18,14 @@
 namespace nerfar {
 
 int RunEnv(const CommandArgs& args) {
-  std::string nerf_path, output, preview, preset = "balanced";
+  std::string nerf_path, output, preview, dump, preset = "balanced";
   std::vector<std::string> sets;
   ArgParser parser("env", "Estimate the distant environment light (32 SGs) of a NeRF by inverse rendering.");
   parser.Positional("NERF", &nerf_path, "trained model (.nerf)");
   parser.Option("-o", &output, "FILE", "output env.json");
   parser.Option("--preview", &preview, "FILE", "also write a 256x128 equirect EXR of the estimate");
+  parser.Option("--dump-samples", &dump, "FILE",
+                "also write the surface samples as CSV (position, normal, observed L, E_nerf, E_env; diagnostics)");
   parser.Option("--preset", &preset, "P", "fast | balanced (default) | accurate");
   parser.Option("--set", &sets, "KEY=VALUE", "override one option (repeatable; see below)");
   parser.Epilog("Options (--set): " + EnvEstimateOptions::Preset("balanced").ToJson() +
@@ -43,6 +45,7 @@ int RunEnv(const CommandArgs& args) {
   }
   CheckNotSameFile(output, {nerf_path});
   if (!preview.empty()) CheckNotSameFile(preview, {nerf_path, output});
+  if (!dump.empty()) CheckNotSameFile(dump, {nerf_path, output, preview});
   const NerfField field = LoadNerf(nerf_path);
   LogInfo("env: " + nerf_path + "; preset " + preset + "; options " + options.ToJson());
 
@@ -58,11 +61,25 @@ int RunEnv(const CommandArgs& args) {
     bar->Update(done);
   };
   EnvEstimateReport report;
+  report.keep_samples = !dump.empty();
   EnvLight env = EstimateEnvironment(field, options, &report, progress);
   if (bar) bar->Finish();
   env.source = nerf_path;
   WriteEnvLight(output, env);
   if (!preview.empty()) WriteEnvPreview(preview, env);
+  if (!dump.empty()) {
+    std::string csv = "x,y,z,nx,ny,nz,L_r,L_g,L_b,Enerf_r,Enerf_g,Enerf_b,Eenv_r,Eenv_g,Eenv_b\n";
+    const EnvSurfaceSamples& s = report.surface;
+    for (size_t i = 0; i < s.size(); ++i) {
+      char row[400];
+      std::snprintf(row, sizeof row, "%.5f,%.5f,%.5f,%.4f,%.4f,%.4f,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g\n",
+                    s.positions[i].x, s.positions[i].y, s.positions[i].z, s.normals[i].x, s.normals[i].y,
+                    s.normals[i].z, s.radiance[i].x, s.radiance[i].y, s.radiance[i].z, s.e_nerf[i].x, s.e_nerf[i].y,
+                    s.e_nerf[i].z, report.e_env[i].x, report.e_env[i].y, report.e_env[i].z);
+      csv += row;
+    }
+    WriteFileAtomic(dump, csv);
+  }
 
   char line[512];
   std::snprintf(line, sizeof line,

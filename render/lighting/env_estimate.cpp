@@ -2,6 +2,7 @@
 
 #include <Eigen/Dense>
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <map>
 #include <nlohmann/json.hpp>
@@ -66,6 +67,7 @@ std::vector<OptionField> Fields(EnvEstimateOptions& o) {
           {"brisque_max", F::kDouble, &o.brisque_max},
           {"max_view_attempts", F::kInt, &o.max_view_attempts},
           {"min_pixel_opacity", F::kDouble, &o.min_pixel_opacity},
+          {"min_view_cosine", F::kDouble, &o.min_view_cosine},
           {"rays_per_point", F::kInt, &o.rays_per_point},
           {"ray_offset_voxels", F::kDouble, &o.ray_offset_voxels},
           {"near_field_pool_m", F::kDouble, &o.near_field_pool_m},
@@ -129,6 +131,7 @@ std::vector<std::string> EnvEstimateOptions::Validate() const {
   range("brisque_max", brisque_max, 0, 1e9);
   range("max_view_attempts", max_view_attempts, views, 1e6);
   range("min_pixel_opacity", min_pixel_opacity, 0, 1);
+  range("min_view_cosine", min_view_cosine, 0, 1);
   range("rays_per_point", rays_per_point, 8, 65536);
   range("ray_offset_voxels", ray_offset_voxels, 0, 100);
   range("near_field_pool_m", near_field_pool_m, 0, 10);
@@ -218,6 +221,25 @@ void EnvEstimateOptions::Set(const std::string& key_value) {
 // -------------------------------------------------------------- view sampling
 namespace {
 
+// Surface normal −∇σ/|∇σ| averaged (unit gradients, equal weights) over the
+// point and 6 points 1.5 voxels away along the axes: a trained grid's
+// gradient is noisy from vertex to vertex, and the average is the normal of
+// the surface smoothed over ~3 voxels. False when no gradient is usable.
+bool SmoothedNormal(const NerfField& field, const Vec3f& x, Vec3f* normal) {
+  const float h = 1.5f * field.voxel_m;
+  const Vec3f offsets[7] = {{0, 0, 0}, {h, 0, 0}, {-h, 0, 0}, {0, h, 0}, {0, -h, 0}, {0, 0, h}, {0, 0, -h}};
+  Vec3f sum;
+  for (const Vec3f& o : offsets) {
+    const Vec3f g = field.DensityGradient(x + o);
+    const float len = Length(g);
+    if (len > 1e-6f && std::isfinite(len)) sum += g * (-1.0f / len);
+  }
+  const float len = Length(sum);
+  if (!(len > 1e-3f)) return false;
+  *normal = sum * (1.0f / len);
+  return true;
+}
+
 struct ViewPick {
   double score = -1;
   std::vector<Vec3f> positions, normals, radiance;
@@ -275,11 +297,13 @@ EnvSurfaceSamples SampleSurfaces(const NerfField& field, const EnvEstimateOption
       const NerfRay& ray = rays[eligible[k]];
       const NerfRayResult& res = results[eligible[k]];
       const Vec3f x = ray.origin + ray.dir * res.depth;
-      Vec3f g = field.DensityGradient(x);
-      const float g_len = Length(g);
-      if (!(g_len > 1e-6f) || !std::isfinite(g_len)) continue;
-      Vec3f n = g * (-1.0f / g_len);
+      Vec3f n;
+      if (!SmoothedNormal(field, x, &n)) continue;
       if (Dot(n, ray.dir) > 0) n = -n;  // the camera sees the surface: face it
+      // A surface seen at a grazing angle is where a noisy density gradient
+      // most often gives a wrong normal (e.g. the table top's normal turned
+      // sideways or down); such samples drive light from below the horizon.
+      if (-Dot(n, ray.dir) < options.min_view_cosine) continue;
       const Vec3f radiance = res.color * (1.0f / res.opacity);
       if (!std::isfinite(radiance.x + radiance.y + radiance.z)) continue;
       pick.positions.push_back(x);
@@ -769,27 +793,46 @@ std::vector<Vec3> EnvironmentIrradiance(const EnvSurfaceSamples& samples, const 
   return e;
 }
 
-double EnvToNearRatioAt(const NerfField& field, const SgMixture& light, const Vec3& point, int directions, int normals,
-                        const NerfRenderOptions& render) {
+NerfIncident NerfIncidentAt(const NerfField& field, const Vec3& point, int directions,
+                            const NerfRenderOptions& render) {
+  NerfIncident in;
   std::vector<Vec3f> dirs;
   for (const Vec3& d : FibonacciSphere(directions)) dirs.push_back(Vec3f(d));
   const std::vector<NerfRay> rays = PointRays(Vec3f(point), dirs, field.aabb);
   std::vector<NerfRayResult> res(rays.size());
   field.RenderRays(rays.data(), rays.size(), res.data(), render);
+  for (size_t j = 0; j < dirs.size(); ++j) {
+    const bool inside = rays[j].t_far > rays[j].t_near;
+    in.dirs.push_back(ToD(dirs[j]));
+    in.color.push_back(inside ? ToD(res[j].color) : Vec3{});
+    in.opacity.push_back(inside ? std::clamp(static_cast<double>(res[j].opacity), 0.0, 1.0) : 0.0);
+  }
+  return in;
+}
+
+Vec3 NerfIncident::NearIrradiance(const Vec3& normal) const {
+  Vec3 e;
+  for (size_t j = 0; j < dirs.size(); ++j) e += color[j] * std::max(0.0, Dot(normal, dirs[j]));
+  return e * (4 * kPi / std::max<size_t>(1, dirs.size()));
+}
+
+Vec3 NerfIncident::DistantIrradiance(const std::function<Vec3(const Vec3&)>& light, const Vec3& normal) const {
+  Vec3 e;
+  for (size_t j = 0; j < dirs.size(); ++j) {
+    const double c = Dot(normal, dirs[j]);
+    if (c > 0 && opacity[j] < 1) e += light(dirs[j]) * ((1 - opacity[j]) * c);
+  }
+  return e * (4 * kPi / std::max<size_t>(1, dirs.size()));
+}
+
+double EnvToNearRatioAt(const NerfField& field, const SgMixture& light, const Vec3& point, int directions, int normals,
+                        const NerfRenderOptions& render) {
+  const NerfIncident in = NerfIncidentAt(field, point, directions, render);
+  const auto env_light = [&light](const Vec3& d) { return Evaluate(light, d); };
   double env = 0, nerf = 0;
-  const double w = 4 * kPi / directions;
   for (const Vec3& n : FibonacciSphere(normals)) {
-    Vec3 e_env, e_nerf;
-    for (size_t j = 0; j < dirs.size(); ++j) {
-      const Vec3 d = ToD(dirs[j]);
-      const double cosine = Dot(n, d);
-      if (cosine <= 0) continue;
-      const float o = rays[j].t_far > rays[j].t_near ? std::clamp(res[j].opacity, 0.0f, 1.0f) : 0.0f;
-      e_env += Evaluate(light, d) * ((1 - o) * cosine * w);
-      e_nerf += ToD(res[j].color) * (cosine * w);
-    }
-    env += Y(e_env);
-    nerf += Y(e_nerf);
+    env += Y(in.DistantIrradiance(env_light, n));
+    nerf += Y(in.NearIrradiance(n));
   }
   if (nerf > 0) return env / nerf;
   return env > 0 ? std::numeric_limits<double>::infinity() : 0.0;
@@ -804,19 +847,22 @@ EnvLight EstimateEnvironment(const NerfField& field, const EnvEstimateOptions& o
     list.ThrowIfAny();
   }
   EnvEstimateReport local;
-  Progress timer("env", 0);
-  double t0 = timer.ElapsedSeconds();
+  local.keep_samples = report != nullptr && report->keep_samples;
+  const auto clock_start = std::chrono::steady_clock::now();
+  const auto elapsed = [&clock_start] {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - clock_start).count();
+  };
+  double t0 = elapsed();
   EnvSurfaceSamples samples = SampleSurfaces(field, options, &local.views, progress);
-  local.seconds_views = timer.ElapsedSeconds() - t0;
+  local.seconds_views = elapsed() - t0;
   local.samples = samples.size();
-  t0 = timer.ElapsedSeconds();
+  t0 = elapsed();
   ComputeNearField(field, options, samples, progress);
-  local.seconds_near_field = timer.ElapsedSeconds() - t0;
-  t0 = timer.ElapsedSeconds();
+  local.seconds_near_field = elapsed() - t0;
+  t0 = elapsed();
   EnvLight env;
   env.lobes = FitEnvironment(samples, field.aabb, options, &local.fit, progress);
-  local.seconds_fit = timer.ElapsedSeconds() - t0;
-  timer.Finish();
+  local.seconds_fit = elapsed() - t0;
 
   const std::vector<Vec3> e_env = EnvironmentIrradiance(samples, env.lobes);
   double sum_env = 0, sum_nerf = 0;
@@ -831,6 +877,10 @@ EnvLight EstimateEnvironment(const NerfField& field, const EnvEstimateOptions& o
   env.threshold = options.negligible_ratio;
   env.negligible = env.env_to_near_surface < env.threshold && env.env_to_near_center < env.threshold;
   env.options_json = options.ToJson();
+  if (local.keep_samples) {
+    local.surface = std::move(samples);
+    local.e_env = e_env;
+  }
   if (report) *report = std::move(local);
   return env;
 }

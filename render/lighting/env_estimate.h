@@ -44,11 +44,14 @@ struct EnvEstimateOptions {
   // diagonal (1: on the sphere around the box; the paper's "half the grid size").
   double view_distance_scale = 1.0;
   // Views below this elevation (degrees, seen from the centre) are not drawn.
-  // −90 draws the whole sphere and leaves poor views to BRISQUE.
-  double min_view_elevation_deg = -90;
+  // Captures are taken from above (the shared scenes: 15 to 70 degrees), so
+  // views from below see the untrained underside (fog, wrong normals), which
+  // BRISQUE does not reliably reject; −90 draws the whole sphere.
+  double min_view_elevation_deg = 10;
   double brisque_max = 50;          // views scoring above are rejected (paper: 50); ≥ 100 disables BRISQUE
   int max_view_attempts = 400;      // views rendered at most; the best-scoring are kept when too few pass
   double min_pixel_opacity = 0.95;  // a pixel passes through the NeRF when its opacity exceeds this
+  double min_view_cosine = 0.25;    // samples whose normal is seen more grazing than this (n·view) are dropped
   // --- near field
   int rays_per_point = 256;        // R: rays per surface point (near-field irradiance and visibility cache)
   double ray_offset_voxels = 2.0;  // rays start this far along the normal (in voxels) to leave the surface
@@ -134,6 +137,20 @@ SgMixture FitEnvironment(const EnvSurfaceSamples& samples, const Aabb& aabb, con
 // Irradiance E_env(x) = ∫ (1 − Ô) L_env max(n·d, 0) dd of each sample from its cache (as the fit uses it).
 std::vector<Vec3> EnvironmentIrradiance(const EnvSurfaceSamples& samples, const SgMixture& light);
 
+// The NeRF seen from a point: its radiance Ĉ and opacity Ô towards N
+// Fibonacci directions (each standing for 4π/N sr).
+struct NerfIncident {
+  std::vector<Vec3> dirs;
+  std::vector<Vec3> color;
+  std::vector<double> opacity;
+  // Near-field irradiance Σ Ĉ max(n·d, 0) 4π/N.
+  Vec3 NearIrradiance(const Vec3& normal) const;
+  // A distant light L(d) seen through the NeRF: Σ (1 − Ô) L(d) max(n·d, 0) 4π/N.
+  Vec3 DistantIrradiance(const std::function<Vec3(const Vec3&)>& light, const Vec3& normal) const;
+};
+NerfIncident NerfIncidentAt(const NerfField& field, const Vec3& point, int directions = 1024,
+                            const NerfRenderOptions& render = {});
+
 // E_env / E_nerf (luminance) at a point: rays in `directions` Fibonacci
 // directions from `point`, both irradiances averaged over `normals` normals
 // spread over the sphere. +inf when the near field is black and the
@@ -146,6 +163,11 @@ struct EnvEstimateReport {
   EnvFitReport fit;
   size_t samples = 0;
   double seconds_views = 0, seconds_near_field = 0, seconds_fit = 0;
+  // Set keep_samples before the call to get the samples (with their near
+  // field) and the fitted environment's irradiance at each (diagnostics).
+  bool keep_samples = false;
+  EnvSurfaceSamples surface;
+  std::vector<Vec3> e_env;
 };
 
 // The whole estimate: samples, near field, fit, energy ratios and the negligible flag.
