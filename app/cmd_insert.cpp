@@ -117,7 +117,7 @@ int RunInsert(const CommandArgs& args) {
   std::string preset = "balanced", light_source, truth_dir, light_probe;
   std::vector<std::string> object_paths, pose_paths, mesh_paths, material_paths;
   int light_directions = -1, sg_lobes = -1, kappa_step = -1;
-  double shadow_reach = -1, self_shadow_offset = -1;
+  double shadow_reach = -1, self_shadow_offset = -1, receiver_min_opacity = -1;
   bool no_self_shadow = false, no_shadows = false, paper_gamma = false, truth_geometry = false;
   ArgParser parser("insert", "Insert virtual objects into a captured scene: light, shade, occlude, shadow, composite.");
   parser.Option(
@@ -142,6 +142,8 @@ int RunInsert(const CommandArgs& args) {
   parser.Option("--shadow-reach", &shadow_reach, "R", "κ within R bounding radii of an object (balanced: 12)");
   parser.Option("--self-shadow-offset", &self_shadow_offset, "R",
                 "self-shadow SSDF queried R bounding radii off the surface (balanced: 0.01)");
+  parser.Option("--receiver-min-opacity", &receiver_min_opacity, "A",
+                "κ only on receivers whose NeRF opacity reaches A (balanced: 0.5)");
   parser.Option("--light-source", &light_source, "L", "full (default), near (NeRF only) or env (environment only)");
   parser.Flag("--no-self-shadow", &no_self_shadow, "objects do not shadow themselves or each other");
   parser.Flag("--no-shadows", &no_shadows, "no shadows on the scene (κ = 1)");
@@ -186,6 +188,7 @@ int RunInsert(const CommandArgs& args) {
   if (kappa_step != -1) options.kappa_step = kappa_step;
   if (shadow_reach != -1) options.shadow_reach_radii = shadow_reach;
   if (self_shadow_offset != -1) options.self_shadow_offset_radii = self_shadow_offset;
+  if (receiver_min_opacity != -1) options.receiver_min_opacity = receiver_min_opacity;
   if (!light_source.empty()) options.light.source = ParseLightSource(light_source);
   if (no_self_shadow) options.self_shadow = false;
   if (no_shadows) options.shadows = false;
