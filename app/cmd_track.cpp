@@ -22,8 +22,9 @@ namespace nerfar {
 
 int RunTrack(const CommandArgs& args) {
   std::string source_name, board_path, camera_path, output, overlay, filter = "constant-velocity", preset = "balanced";
-  std::string response;
-  int upsample = 0, max_frames = 0;
+  std::string response, strength = "balanced";
+  int upsample = 0, max_frames = 0, full_search_every = 0, threads = 0;
+  bool whole_frames = false;
   ArgParser parser("track", "Track the camera pose from the AprilTags of a board, frame by frame.");
   parser.Option("--source", &source_name, "S", "frames: images:DIR, video:FILE, v4l2:/dev/videoN, synthetic, ...");
   parser.Option("--board", &board_path, "B", "board.json");
@@ -36,6 +37,12 @@ int RunTrack(const CommandArgs& args) {
   parser.Option("--upsample", &upsample, "N", "1 or 2 (default: 2 for EXR image folders, else 1)");
   parser.Option("--response", &response, "R", "srgb | display | linear (default: display for EXR folders, else srgb)");
   parser.Option("--max-frames", &max_frames, "N", "stop after N frames (0: all)");
+  parser.Option("--filter-strength", &strength, "S",
+                "smooth | balanced (default) | responsive: less jitter or less latency");
+  parser.Flag("--whole-frames", &whole_frames, "search every frame whole (no region search around predicted tags)");
+  parser.Option("--full-search-every", &full_search_every, "N",
+                "whole-frame search at least every N frames while tracking (default 10)");
+  parser.Option("--detector-threads", &threads, "N", "threads of the tag detector (default 1)");
   parser.Epilog(SourceHelp());
   if (!parser.Parse(args)) return 0;
   if (source_name.empty() || board_path.empty() || camera_path.empty())
@@ -54,7 +61,11 @@ int RunTrack(const CommandArgs& args) {
   TrackerOptions options = TrackerOptions::Preset(preset);
   options.detector.upsample = upsample > 0 ? upsample : (exr_folder ? 2 : 1);
   options.detector.response = !response.empty() ? response : (exr_folder ? "display" : "srgb");
+  options.filter = PoseFilterOptions::Preset(strength);
   options.filter.kind = ParseFilterKind(filter);
+  options.region_search = !whole_frames;
+  if (full_search_every > 0) options.full_search_every = full_search_every;
+  if (threads > 0) options.detector.threads = threads;
   if (options.filter.kind == FilterKind::kNone) options.confirm_frames = 0;
   std::unique_ptr<FrameSource> source = OpenSource(source_name);
   Tracker tracker(board, camera.camera, options);
