@@ -46,10 +46,11 @@ struct TagDetectorOptions {
   double min_decision_margin = 0.0;
   // Worker threads of the detector (>= 1).
   int threads = 1;
-  // Re-fit each edge of the black square to sub-pixel precision (the 50%
-  // crossing between ink and paper along profiles, in linear intensity) and
-  // intersect the lines. Removes the library's bias of a few tenths of a
-  // pixel; needed for the accuracy targets on small tags.
+  // Re-fit each edge of the black square to sub-pixel precision (the edge
+  // position from the area under ink-to-paper profiles, in linear intensity)
+  // and intersect the lines. Exact on clean frontal renders, but it made
+  // poses worse on the shared scenes and the synthetic stream (by 2-5x in
+  // translation, docs/BENCHMARKS.md), so it is off by default.
   bool refine_corners = false;
   // How frame values relate to light, for the 50% crossing: "srgb" (cameras),
   // "display" (sRGB after Reinhard x/(1+x): frames from ToneMapToDisplay,
