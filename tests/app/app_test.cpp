@@ -150,6 +150,11 @@ TEST(App, LiveHeadlessWritesVideoSheetSessionAndReport) {
   const Result again = RunNerfar("report " + session);
   EXPECT_EQ(again.exit_code, 0) << again.output;
   EXPECT_NE(again.output.find("tracking"), std::string::npos) << again.output;
+  // A SCENE without sessions/ reports its scene items only.
+  const Result scene = RunNerfar("report " + dir.path());
+  EXPECT_EQ(scene.exit_code, 0) << scene.output;
+  EXPECT_NE(scene.output.find("environment energy"), std::string::npos) << scene.output;
+  EXPECT_TRUE(std::filesystem::is_regular_file(dir.File("report.png")));
 }
 
 TEST(ArgParser, ParsesOptionsPositionalsAndRejectsMisuse) {
