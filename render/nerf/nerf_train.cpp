@@ -552,7 +552,8 @@ double NerfTrainer::State::DoStep() {
       4096);
 
   ++step;
-  if (step % options.occupancy_every == 0 && adam_t > options.prune_delay) field.UpdateOccupancy(OccupancySigma());
+  if (step % options.occupancy_every == 0 && (level == 0 || adam_t > options.prune_delay))
+    field.UpdateOccupancy(OccupancySigma());
   double loss = 0.0;
   for (double l : chunk_loss) loss += l;
   return loss / double(batch);

@@ -83,7 +83,8 @@ struct NerfTrainOptions {
   // every level (not scaled with 1/voxel), so surfaces blurred by upsampling are
   // never pruned; 1/m stops under 1 % of the light over 1 cm.
   double occupancy_sigma = 1.0;
-  // Steps after each upsampling before the occupancy is refreshed (the new level keeps every cell it was given).
+  // Steps after each upsampling before the occupancy is refreshed (the new level keeps
+  // every cell it was given); the first level prunes from the start.
   int prune_delay = 64;
   // Initial density (1/m) of the coarse level: a light fog that lets every voxel receive gradients.
   double initial_sigma = 4.0;
