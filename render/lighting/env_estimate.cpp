@@ -638,7 +638,9 @@ void SolveScale(FitState& st) {
   for (size_t i = 0; i < st.s->size(); ++i)
     for (int c = 0; c < 3; ++c) mean_w += st.robust[i] * st.inv_scale[i][c] * st.inv_scale[i][c];
   mean_w /= std::max<size_t>(1, 3 * st.s->size());
-  const double typical = mean_w * std::pow(st.prior / kPi, 2) * 1.0;
+  // In units of one sample's data term at the typical irradiance, so that
+  // the prior's pull does not depend on the radiance scale (HDR: 1e-3..1e3).
+  const double typical = mean_w * std::pow(st.prior / kPi * st.typical_irradiance, 2);
   std::vector<double> count(st.albedo.size(), 0);
   for (size_t i = 0; i < st.s->size(); ++i) count[st.cell[i]] += 1;
   for (size_t k = 0; k < st.albedo.size(); ++k)
