@@ -1,11 +1,8 @@
 // The `nerfar` executable as a user meets it: help, exit codes 0/1/2 and
 // messages that name what is wrong.
 #include <gtest/gtest.h>
-#include <sys/wait.h>
 
-#include <array>
 #include <cmath>
-#include <cstdio>
 #include <filesystem>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -24,19 +21,10 @@
 namespace nerfar {
 namespace {
 
-struct Result {
-  int exit_code;
-  std::string output;  // stdout and stderr together
-};
+using Result = testing::CommandResult;
 
 Result RunNerfar(const std::string& arguments) {
-  const std::string command = std::string(NERFAR_BINARY) + " " + arguments + " 2>&1";
-  FILE* pipe = ::popen(command.c_str(), "r");
-  std::string output;
-  std::array<char, 4096> buffer{};
-  while (pipe != nullptr && std::fgets(buffer.data(), buffer.size(), pipe) != nullptr) output += buffer.data();
-  const int status = pipe != nullptr ? ::pclose(pipe) : -1;
-  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, output};
+  return testing::RunCommand(std::string(NERFAR_BINARY) + " " + arguments);
 }
 
 TEST(App, HelpListsTheCommands) {

@@ -1,10 +1,7 @@
 // `nerfar insert` on bad input: every case exits with 2 (bad usage or bad
 // input, DESIGN.md) and names what is wrong; nothing crashes.
 #include <gtest/gtest.h>
-#include <sys/wait.h>
 
-#include <array>
-#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <string>
@@ -16,19 +13,10 @@ namespace {
 
 namespace fs = std::filesystem;
 
-struct Result {
-  int exit_code;
-  std::string output;  // stdout and stderr together
-};
+using Result = testing::CommandResult;
 
 Result RunInsert(const std::string& arguments) {
-  const std::string command = std::string(NERFAR_BINARY) + " insert " + arguments + " 2>&1";
-  FILE* pipe = ::popen(command.c_str(), "r");
-  std::string output;
-  std::array<char, 4096> buffer{};
-  while (pipe != nullptr && std::fgets(buffer.data(), buffer.size(), pipe) != nullptr) output += buffer.data();
-  const int status = pipe != nullptr ? ::pclose(pipe) : -1;
-  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, output};
+  return testing::RunCommand(std::string(NERFAR_BINARY) + " insert " + arguments);
 }
 
 class InsertCli : public ::testing::Test {

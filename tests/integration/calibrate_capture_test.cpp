@@ -4,10 +4,8 @@
 // tracked stream into a dataset whose poses match the truth and which the
 // dataset reader (the trainer's input) accepts.
 #include <gtest/gtest.h>
-#include <sys/wait.h>
 
 #include <algorithm>
-#include <array>
 #include <cmath>
 #include <cstdio>
 #include <nlohmann/json.hpp>
@@ -28,14 +26,9 @@ namespace nerfar {
 namespace {
 
 int RunNerfar(const std::string& arguments, std::string* output = nullptr) {
-  const std::string command = std::string(NERFAR_BINARY) + " " + arguments + " 2>&1";
-  FILE* pipe = ::popen(command.c_str(), "r");
-  std::string text;
-  std::array<char, 4096> buffer{};
-  while (pipe != nullptr && std::fgets(buffer.data(), buffer.size(), pipe) != nullptr) text += buffer.data();
-  const int status = pipe != nullptr ? ::pclose(pipe) : -1;
-  if (output != nullptr) *output = text;
-  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  testing::CommandResult result = testing::RunCommand(std::string(NERFAR_BINARY) + " " + arguments);
+  if (output != nullptr) *output = std::move(result.output);
+  return result.exit_code;
 }
 
 synth::CameraStreamOptions StreamOptions() {

@@ -1,8 +1,11 @@
 #include "tests/support/support.h"
 
+#include <sys/wait.h>
 #include <unistd.h>
 
+#include <array>
 #include <atomic>
+#include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -54,6 +57,16 @@ std::string ReadText(const std::string& path) {
 void WriteTruncatedCopy(const std::string& from, const std::string& to, size_t bytes) {
   const std::string text = ReadText(from);
   WriteText(to, text.substr(0, std::min(bytes, text.size())));
+}
+
+CommandResult RunCommand(const std::string& command_line) {
+  const std::string command = command_line + " 2>&1";
+  FILE* pipe = ::popen(command.c_str(), "r");
+  std::string output;
+  std::array<char, 4096> buffer{};
+  while (pipe != nullptr && std::fgets(buffer.data(), buffer.size(), pipe) != nullptr) output += buffer.data();
+  const int status = pipe != nullptr ? ::pclose(pipe) : -1;
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, output};
 }
 
 }  // namespace nerfar::testing

@@ -33,6 +33,16 @@ std::string ReadText(const std::string& path);
 // Copies the first `bytes` bytes of `from` to `to` (a truncated file).
 void WriteTruncatedCopy(const std::string& from, const std::string& to, size_t bytes);
 
+// A finished shell command: its exit code (-1 when it did not exit normally)
+// and its stdout and stderr together.
+struct CommandResult {
+  int exit_code;
+  std::string output;
+};
+// Runs `command_line` through the shell and waits for it (for tests of the
+// `nerfar` binary's exit codes and messages).
+CommandResult RunCommand(const std::string& command_line);
+
 }  // namespace nerfar::testing
 
 // Skips the current test, naming what is missing, when the shared scenes are absent.
