@@ -1,10 +1,17 @@
 #include "render/sg/brdf.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
+#include <cstdlib>
+#include <string>
 
 #include "calib/core/error.h"
 #include "render/sg/fast_exp.h"
+
+#if defined(__x86_64__) && defined(__GNUC__)
+#include <immintrin.h>
+#endif
 
 namespace nerfar {
 
@@ -274,21 +281,158 @@ constexpr float kCut = -60.0f;
   }
 }
 
+// ---- Many pixels per call: lanes are pixels, the loop runs over lobes.
+// One block is kPixelLanes pixels; per-pixel inputs and the sums are lane
+// arrays, per-lobe values scalars (broadcast). Each lobe's arithmetic is the
+// same as above (UnitInnerProductF, the table read, Burley's factor); there
+// are no horizontal sums, and the lobes' bodies are independent, so they
+// overlap in the pipeline.
+
+constexpr int kPixelLanes = 16;
+struct PixelBlock {
+  alignas(64) float nx[kPixelLanes], ny[kPixelLanes], nz[kPixelLanes];
+  alignas(64) float vx[kPixelLanes], vy[kPixelLanes], vz[kPixelLanes];
+  alignas(64) float rough[kPixelLanes], view_term[kPixelLanes];
+  alignas(64) float sx[kPixelLanes], sy[kPixelLanes], sz[kPixelLanes];  // mirror direction
+  alignas(64) float sl0[kPixelLanes], sl1[kPixelLanes];                 // specular lobes' sharpness
+  alignas(64) float gamma[kMaxSgLobes * kPixelLanes];                   // lobe-major: [k][lane]
+};
+// Sums per lane: diffuse RGB (Σ μ γ E Burley), specular RGB (Σ μ γ Σ_j 2π c_j ⟨G, S_j⟩).
+struct BlockSums {
+  alignas(64) float dr[kPixelLanes], dg[kPixelLanes], db[kPixelLanes];
+  alignas(64) float sr[kPixelLanes], sg[kPixelLanes], sb[kPixelLanes];
+};
+// The table reads of one block (lo = rows[at], hi = rows[at + 1] per lane):
+// a hardware gather where the kernel's instruction set has one (the
+// compiler's generic tuning emulates gathers with scalar inserts).
+struct GatherScalar {
+  [[gnu::always_inline]] static inline void Run(const float* rows, const int* at, float* lo, float* hi) {
+    for (int i = 0; i < kPixelLanes; ++i) lo[i] = rows[at[i]], hi[i] = rows[at[i] + 1];
+  }
+};
+
+template <bool kDiffuse, class Gather>
+[[gnu::always_inline]] inline void ShadeBlockBody(const LobeArrays& a, const PixelBlock& b, BlockSums* out) {
+  constexpr int kLast = kIrradianceTableColumns - 1;
+  constexpr float kTwoPiF = 6.28318530717958647692f;
+  const float c0 = kTwoPiF * static_cast<float>(kNdfWeight[0]), c1 = kTwoPiF * static_cast<float>(kNdfWeight[1]);
+  float* __restrict dr = out->dr;
+  float* __restrict dg = out->dg;
+  float* __restrict db = out->db;
+  float* __restrict sr = out->sr;
+  float* __restrict sg = out->sg;
+  float* __restrict sb = out->sb;
+  for (int i = 0; i < kPixelLanes; ++i) dr[i] = dg[i] = db[i] = sr[i] = sg[i] = sb[i] = 0.0f;
+  alignas(64) float cos_n[kPixelLanes], frac[kPixelLanes], lo[kPixelLanes], hi[kPixelLanes];
+  alignas(64) int at[kPixelLanes];
+  for (int k = 0; k < a.count; ++k) {
+    const float px = a.px[k], py = a.py[k], pz = a.pz[k], lambda = a.lambda[k];
+    const float mr = a.mr[k], mg = a.mg[k], mb = a.mb[k];
+    const float* __restrict g = b.gamma + k * kPixelLanes;
+    if constexpr (kDiffuse) {
+      const float inv_width = a.inv_width[k], scale = a.scale[k], slope = a.slope[k];
+      const int row = k * kIrradianceTableColumns;
+#pragma omp simd
+      for (int i = 0; i < kPixelLanes; ++i) {
+        const float c = px * b.nx[i] + py * b.ny[i] + pz * b.nz[i];
+        cos_n[i] = c;
+        const float x = MinC(static_cast<float>(kLast), std::abs(c) * inv_width);
+        const int j = MinC(kLast - 1, static_cast<int>(x));
+        frac[i] = x - static_cast<float>(j);
+        at[i] = row + j;
+      }
+      Gather::Run(a.rows, at, lo, hi);
+#pragma omp simd
+      for (int i = 0; i < kPixelLanes; ++i) {
+        // Exact clamped-cosine irradiance of the lobe, then Burley's factor with l = its axis.
+        const float c = cos_n[i];
+        const float e = MaxC(0.0f, c) * slope + scale * FastExpCut(lo[i] + frac[i] * (hi[i] - lo[i]), kCut);
+        const float pv = px * b.vx[i] + py * b.vy[i] + pz * b.vz[i];
+        const float f90m1 = b.rough[i] * (1.0f + pv) - 0.5f;
+        const float nl = MinC(1.0f, MaxC(0.0f, c)), w = 1.0f - nl, w2 = w * w, w5 = w2 * w2 * w;
+        const float weight = g[i] * e * (1.0f + f90m1 * w5) * (1.0f + f90m1 * b.view_term[i]);
+        dr[i] += mr * weight;
+        dg[i] += mg * weight;
+        db[i] += mb * weight;
+      }
+    }
+#pragma omp simd
+    for (int i = 0; i < kPixelLanes; ++i) {
+      const float dx = px - b.sx[i], dy = py - b.sy[i], dz = pz - b.sz[i];
+      const float d2 = dx * dx + dy * dy + dz * dz, ps = 1.0f - 0.5f * d2;
+      const float weight =
+          g[i] * (c0 * UnitInnerProductF(lambda, b.sl0[i], d2, ps) + c1 * UnitInnerProductF(lambda, b.sl1[i], d2, ps));
+      sr[i] += mr * weight;
+      sg[i] += mg * weight;
+      sb[i] += mb * weight;
+    }
+  }
+}
+
 void ShadeLobesBaseline(const LobeArrays& a, const PixelTerms& t, float* out) { ShadeLobesBody(a, t, out); }
+void ShadeBlockBaseline(const LobeArrays& a, const PixelBlock& b, bool diffuse, BlockSums* out) {
+  diffuse ? ShadeBlockBody<true, GatherScalar>(a, b, out) : ShadeBlockBody<false, GatherScalar>(a, b, out);
+}
 
 using ShadeLobesFn = void (*)(const LobeArrays&, const PixelTerms&, float*);
+using ShadeBlockFn = void (*)(const LobeArrays&, const PixelBlock&, bool, BlockSums*);
+struct Kernels {
+  ShadeLobesFn lobes;
+  ShadeBlockFn block;
+};
 #if defined(__x86_64__) && defined(__GNUC__)
-[[gnu::target("avx2,fma")]] void ShadeLobesAvx2(const LobeArrays& a, const PixelTerms& t, float* out) {
+#define NERFAR_SG_AVX2 "avx2,fma"
+#define NERFAR_SG_AVX512 "avx512f,avx512vl,avx512dq,avx512bw,avx2,fma,prefer-vector-width=512"
+[[gnu::target(NERFAR_SG_AVX2)]] void ShadeLobesAvx2(const LobeArrays& a, const PixelTerms& t, float* out) {
   ShadeLobesBody(a, t, out);
 }
-ShadeLobesFn PickShadeLobes() {
+struct GatherAvx2 {
+  [[gnu::target(NERFAR_SG_AVX2)]] static void Run(const float* rows, const int* at, float* lo, float* hi) {
+    for (int h = 0; h < kPixelLanes; h += 8) {
+      const __m256i index = _mm256_load_si256(reinterpret_cast<const __m256i*>(at + h));
+      _mm256_store_ps(lo + h, _mm256_i32gather_ps(rows, index, 4));
+      _mm256_store_ps(hi + h, _mm256_i32gather_ps(rows + 1, index, 4));
+    }
+  }
+};
+[[gnu::target(NERFAR_SG_AVX2)]] void ShadeBlockAvx2(const LobeArrays& a, const PixelBlock& b, bool diffuse,
+                                                    BlockSums* out) {
+  diffuse ? ShadeBlockBody<true, GatherAvx2>(a, b, out) : ShadeBlockBody<false, GatherAvx2>(a, b, out);
+}
+[[gnu::target(NERFAR_SG_AVX512)]] void ShadeLobesAvx512(const LobeArrays& a, const PixelTerms& t, float* out) {
+  ShadeLobesBody(a, t, out);
+}
+struct GatherAvx512 {
+  [[gnu::target(NERFAR_SG_AVX512)]] static void Run(const float* rows, const int* at, float* lo, float* hi) {
+    static_assert(kPixelLanes == 16);
+    const __m512i index = _mm512_load_si512(at);
+    const __m512 zero = _mm512_setzero_ps();  // the masked form: the plain one reads an undefined register
+    _mm512_store_ps(lo, _mm512_mask_i32gather_ps(zero, 0xFFFF, index, rows, 4));
+    _mm512_store_ps(hi, _mm512_mask_i32gather_ps(zero, 0xFFFF, index, rows + 1, 4));
+  }
+};
+[[gnu::target(NERFAR_SG_AVX512)]] void ShadeBlockAvx512(const LobeArrays& a, const PixelBlock& b, bool diffuse,
+                                                        BlockSums* out) {
+  diffuse ? ShadeBlockBody<true, GatherAvx512>(a, b, out) : ShadeBlockBody<false, GatherAvx512>(a, b, out);
+}
+// The widest instruction set the CPU has, or a narrower one named by the
+// environment variable NERFAR_SG_SIMD (avx2 or baseline; for testing every
+// kernel on one machine, tests/sg/CMakeLists.txt).
+Kernels PickKernels() {
   __builtin_cpu_init();
-  return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma") ? ShadeLobesAvx2 : ShadeLobesBaseline;
+  const char* env = std::getenv("NERFAR_SG_SIMD");
+  const std::string limit = env != nullptr ? env : "";
+  if (limit.empty() && __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl") &&
+      __builtin_cpu_supports("avx512dq") && __builtin_cpu_supports("avx512bw"))
+    return {ShadeLobesAvx512, ShadeBlockAvx512};
+  if (limit != "baseline" && __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma"))
+    return {ShadeLobesAvx2, ShadeBlockAvx2};
+  return {ShadeLobesBaseline, ShadeBlockBaseline};
 }
 #else
-ShadeLobesFn PickShadeLobes() { return ShadeLobesBaseline; }
+Kernels PickKernels() { return {ShadeLobesBaseline, ShadeBlockBaseline}; }
 #endif
-const ShadeLobesFn kShadeLobes = PickShadeLobes();
+const Kernels kKernels = PickKernels();
 
 }  // namespace
 
@@ -310,7 +454,7 @@ Vec3f SgShader::Shade(const SgMaterial& m, const Vec3f& n, const Vec3f& v, const
   for (int j = 0; j < kNdfLobes; ++j) terms.sl[j] = static_cast<float>(kNdfSharpness[j]) * view.sharpness_unit;
   const LobeArrays arrays{px_, py_, pz_, lambda_, mr_, mg_, mb_, inv_width_, scale_, slope_, rows_.data(), padded_};
   float sums[kSums];
-  kShadeLobes(arrays, terms, sums);
+  kKernels.lobes(arrays, terms, sums);
 
   const float kd = static_cast<float>((1.0 - m.metallic) * kInvPi);
   Vec3f out(kd * static_cast<float>(m.base_color.x) * sums[0], kd * static_cast<float>(m.base_color.y) * sums[1],
@@ -322,6 +466,54 @@ Vec3f SgShader::Shade(const SgMaterial& m, const Vec3f& n, const Vec3f& v, const
     out.z += c * view.amp_b * sums[5 + 3 * j];
   }
   return out;
+}
+
+void SgShader::Shade(const SgMaterial* materials, const Vec3f* normals, const Vec3f* views, const float* gamma,
+                     int count, Vec3f* out) const {
+  // Lobes are the loop here, not lanes: no padding needed.
+  const LobeArrays arrays{px_, py_, pz_, lambda_, mr_, mg_, mb_, inv_width_, scale_, slope_, rows_.data(), count_};
+  PixelBlock block;
+  BlockSums sums;
+  // Per lane: the factors that turn the sums into radiance.
+  float kd[3][kPixelLanes], ks[3][kPixelLanes];
+  for (int begin = 0; begin < count; begin += kPixelLanes) {
+    const int lanes = std::min(kPixelLanes, count - begin);
+    bool diffuse = false;
+    for (int i = 0; i < kPixelLanes; ++i) {
+      // Lanes past the end repeat the last pixel (finite inputs; results unused).
+      const int p = begin + std::min(i, lanes - 1);
+      const SgMaterial& m = materials[p];
+      const Vec3f& n = normals[p];
+      const Vec3f& v = views[p];
+      const float metallic = static_cast<float>(m.metallic);
+      const float base[3] = {static_cast<float>(m.base_color.x), static_cast<float>(m.base_color.y),
+                             static_cast<float>(m.base_color.z)};
+      float f0[3];
+      for (int c = 0; c < 3; ++c) f0[c] = kDielectricF0 + (base[c] - float(kDielectricF0)) * metallic;
+      const float rough = static_cast<float>(m.roughness);
+      const SpecularView<float> view =
+          MakeSpecularView<float>(f0[0], f0[1], f0[2], rough, n.x, n.y, n.z, v.x, v.y, v.z);
+      const float nv = std::clamp(Dot(n, v), 0.0f, 1.0f), wv = 1.0f - nv, wv2 = wv * wv;
+      block.nx[i] = n.x, block.ny[i] = n.y, block.nz[i] = n.z;
+      block.vx[i] = v.x, block.vy[i] = v.y, block.vz[i] = v.z;
+      block.rough[i] = rough, block.view_term[i] = wv2 * wv2 * wv;
+      block.sx[i] = view.rx, block.sy[i] = view.ry, block.sz[i] = view.rz;
+      block.sl0[i] = static_cast<float>(kNdfSharpness[0]) * view.sharpness_unit;
+      block.sl1[i] = static_cast<float>(kNdfSharpness[1]) * view.sharpness_unit;
+      const float kdm = static_cast<float>((1.0 - m.metallic) * kInvPi);
+      for (int c = 0; c < 3; ++c) kd[c][i] = kdm * base[c];
+      ks[0][i] = view.amp_r, ks[1][i] = view.amp_g, ks[2][i] = view.amp_b;
+      diffuse = diffuse || m.metallic < 1.0;
+      // γ to lobe-major (padded lobes: 1, their amplitude is 0).
+      const float* gp = gamma != nullptr ? gamma + static_cast<size_t>(p) * count_ : nullptr;
+      for (int k = 0; k < count_; ++k) block.gamma[k * kPixelLanes + i] = gp != nullptr ? gp[k] : 1.0f;
+    }
+    kKernels.block(arrays, block, diffuse, &sums);
+    for (int i = 0; i < lanes; ++i)
+      out[begin + i] =
+          Vec3f(kd[0][i] * sums.dr[i] + ks[0][i] * sums.sr[i], kd[1][i] * sums.dg[i] + ks[1][i] * sums.sg[i],
+                kd[2][i] * sums.db[i] + ks[2][i] * sums.sb[i]);
+  }
 }
 
 }  // namespace nerfar

@@ -66,13 +66,19 @@ Vec3 ShadeSg(const SgMixture& light, const SgMaterial& material, const Vec3& n, 
 // loop over lobes that the compiler vectorises (FastExp, no branches per
 // lobe). At most kMaxSgLobes lobes. Agrees with ShadeSg to ~1e-4 relative
 // (differential test). docs/SG.md "Shading cost" counts its FLOPs.
-inline constexpr int kSgLanes = 8;
+inline constexpr int kSgLanes = 16;
 class SgShader {
  public:
   explicit SgShader(const SgMixture& light);
   int lobe_count() const { return count_; }
   // gamma: lobe_count() factors or nullptr (all 1). Returns linear RGB.
   Vec3f Shade(const SgMaterial& material, const Vec3f& n, const Vec3f& v, const float* gamma = nullptr) const;
+  // The same for `count` pixels at once (the fast path: lanes are pixels, so
+  // the per-pixel set-up and sums vectorise too). materials, normals, views,
+  // out: count entries each; gamma: count × lobe_count() factors, pixel after
+  // pixel (gamma[p · lobe_count() + k]), or nullptr (all 1).
+  void Shade(const SgMaterial* materials, const Vec3f* normals, const Vec3f* views, const float* gamma, int count,
+             Vec3f* out) const;
 
  private:
   int count_ = 0;

@@ -576,6 +576,54 @@ TEST(SgShading, PreparedShaderHandlesAnyLobeCountAndNoGamma) {
   }
 }
 
+TEST(SgShading, ManyPixelShadeAgreesWithTheReference) {
+  // The many-pixel path (lanes are pixels) against the double reference, per
+  // pixel: a different material, normal, view and γ for every pixel (the
+  // lanes must not mix), pixel counts that leave a partial block of 16, lobe
+  // counts 1 to 64, γ absent, and a pixel seen from behind (no specular).
+  // Same 1e-4 relative tolerance as the per-pixel path (float rounding over
+  // ≤ 64 terms ~1e-6, float table lookups ~1e-6, FastExp < 4e-7).
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  for (int lobes : {1, 13, 32, 64}) {
+    SgMixture light;
+    const std::vector<Vec3> axes = FibonacciSphere(lobes);
+    for (int k = 0; k < lobes; ++k)
+      light.push_back({axes[k], std::pow(10.0, -1.0 + 4.0 * k / std::max(1, lobes - 1)), Vec3(1.0 + k, 2.0, 0.5)});
+    const SgShader shader(light);
+    for (int pixels : {1, 16, 37}) {
+      std::vector<SgMaterial> materials;
+      std::vector<Vec3f> normals, views;
+      std::vector<float> gamma;
+      const std::vector<Vec3> dirs = FibonacciSphere(pixels);
+      for (int p = 0; p < pixels; ++p) {
+        const double metallic = p % 3 == 0 ? 0.0 : (p % 3 == 1 ? 1.0 : 0.5);
+        const double roughness = p % 5 == 0 ? 0.02 : 0.05 + 0.95 * u(rng);
+        materials.push_back({Vec3(u(rng), u(rng), u(rng)), roughness, metallic});
+        const Vec3 n = dirs[p];
+        // Pixel 7 is seen from behind (n·v < 0); the others from the front.
+        const Vec3 v = p == 7 ? Normalized(Vec3(0.3, -0.2, 0.1) - n) : Normalized(n + Vec3(0.3, -0.2, 0.1) * u(rng));
+        normals.emplace_back(n);
+        views.emplace_back(v);
+        for (int k = 0; k < lobes; ++k) gamma.push_back(static_cast<float>(u(rng)));
+      }
+      for (bool with_gamma : {true, false}) {
+        std::vector<Vec3f> got(pixels);
+        shader.Shade(materials.data(), normals.data(), views.data(), with_gamma ? gamma.data() : nullptr, pixels,
+                     got.data());
+        for (int p = 0; p < pixels; ++p) {
+          std::vector<double> g;
+          if (with_gamma) g.assign(gamma.begin() + static_cast<size_t>(p) * lobes, gamma.begin() + (p + 1) * lobes);
+          const Vec3 ref = ShadeSg(light, materials[p], Vec3(normals[p]), Vec3(views[p]), g);
+          for (int c = 0; c < 3; ++c)
+            EXPECT_NEAR(got[p][c], ref[c], 1e-4 * std::abs(ref[c]) + 1e-6)
+                << lobes << " lobes, " << pixels << " pixels, pixel " << p << (with_gamma ? "" : ", no gamma");
+        }
+      }
+    }
+  }
+}
+
 TEST(SgShading, FastExpIsAccurate) {
   // Against std::exp (double) on a dense grid over the normal float range:
   // measured maximum relative error < 4e-7 (the header's figure); tolerance
