@@ -205,6 +205,7 @@ int RunLive(const CommandArgs& args) {
           std::to_string(ThreadCount()) + ", session " + session_dir);
 
   // Places object 0 under the image centre once a frame has a pose.
+  std::int64_t auto_placed_frame = -1;
   const auto try_auto_place = [&](const LiveFrame& f) {
     if (!auto_place || pipeline.object(0).placed || !f.has_pose) return;
     if (const auto hit = pipeline.PickSurface(f, f.ar.width * 0.5, f.ar.height * 0.5)) {
@@ -212,7 +213,9 @@ int RunLive(const CommandArgs& args) {
       s.placed = true;
       s.anchor_world = *hit;
       pipeline.set_object(0, s);
-      LogInfo("live: placed " + objects[0].name + " at the surface under the image centre");
+      auto_placed_frame = f.index;
+      LogInfo("live: placed " + objects[0].name + " at the surface under the image centre of frame " +
+              std::to_string(f.index));
     }
   };
 
@@ -294,6 +297,7 @@ int RunLive(const CommandArgs& args) {
   info.mode = window_mode ? "window" : (realtime ? "headless-realtime" : "headless");
   info.wall_s = wall_s;
   info.threads = ThreadCount();
+  info.auto_placed_frame = auto_placed_frame;
   WriteSession(session_dir, info, pipeline);
   std::string report_dir;
   const Json report = BuildReport(session_dir, &report_dir);

@@ -36,6 +36,7 @@ class LiveUi {
   int frames_shown() const { return frames_shown_; }
   void StartRecording();
   void StopRecording();
+  bool recording() const { return video_ != nullptr; }
   // Saves the next presented window as SESSION/screenshot_NNN.png; returns its path.
   std::string Screenshot();
 

@@ -237,12 +237,42 @@ std::optional<Vec3> LivePipeline::PickSurface(const LiveFrame& frame, double x, 
   const Vec3 direction = Normalized(frame.T_world_camera.Rotate(d_camera));
   const auto range = IntersectBox(scene_.Box(), origin, direction);
   if (!range) return std::nullopt;
+  const std::optional<double> t = MedianHitDistance(scene_, origin, direction, range->first, range->second);
+  if (!t) return std::nullopt;
+  return origin + direction * *t;
+}
+
+std::optional<double> MedianHitDistance(const SceneField& scene, const Vec3& origin, const Vec3& direction,
+                                        double t_near, double t_far) {
+  // Why the median and not the expected depth Σ T α t / Ô: a NeRF's thin fog
+  // in front of a surface pulls the expected depth towards the camera (and
+  // fog behind it away), by centimetres on a fast model; the distance where
+  // half of the ray's opacity has accumulated stays on the surface as long
+  // as the fog in front holds less than half of it. Two passes of kSteps
+  // rays each over nested brackets: (t_far − t_near)/kSteps² resolution.
+  constexpr int kSteps = 32;
   SceneRays rays;
-  rays.Add(Vec3f(origin), Vec3f(direction), static_cast<float>(range->first), static_cast<float>(range->second));
   SceneSamples samples;
-  scene_.RenderRays(rays, samples);
-  if (!(samples.opacity[0] >= kSurfaceOpacity) || !std::isfinite(samples.depth[0])) return std::nullopt;
-  return origin + direction * static_cast<double>(samples.depth[0]);
+  rays.Add(Vec3f(origin), Vec3f(direction), static_cast<float>(t_near), static_cast<float>(t_far));
+  scene.RenderRays(rays, samples);
+  const float total = samples.opacity[0];
+  if (!(total >= kSurfaceOpacity) || !std::isfinite(total)) return std::nullopt;
+  const float half = 0.5f * total;
+  double lo = t_near, hi = t_far;
+  for (int pass = 0; pass < 2; ++pass) {
+    rays.Clear();
+    const double step = (hi - lo) / kSteps;
+    for (int k = 1; k <= kSteps; ++k)
+      rays.Add(Vec3f(origin), Vec3f(direction), static_cast<float>(t_near), static_cast<float>(lo + step * k));
+    scene.RenderRays(rays, samples);
+    // Opacity over [t_near, t] grows with t: the first t reaching half.
+    int k = 0;
+    while (k < kSteps - 1 && !(samples.opacity[k] >= half)) ++k;
+    hi = lo + step * (k + 1);
+    lo = hi - step;
+  }
+  const double t = 0.5 * (lo + hi);
+  return std::isfinite(t) ? std::optional<double>(t) : std::nullopt;
 }
 
 std::optional<LivePipeline::Captured> LivePipeline::Capture(bool& end) {

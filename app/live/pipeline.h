@@ -155,8 +155,9 @@ class LivePipeline {
   void MarkDisplayed(const LiveFrame& frame);
 
   // Placement: the scene surface under view pixel (x, y) of the AR view of
-  // `frame` (NeRF opacity-weighted depth along the pixel ray); nullopt where
-  // the ray meets no surface (opacity below 0.3).
+  // `frame` (the median hit distance of the NeRF along the pixel ray,
+  // MedianHitDistance); nullopt where the ray meets no surface (opacity
+  // below 0.3).
   std::optional<Vec3> PickSurface(const LiveFrame& frame, double x, double y) const;
 
   // Edits (thread-safe; applied from the next processed frame).
@@ -223,6 +224,13 @@ class LivePipeline {
   std::atomic<bool> source_ended_{false};
   std::thread capture_thread_, process_thread_;
 };
+
+// Distance along the ray o + t·d (d unit) where the scene's opacity over
+// [t_near, t] first reaches half of its value over [t_near, t_far] (the median
+// of where the ray ends; within (t_far − t_near)/1024); nullopt when the whole
+// range holds less than 0.3 opacity (no surface).
+std::optional<double> MedianHitDistance(const SceneField& scene, const Vec3& origin, const Vec3& direction,
+                                        double t_near, double t_far);
 
 // Stage names and values of LiveStageTimes in a fixed order (tables, JSON).
 std::vector<std::pair<std::string, double>> StageList(const LiveStageTimes& times);

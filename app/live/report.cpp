@@ -189,12 +189,31 @@ void WriteSession(const std::string& session_dir, const SessionInfo& info, const
     if (r.light_fit_loss >= 0) f["light_fit_loss"] = r.light_fit_loss;
     frames.push_back(f);
   }
+  Json objects = Json::array();
+  for (size_t i = 0; i < pipeline.object_count(); ++i) {
+    const LiveObjectState o = pipeline.object(i);
+    Json j = {{"file", i < info.objects.size() ? info.objects[i] : std::string()},
+              {"placed", o.placed},
+              {"yaw_rad", o.yaw_rad},
+              {"scale", o.scale},
+              {"material",
+               {{"base_color", {o.material.base_color.x, o.material.base_color.y, o.material.base_color.z}},
+                {"roughness", o.material.roughness},
+                {"metallic", o.material.metallic}}}};
+    if (o.placed) {
+      j["anchor_world"] = {o.anchor_world.x, o.anchor_world.y, o.anchor_world.z};
+      j["T_world_object"] = PoseJson(pipeline.ObjectPose(i, o));
+    }
+    if (i == 0 && info.auto_placed_frame >= 0) j["auto_placed_frame"] = info.auto_placed_frame;
+    objects.push_back(j);
+  }
   Json session = {{"format", "nerfar-session"},
                   {"version", 1},
                   {"scene", info.scene_dir},
                   {"source", info.source},
                   {"camera", info.camera_path},
                   {"objects", info.objects},
+                  {"placements", objects},
                   {"mode", info.mode},
                   {"preset", pipeline.preset()},
                   {"wall_s", info.wall_s},

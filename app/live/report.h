@@ -1,7 +1,8 @@
 // The session of a live run and its report. `nerfar live` writes
 // SESSION/session.json (options, counters, one record per processed frame:
 // tracking state, pose, true pose where the source knows it, per-stage ms,
-// capture-to-display latency) and the last views (last_ar.png, ...); the
+// capture-to-display latency; the objects as they were at the end: placed,
+// anchor, yaw, scale, material, world pose) and the last views (last_ar.png, ...); the
 // report is computed from those and the SCENE's files: calibration RMS,
 // tracking jitter and loss (and error against the truth), light-fit error,
 // environment energy, SSDF error estimate (field against brute-force ray
@@ -9,6 +10,7 @@
 // one-page SESSION/report.png.
 #pragma once
 
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -26,6 +28,8 @@ struct SessionInfo {
   double wall_s = 0;                 // seconds from start to end
   int threads = 0;
   std::string load;  // /proc/loadavg at the end (others' work inflates times)
+  // Frame whose pose placed object 0 by --auto-place (-1: not auto-placed).
+  std::int64_t auto_placed_frame = -1;
 };
 
 // SESSION/session.json (atomic).

@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
 #include <memory>
 #include <string>
 #include <thread>
@@ -21,6 +22,7 @@
 #include "render/mesh/mesh.h"
 #include "render/synth/camera_stream.h"
 #include "tests/support/support.h"
+#include "tracking/frame_sources.h"
 
 namespace nerfar {
 namespace {
@@ -265,6 +267,54 @@ TEST_F(LiveAppTest, ClickPlacesTheObjectWhereClickedAndDragMovesIt) {
   int measured = 0;
   for (const LiveFrameRecord& r : pipeline_->records()) measured += r.latency_ms >= 0;
   EXPECT_GT(measured, 0);
+}
+
+TEST_F(LiveAppTest, KeysTakeAScreenshotToggleRecordingAndQuit) {
+  testing::TempDir dir;
+  LiveWindow window("nerfar keys test", 640, 480);
+  LiveUi ui(window, *pipeline_, dir.path());
+  pipeline_->Start();
+  ASSERT_TRUE(TickUntil(ui, [&] { return ui.shown().has_value(); })) << "no frame shown";
+  // Real key presses through the X server (XTEST) to the focused window.
+  const std::string id = "$(xdotool search --sync --name 'nerfar keys test' | head -n 1)";
+  const auto key = [&](const std::string& name) {
+    return std::system(("sh -c \"xdotool windowfocus --sync " + id + " key " + name + "\"").c_str());
+  };
+
+  // P: the next presented window is saved as SESSION/screenshot_000.png, as
+  // large as the window (the views and the panel as the user sees them).
+  const std::string shot = dir.File("screenshot_000.png");
+  ASSERT_EQ(key("p"), 0);
+  ASSERT_TRUE(TickUntil(ui, [&] { return std::filesystem::is_regular_file(shot); })) << "P wrote no screenshot";
+  const Image8 image = ReadImage8(shot);
+  EXPECT_EQ(image.width, 640);
+  EXPECT_EQ(image.height, 480);
+
+  // R starts recording, R again stops it: SESSION/recording.mp4 holds every
+  // frame shown in between (a frame is written when it is shown; the key is
+  // handled after the frame of its tick), at the AR view's size.
+  ASSERT_EQ(key("r"), 0);
+  ASSERT_TRUE(TickUntil(ui, [&] { return ui.recording(); })) << "R did not start recording";
+  const int started = ui.frames_shown();
+  ASSERT_TRUE(TickUntil(ui, [&] { return ui.frames_shown() >= started + 5; }));
+  ASSERT_EQ(key("r"), 0);
+  ASSERT_TRUE(TickUntil(ui, [&] { return !ui.recording(); })) << "R did not stop recording";
+  const int recorded = ui.frames_shown() - started;
+  std::unique_ptr<FrameSource> video = OpenFrameSource("video:" + dir.File("recording.mp4"));
+  Frame f;
+  int count = 0;
+  while (video->Next(f, 1000) == FrameStatus::kOk) {
+    EXPECT_EQ(f.image.width, 320);
+    EXPECT_EQ(f.image.height, 240);
+    ++count;
+  }
+  EXPECT_EQ(count, recorded);
+  EXPECT_GE(count, 5);
+
+  // Esc closes the window: Tick says so.
+  ASSERT_EQ(key("Escape"), 0);
+  EXPECT_TRUE(TickUntil(ui, [&] { return window.ShouldClose(); })) << "Esc did not close the window";
+  pipeline_->Stop();
 }
 
 }  // namespace
