@@ -53,26 +53,25 @@ struct SpecularView {
   T amp_r = 0, amp_g = 0, amp_b = 0;  // × c_j: lobe j's amplitude
 };
 template <class T>
-SpecularView<T> MakeSpecularView(T f0r, T f0g, T f0b, T roughness, T nx, T ny, T nz, T vx, T vy, T vz) {
+[[gnu::always_inline]] inline SpecularView<T> MakeSpecularView(T f0r, T f0g, T f0b, T roughness, T nx, T ny, T nz, T vx,
+                                                               T vy, T vz) {
+  // Branch-free (selects only), so that a loop over pixels vectorises.
   SpecularView<T> out;
   const T nv_raw = nx * vx + ny * vy + nz * vz;
-  if (!(nv_raw > T(0))) {
-    out.rx = nx, out.ry = ny, out.rz = nz;
-    return out;
-  }
+  const bool front = nv_raw > T(0);
   const T nv = std::max(nv_raw, T(1e-6));
   const T alpha = std::max(roughness * roughness, T(kMinAlpha)), a2 = alpha * alpha;
   const T rx = T(2) * nv_raw * nx - vx, ry = T(2) * nv_raw * ny - vy, rz = T(2) * nv_raw * nz - vz;
   const T inv_len = T(1) / std::sqrt(rx * rx + ry * ry + rz * rz);
-  out.rx = rx * inv_len, out.ry = ry * inv_len, out.rz = rz * inv_len;
+  out.rx = front ? rx * inv_len : nx, out.ry = front ? ry * inv_len : ny, out.rz = front ? rz * inv_len : nz;
   // Smith G1 at n·l = n·v, squared; Schlick at v·h = n·v.
   const T g1 = T(2) * nv / (nv + std::sqrt(a2 + (T(1) - a2) * nv * nv));
   const T w = T(1) - std::min(nv, T(1)), w2 = w * w, w5 = w2 * w2 * w;
-  const T common = g1 * g1 / (T(4) * nv * T(kPi) * a2);
+  const T common = front ? g1 * g1 / (T(4) * nv * T(kPi) * a2) : T(0);
   out.amp_r = (f0r + (T(1) - f0r) * w5) * common;
   out.amp_g = (f0g + (T(1) - f0g) * w5) * common;
   out.amp_b = (f0b + (T(1) - f0b) * w5) * common;
-  out.sharpness_unit = T(1) / (a2 * T(4) * nv);
+  out.sharpness_unit = front ? T(1) / (a2 * T(4) * nv) : T(1);
   return out;
 }
 
@@ -213,7 +212,7 @@ constexpr float kCut = -60.0f;
   const float sum = l + sl + lm;
   const float inv = 1.0f / (sum * lm_safe);
   const float log_scale = MinC(0.0f, -l * sl * d2 * lm_safe * inv);
-  const float big = (1.0f - FastExp(-2.0f * lm_safe)) * sum * inv;
+  const float big = (1.0f - FastExpNonPositive(-2.0f * lm_safe)) * sum * inv;
   const float small = 2.0f + lm * (-2.0f + lm * (4.0f / 3.0f - lm * (2.0f / 3.0f)));
   return FastExpCut(log_scale, kCut) * (lm > 1.0f / 64.0f ? big : small);
 }
@@ -474,8 +473,8 @@ void SgShader::Shade(const SgMaterial* materials, const Vec3f* normals, const Ve
   const LobeArrays arrays{px_, py_, pz_, lambda_, mr_, mg_, mb_, inv_width_, scale_, slope_, rows_.data(), count_};
   PixelBlock block;
   BlockSums sums;
-  // Per lane: the factors that turn the sums into radiance.
-  float kd[3][kPixelLanes], ks[3][kPixelLanes];
+  // Per lane: the material, and the factors that turn the sums into radiance.
+  alignas(64) float base[3][kPixelLanes], metal[kPixelLanes], kd[3][kPixelLanes], ks[3][kPixelLanes];
   for (int begin = 0; begin < count; begin += kPixelLanes) {
     const int lanes = std::min(kPixelLanes, count - begin);
     bool diffuse = false;
@@ -483,30 +482,35 @@ void SgShader::Shade(const SgMaterial* materials, const Vec3f* normals, const Ve
       // Lanes past the end repeat the last pixel (finite inputs; results unused).
       const int p = begin + std::min(i, lanes - 1);
       const SgMaterial& m = materials[p];
-      const Vec3f& n = normals[p];
-      const Vec3f& v = views[p];
-      const float metallic = static_cast<float>(m.metallic);
-      const float base[3] = {static_cast<float>(m.base_color.x), static_cast<float>(m.base_color.y),
-                             static_cast<float>(m.base_color.z)};
+      base[0][i] = static_cast<float>(m.base_color.x);
+      base[1][i] = static_cast<float>(m.base_color.y);
+      base[2][i] = static_cast<float>(m.base_color.z);
+      metal[i] = static_cast<float>(m.metallic);
+      block.rough[i] = static_cast<float>(m.roughness);
+      diffuse = diffuse || m.metallic < 1.0;
+      block.nx[i] = normals[p].x, block.ny[i] = normals[p].y, block.nz[i] = normals[p].z;
+      block.vx[i] = views[p].x, block.vy[i] = views[p].y, block.vz[i] = views[p].z;
+      // γ to lobe-major.
+      const float* gp = gamma != nullptr ? gamma + static_cast<size_t>(p) * count_ : nullptr;
+      for (int k = 0; k < count_; ++k) block.gamma[k * kPixelLanes + i] = gp != nullptr ? gp[k] : 1.0f;
+    }
+#pragma omp simd
+    for (int i = 0; i < kPixelLanes; ++i) {
       float f0[3];
-      for (int c = 0; c < 3; ++c) f0[c] = kDielectricF0 + (base[c] - float(kDielectricF0)) * metallic;
-      const float rough = static_cast<float>(m.roughness);
+      for (int c = 0; c < 3; ++c) f0[c] = float(kDielectricF0) + (base[c][i] - float(kDielectricF0)) * metal[i];
       const SpecularView<float> view =
-          MakeSpecularView<float>(f0[0], f0[1], f0[2], rough, n.x, n.y, n.z, v.x, v.y, v.z);
-      const float nv = std::clamp(Dot(n, v), 0.0f, 1.0f), wv = 1.0f - nv, wv2 = wv * wv;
-      block.nx[i] = n.x, block.ny[i] = n.y, block.nz[i] = n.z;
-      block.vx[i] = v.x, block.vy[i] = v.y, block.vz[i] = v.z;
-      block.rough[i] = rough, block.view_term[i] = wv2 * wv2 * wv;
+          MakeSpecularView<float>(f0[0], f0[1], f0[2], block.rough[i], block.nx[i], block.ny[i], block.nz[i],
+                                  block.vx[i], block.vy[i], block.vz[i]);
+      const float nv =
+          MinC(1.0f, MaxC(0.0f, block.nx[i] * block.vx[i] + block.ny[i] * block.vy[i] + block.nz[i] * block.vz[i]));
+      const float wv = 1.0f - nv, wv2 = wv * wv;
+      block.view_term[i] = wv2 * wv2 * wv;
       block.sx[i] = view.rx, block.sy[i] = view.ry, block.sz[i] = view.rz;
       block.sl0[i] = static_cast<float>(kNdfSharpness[0]) * view.sharpness_unit;
       block.sl1[i] = static_cast<float>(kNdfSharpness[1]) * view.sharpness_unit;
-      const float kdm = static_cast<float>((1.0 - m.metallic) * kInvPi);
-      for (int c = 0; c < 3; ++c) kd[c][i] = kdm * base[c];
+      const float kdm = (1.0f - metal[i]) * static_cast<float>(kInvPi);
+      for (int c = 0; c < 3; ++c) kd[c][i] = kdm * base[c][i];
       ks[0][i] = view.amp_r, ks[1][i] = view.amp_g, ks[2][i] = view.amp_b;
-      diffuse = diffuse || m.metallic < 1.0;
-      // γ to lobe-major (padded lobes: 1, their amplitude is 0).
-      const float* gp = gamma != nullptr ? gamma + static_cast<size_t>(p) * count_ : nullptr;
-      for (int k = 0; k < count_; ++k) block.gamma[k * kPixelLanes + i] = gp != nullptr ? gp[k] : 1.0f;
     }
     kKernels.block(arrays, block, diffuse, &sums);
     for (int i = 0; i < lanes; ++i)

@@ -639,6 +639,12 @@ TEST(SgShading, FastExpIsAccurate) {
   EXPECT_EQ(FastExp(-86.6f), 0.0f);
   EXPECT_EQ(FastExp(-1e30f), 0.0f);
   EXPECT_GE(FastExp(-86.5f), std::numeric_limits<float>::min());
+  // FastExpNonPositive: the same values for x ≤ 0 above −86.5, and a normal
+  // float (e^{−86.5}) below; FastExpCut: the same values above its cut.
+  for (float x : {-86.0f, -20.0f, -1.0f, -1e-3f, 0.0f}) EXPECT_EQ(FastExpNonPositive(x), FastExp(x)) << x;
+  EXPECT_GE(FastExpNonPositive(-1e30f), std::numeric_limits<float>::min());
+  EXPECT_LT(FastExpNonPositive(-1e30f), 3e-38f);
+  for (float x : {-59.0f, -1.0f, 0.0f, 3.0f, 87.0f}) EXPECT_EQ(FastExpCut(x, -60.0f), FastExp(x)) << x;
   EXPECT_EQ(FastExpCut(-61.0f, -60.0f), 0.0f);
   EXPECT_NEAR(FastExpCut(-59.0f, -60.0f), std::exp(-59.0), 5e-7 * std::exp(-59.0));
 }
