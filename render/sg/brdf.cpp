@@ -310,7 +310,7 @@ struct GatherScalar {
   }
 };
 
-template <bool kDiffuse, class Gather>
+template <bool kDiffuse, bool kSpecular, class Gather>
 [[gnu::always_inline]] inline void ShadeBlockBody(const LobeArrays& a, const PixelBlock& b, BlockSums* out) {
   constexpr int kLast = kIrradianceTableColumns - 1;
   constexpr float kTwoPiF = 6.28318530717958647692f;
@@ -355,26 +355,36 @@ template <bool kDiffuse, class Gather>
         db[i] += mb * weight;
       }
     }
+    if constexpr (kSpecular) {
 #pragma omp simd
-    for (int i = 0; i < kPixelLanes; ++i) {
-      const float dx = px - b.sx[i], dy = py - b.sy[i], dz = pz - b.sz[i];
-      const float d2 = dx * dx + dy * dy + dz * dz, ps = 1.0f - 0.5f * d2;
-      const float weight =
-          g[i] * (c0 * UnitInnerProductF(lambda, b.sl0[i], d2, ps) + c1 * UnitInnerProductF(lambda, b.sl1[i], d2, ps));
-      sr[i] += mr * weight;
-      sg[i] += mg * weight;
-      sb[i] += mb * weight;
+      for (int i = 0; i < kPixelLanes; ++i) {
+        const float dx = px - b.sx[i], dy = py - b.sy[i], dz = pz - b.sz[i];
+        const float d2 = dx * dx + dy * dy + dz * dz, ps = 1.0f - 0.5f * d2;
+        const float weight = g[i] * (c0 * UnitInnerProductF(lambda, b.sl0[i], d2, ps) +
+                                     c1 * UnitInnerProductF(lambda, b.sl1[i], d2, ps));
+        sr[i] += mr * weight;
+        sg[i] += mg * weight;
+        sb[i] += mb * weight;
+      }
     }
   }
 }
 
 void ShadeLobesBaseline(const LobeArrays& a, const PixelTerms& t, float* out) { ShadeLobesBody(a, t, out); }
-void ShadeBlockBaseline(const LobeArrays& a, const PixelBlock& b, bool diffuse, BlockSums* out) {
-  diffuse ? ShadeBlockBody<true, GatherScalar>(a, b, out) : ShadeBlockBody<false, GatherScalar>(a, b, out);
+// parts: 1 diffuse, 2 specular, 3 both (SgShader::Shade's `terms` and the materials).
+template <class Gather>
+[[gnu::always_inline]] inline void ShadeBlockParts(const LobeArrays& a, const PixelBlock& b, int parts,
+                                                   BlockSums* out) {
+  if (parts == 1) return ShadeBlockBody<true, false, Gather>(a, b, out);
+  if (parts == 2) return ShadeBlockBody<false, true, Gather>(a, b, out);
+  ShadeBlockBody<true, true, Gather>(a, b, out);
+}
+void ShadeBlockBaseline(const LobeArrays& a, const PixelBlock& b, int parts, BlockSums* out) {
+  ShadeBlockParts<GatherScalar>(a, b, parts, out);
 }
 
 using ShadeLobesFn = void (*)(const LobeArrays&, const PixelTerms&, float*);
-using ShadeBlockFn = void (*)(const LobeArrays&, const PixelBlock&, bool, BlockSums*);
+using ShadeBlockFn = void (*)(const LobeArrays&, const PixelBlock&, int, BlockSums*);
 struct Kernels {
   ShadeLobesFn lobes;
   ShadeBlockFn block;
@@ -394,9 +404,9 @@ struct GatherAvx2 {
     }
   }
 };
-[[gnu::target(NERFAR_SG_AVX2)]] void ShadeBlockAvx2(const LobeArrays& a, const PixelBlock& b, bool diffuse,
+[[gnu::target(NERFAR_SG_AVX2)]] void ShadeBlockAvx2(const LobeArrays& a, const PixelBlock& b, int parts,
                                                     BlockSums* out) {
-  diffuse ? ShadeBlockBody<true, GatherAvx2>(a, b, out) : ShadeBlockBody<false, GatherAvx2>(a, b, out);
+  ShadeBlockParts<GatherAvx2>(a, b, parts, out);
 }
 [[gnu::target(NERFAR_SG_AVX512)]] void ShadeLobesAvx512(const LobeArrays& a, const PixelTerms& t, float* out) {
   ShadeLobesBody(a, t, out);
@@ -410,9 +420,9 @@ struct GatherAvx512 {
     _mm512_store_ps(hi, _mm512_mask_i32gather_ps(zero, 0xFFFF, index, rows + 1, 4));
   }
 };
-[[gnu::target(NERFAR_SG_AVX512)]] void ShadeBlockAvx512(const LobeArrays& a, const PixelBlock& b, bool diffuse,
+[[gnu::target(NERFAR_SG_AVX512)]] void ShadeBlockAvx512(const LobeArrays& a, const PixelBlock& b, int parts,
                                                         BlockSums* out) {
-  diffuse ? ShadeBlockBody<true, GatherAvx512>(a, b, out) : ShadeBlockBody<false, GatherAvx512>(a, b, out);
+  ShadeBlockParts<GatherAvx512>(a, b, parts, out);
 }
 // The widest instruction set the CPU has, or a narrower one named by the
 // environment variable NERFAR_SG_SIMD (avx2 or baseline; for testing every
@@ -468,7 +478,7 @@ Vec3f SgShader::Shade(const SgMaterial& m, const Vec3f& n, const Vec3f& v, const
 }
 
 void SgShader::Shade(const SgMaterial* materials, const Vec3f* normals, const Vec3f* views, const float* gamma,
-                     int count, Vec3f* out) const {
+                     int count, Vec3f* out, SgTerms terms) const {
   // Lobes are the loop here, not lanes: no padding needed.
   const LobeArrays arrays{px_, py_, pz_, lambda_, mr_, mg_, mb_, inv_width_, scale_, slope_, rows_.data(), count_};
   PixelBlock block;
@@ -512,7 +522,13 @@ void SgShader::Shade(const SgMaterial* materials, const Vec3f* normals, const Ve
       for (int c = 0; c < 3; ++c) kd[c][i] = kdm * base[c][i];
       ks[0][i] = view.amp_r, ks[1][i] = view.amp_g, ks[2][i] = view.amp_b;
     }
-    kKernels.block(arrays, block, diffuse, &sums);
+    // Metals have no diffuse term: a block of metals skips that loop.
+    const int parts = (terms != SgTerms::kSpecular && diffuse ? 1 : 0) | (terms != SgTerms::kDiffuse ? 2 : 0);
+    if (parts == 0) {
+      std::fill(out + begin, out + begin + lanes, Vec3f());
+      continue;
+    }
+    kKernels.block(arrays, block, parts, &sums);
     for (int i = 0; i < lanes; ++i)
       out[begin + i] =
           Vec3f(kd[0][i] * sums.dr[i] + ks[0][i] * sums.sr[i], kd[1][i] * sums.dg[i] + ks[1][i] * sums.sg[i],

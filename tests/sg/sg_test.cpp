@@ -580,7 +580,8 @@ TEST(SgShading, ManyPixelShadeAgreesWithTheReference) {
   // The many-pixel path (lanes are pixels) against the double reference, per
   // pixel: a different material, normal, view and γ for every pixel (the
   // lanes must not mix), pixel counts that leave a partial block of 16, lobe
-  // counts 1 to 64, γ absent, and a pixel seen from behind (no specular).
+  // counts 1 to 64, γ absent, a pixel seen from behind (no specular), and
+  // the diffuse and specular parts on their own.
   // Same 1e-4 relative tolerance as the per-pixel path (float rounding over
   // ≤ 64 terms ~1e-6, float table lookups ~1e-6, FastExp < 4e-7).
   std::mt19937 rng(11);
@@ -618,6 +619,30 @@ TEST(SgShading, ManyPixelShadeAgreesWithTheReference) {
           for (int c = 0; c < 3; ++c)
             EXPECT_NEAR(got[p][c], ref[c], 1e-4 * std::abs(ref[c]) + 1e-6)
                 << lobes << " lobes, " << pixels << " pixels, pixel " << p << (with_gamma ? "" : ", no gamma");
+        }
+      }
+      // The two parts: the specular one against the reference's specular sum
+      // (SpecularLobes and the inner-product closed form, double), and
+      // diffuse + specular = the whole (same tolerance).
+      std::vector<Vec3f> diffuse(pixels), specular(pixels), all(pixels);
+      shader.Shade(materials.data(), normals.data(), views.data(), gamma.data(), pixels, all.data());
+      shader.Shade(materials.data(), normals.data(), views.data(), gamma.data(), pixels, diffuse.data(),
+                   SgTerms::kDiffuse);
+      shader.Shade(materials.data(), normals.data(), views.data(), gamma.data(), pixels, specular.data(),
+                   SgTerms::kSpecular);
+      for (int p = 0; p < pixels; ++p) {
+        Vec3 spec_ref;
+        for (const Sg& s : SpecularLobes(materials[p], Vec3(normals[p]), Vec3(views[p])))
+          for (int k = 0; k < lobes; ++k)
+            spec_ref += light[k].amplitude * s.amplitude *
+                        (gamma[static_cast<size_t>(p) * lobes + k] *
+                         UnitInnerProduct(light[k].axis, light[k].sharpness, s.axis, s.sharpness));
+        for (int c = 0; c < 3; ++c) {
+          EXPECT_NEAR(specular[p][c], spec_ref[c], 1e-4 * std::abs(spec_ref[c]) + 1e-6) << "pixel " << p;
+          EXPECT_NEAR(diffuse[p][c] + specular[p][c], all[p][c], 1e-4 * std::abs(all[p][c]) + 1e-6) << "pixel " << p;
+        }
+        if (materials[p].metallic == 1.0) {
+          EXPECT_EQ(diffuse[p].x, 0.0f) << "a metal has no diffuse term";
         }
       }
     }
