@@ -8,6 +8,7 @@
 // from an exact tabletop (table slab, a sphere), so the occlusion and κ stages
 // pay the real cost of marching a NeRF with empty-space skipping.
 #include <cmath>
+#include <cstdlib>
 #include <filesystem>
 #include <string>
 
@@ -176,7 +177,13 @@ void GroundTruthQuality(const std::string& scenes_dir, const std::string& scene_
 
 std::vector<BenchFigure> BenchInsert(const BenchOptions& options) {
   std::vector<BenchFigure> figures;
-  if (!options.quick && !options.scenes_dir.empty()) {
+  // NERFAR_BENCH_INSERT_GT=0 skips the ground-truth quality part;
+  // NERFAR_BENCH_INSERT_PRESETS="fast,balanced" times only those presets.
+  const char* gt_env = std::getenv("NERFAR_BENCH_INSERT_GT");
+  const bool with_gt = gt_env == nullptr || std::string(gt_env) != "0";
+  const char* presets_env = std::getenv("NERFAR_BENCH_INSERT_PRESETS");
+  const std::string presets = presets_env ? presets_env : "fast,balanced,accurate";
+  if (with_gt && !options.quick && !options.scenes_dir.empty()) {
     for (const char* scene_name : {"lamps", "window"})
       for (const char* object_name : {"monkey_diffuse", "sphere_glossy"})
         GroundTruthQuality(options.scenes_dir, scene_name, object_name, figures);
@@ -232,6 +239,7 @@ std::vector<BenchFigure> BenchInsert(const BenchOptions& options) {
   }
   const std::string size = std::to_string(width) + "x" + std::to_string(height) + ", " + mesh_name;
   for (const char* preset : {"fast", "balanced", "accurate"}) {
+    if (presets.find(preset) == std::string::npos) continue;
     const InsertOptions insert_options = InsertOptions::Preset(preset);
     const StageMedians m = TimePreset(scene, environment, object, camera, T_world_camera, insert_options, repeats);
     const std::string note = std::string(preset) + ", " + size + ", object " +

@@ -116,7 +116,9 @@ int RunInsert(const CommandArgs& args) {
   std::string nerf_path, env_path, dataset_dir, split = "test", output, frames_dir, background = "images";
   std::string preset = "balanced", light_source, truth_dir, light_probe;
   std::vector<std::string> object_paths, pose_paths, mesh_paths, material_paths;
-  int light_directions = -1, sg_lobes = -1, kappa_step = -1;
+  int light_directions = -1, sg_lobes = -1, kappa_step = -1, occlusion_step = -1;
+  double kappa_cache = -1;
+  bool gamma_per_pixel = false;
   double shadow_reach = -1, self_shadow_offset = -1, receiver_min_opacity = -1;
   bool no_self_shadow = false, no_shadows = false, paper_gamma = false, truth_geometry = false;
   ArgParser parser("insert", "Insert virtual objects into a captured scene: light, shade, occlude, shadow, composite.");
@@ -145,6 +147,12 @@ int RunInsert(const CommandArgs& args) {
   parser.Option("--receiver-min-opacity", &receiver_min_opacity, "A",
                 "κ only on receivers whose NeRF opacity reaches A (balanced: 0.5)");
   parser.Option("--light-source", &light_source, "L", "full (default), near (NeRF only) or env (environment only)");
+  parser.Option("--occlusion-step", &occlusion_step, "S",
+                "occlusion first every S pixels, per pixel only where the scene is seen (balanced: 2; 1: every pixel)");
+  parser.Option(
+      "--kappa-cache", &kappa_cache, "H",
+      "κ kept on a world lattice of H bounding radii while nothing moves (balanced: 0.1; 0: exact per pixel)");
+  parser.Flag("--gamma-per-pixel", &gamma_per_pixel, "self-shadow γ by an SSDF query per pixel, not per mesh vertex");
   parser.Flag("--no-self-shadow", &no_self_shadow, "objects do not shadow themselves or each other");
   parser.Flag("--no-shadows", &no_shadows, "no shadows on the scene (κ = 1)");
   parser.Flag("--paper-gamma", &paper_gamma,
@@ -186,6 +194,9 @@ int RunInsert(const CommandArgs& args) {
   if (light_directions != -1) options.light.directions = light_directions;
   if (sg_lobes != -1) options.light.fit.lobes = sg_lobes;
   if (kappa_step != -1) options.kappa_step = kappa_step;
+  if (occlusion_step != -1) options.occlusion_step = occlusion_step;
+  if (kappa_cache >= 0) options.kappa_cache_spacing_radii = kappa_cache;
+  if (gamma_per_pixel) options.self_shadow_per_vertex = false;
   if (shadow_reach != -1) options.shadow_reach_radii = shadow_reach;
   if (self_shadow_offset != -1) options.self_shadow_offset_radii = self_shadow_offset;
   if (receiver_min_opacity != -1) options.receiver_min_opacity = receiver_min_opacity;

@@ -1,10 +1,14 @@
 #include "render/insert/inserter.h"
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
+#include <cstdint>
 #include <limits>
+#include <mutex>
 #include <nlohmann/json.hpp>
+#include <unordered_map>
 
 #include "calib/core/error.h"
 #include "calib/core/json.h"
@@ -96,6 +100,118 @@ struct WorldSphere {
   float radius = 0;
 };
 
+// γ_k of every lobe at a surface point with normal n from the union SSD
+// there (paper eq. 10; with `horizon`, relative to the part of the lobe above
+// the surface's horizon, see InsertOptions::self_shadow_horizon).
+void GammaFromSsd(const std::vector<Vec3f>& axes, const std::vector<SgTableRow>& rows, const Vec3f& n,
+                  const float* ssd_min, bool horizon, float* gamma) {
+  for (size_t l = 0; l < axes.size(); ++l) {
+    gamma[l] = 1.0f;
+    if (!(ssd_min[l] < 0.5f * static_cast<float>(kPi))) continue;  // nothing in the way: γ = 1
+    if (horizon) {
+      const float e = std::asin(std::clamp(Dot(axes[l], n), -1.0f, 1.0f));
+      const float full = GammaPrepared(rows[l], e);
+      gamma[l] = full > 1e-6f ? GammaPrepared(rows[l], std::min(ssd_min[l], e)) / full : 1.0f;
+    } else {
+      gamma[l] = GammaPrepared(rows[l], ssd_min[l]);
+    }
+    gamma[l] = std::isfinite(gamma[l]) ? std::clamp(gamma[l], 0.0f, 1.0f) : 1.0f;
+  }
+}
+
+// Unit world normals per vertex: the mesh's own, else area-weighted face normals.
+std::vector<Vec3f> WorldVertexNormals(const TriangleMesh& mesh, const Pose& T_world_object) {
+  const size_t nv = mesh.positions.size();
+  std::vector<Vec3> n(nv);
+  if (mesh.normals.size() == nv) {
+    for (size_t v = 0; v < nv; ++v) n[v] = Vec3(mesh.normals[v]);
+  } else {
+    for (const auto& t : mesh.triangles) {
+      if (t[0] >= nv || t[1] >= nv || t[2] >= nv) continue;
+      const Vec3 face =
+          Cross(Vec3(mesh.positions[t[1]] - mesh.positions[t[0]]), Vec3(mesh.positions[t[2]] - mesh.positions[t[0]]));
+      if (!(std::isfinite(face.x) && std::isfinite(face.y) && std::isfinite(face.z))) continue;
+      for (int c = 0; c < 3; ++c) n[t[c]] = n[t[c]] + face;
+    }
+  }
+  std::vector<Vec3f> out(nv);
+  for (size_t v = 0; v < nv; ++v) {
+    const Vec3 w = T_world_object.Rotate(n[v]);
+    out[v] = Dot(w, w) > 1e-30 ? Vec3f(Normalized(w)) : Vec3f{};
+  }
+  return out;
+}
+
+// A coarse κ cell whose receivers lie on one plane.
+struct CellPlane {
+  bool valid = false;
+  Vec3f point, normal;         // a point of the plane and its unit normal (facing the camera)
+  float t_min = 0, t_max = 0;  // range of the corners' ray distances
+};
+
+// Scratch of one κ evaluation (kept per thread to avoid allocations).
+struct KappaScratch {
+  std::vector<double> s_bound, s_exact, cap;
+  std::vector<float> ssd;
+};
+
+// Receiver normals in 32×32 octahedral cells (the κ lattice is kept per cell).
+constexpr int kNormalCells = 32;
+uint32_t NormalCell(const Vec3f& n) {
+  const float l1 = std::abs(n.x) + std::abs(n.y) + std::abs(n.z);
+  float u = n.x / l1, v = n.y / l1;
+  if (n.z < 0) {
+    const float pu = (1 - std::abs(v)) * (u >= 0 ? 1.0f : -1.0f), pv = (1 - std::abs(u)) * (v >= 0 ? 1.0f : -1.0f);
+    u = pu;
+    v = pv;
+  }
+  const auto cell = [](float t) {
+    return static_cast<uint32_t>(std::clamp(static_cast<int>((t + 1) * 0.5f * kNormalCells), 0, kNormalCells - 1));
+  };
+  return cell(v) * kNormalCells + cell(u);
+}
+Vec3f CellNormal(uint32_t cell) {
+  const float u = ((cell % kNormalCells) + 0.5f) / kNormalCells * 2 - 1;
+  const float v = ((cell / kNormalCells) + 0.5f) / kNormalCells * 2 - 1;
+  Vec3f n{u, v, 1 - std::abs(u) - std::abs(v)};
+  if (n.z < 0) {
+    const float x = (1 - std::abs(v)) * (u >= 0 ? 1.0f : -1.0f), y = (1 - std::abs(u)) * (v >= 0 ? 1.0f : -1.0f);
+    n.x = x;
+    n.y = y;
+  }
+  return Normalized(n);
+}
+// Lattice node (i, j, k) (18 bits each, offset) and normal cell (10 bits).
+uint64_t LatticeKey(int64_t i, int64_t j, int64_t k, uint32_t cell) {
+  constexpr int64_t kOffset = int64_t(1) << 17, kMask = (int64_t(1) << 18) - 1;
+  return (uint64_t((i + kOffset) & kMask) << 46) | (uint64_t((j + kOffset) & kMask) << 28) |
+         (uint64_t((k + kOffset) & kMask) << 10) | cell;
+}
+constexpr size_t kKappaCacheMaxNodes = size_t(1) << 22;  // ~4 M nodes (~100 MB): cleared beyond
+
+// What a cached per-pose value depends on, as numbers compared exactly.
+void AppendPoseKey(const Pose& pose, double scale, std::vector<double>& key) {
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) key.push_back(pose.rotation(r, c));
+  for (int c = 0; c < 3; ++c) key.push_back(pose.translation[c]);
+  key.push_back(scale);
+}
+void AppendObjectKey(const InsertObject& object, std::vector<double>& key) {
+  key.push_back(double(reinterpret_cast<uintptr_t>(object.visibility)));
+  key.push_back(double(reinterpret_cast<uintptr_t>(object.mesh)));
+  AppendPoseKey(object.T_world_object, object.scale, key);
+  if (object.visibility) {
+    const Vec3 c = object.visibility->Center();
+    key.insert(key.end(), {c.x, c.y, c.z, object.visibility->Radius()});
+  }
+}
+void AppendLightKey(const SgMixture& light, std::vector<double>& key) {
+  key.push_back(double(light.size()));
+  for (const Sg& lobe : light)
+    key.insert(key.end(), {lobe.axis.x, lobe.axis.y, lobe.axis.z, lobe.sharpness, lobe.amplitude.x, lobe.amplitude.y,
+                           lobe.amplitude.z});
+}
+
 }  // namespace
 
 // ------------------------------------------------------------------ options
@@ -108,12 +224,18 @@ InsertOptions InsertOptions::Preset(const std::string& name) {
     o.shadow_reach_radii = 8.0;
     o.shadow_epsilon = 5e-3;
     o.kappa_step = 4;
+    o.occlusion_step = 4;
+    o.kappa_cache_spacing_radii = 0.15;
   } else if (name == "balanced") {
   } else if (name == "accurate") {
     o.light.directions = 2048;
     o.shadow_reach_radii = 20.0;
     o.shadow_epsilon = 5e-4;
     o.kappa_step = 1;
+    o.self_shadow_per_vertex = false;
+    o.occlusion_step = 1;
+    o.kappa_cache_spacing_radii = 0.0;
+    o.kappa_plane_upsampling = false;
     o.kappa_coarse_factor = 2;
     o.kappa_refine_delta = 0.01;
   } else {
@@ -133,6 +255,11 @@ std::vector<std::string> InsertOptions::Validate() const {
         "shadow_reach_radii: out of range (expected 1 to 1000)");
   check(std::isfinite(shadow_epsilon) && shadow_epsilon >= 0 && shadow_epsilon < 1,
         "shadow_epsilon: out of range (expected 0 <= value < 1)");
+  check(occlusion_step >= 1 && occlusion_step <= 64, "occlusion_step: out of range (expected 1 to 64)");
+  check(std::isfinite(occlusion_clear_opacity) && occlusion_clear_opacity >= 0 && occlusion_clear_opacity < 1,
+        "occlusion_clear_opacity: out of range (expected 0 <= value < 1)");
+  check(std::isfinite(kappa_cache_spacing_radii) && kappa_cache_spacing_radii >= 0 && kappa_cache_spacing_radii <= 10,
+        "kappa_cache_spacing_radii: out of range (expected 0 to 10)");
   check(kappa_step >= 1 && kappa_step <= 64, "kappa_step: out of range (expected 1 to 64)");
   check(kappa_coarse_factor >= 1 && kappa_coarse_factor <= 64, "kappa_coarse_factor: out of range (expected 1 to 64)");
   check(std::isfinite(kappa_refine_delta) && kappa_refine_delta >= 0 && kappa_refine_delta <= 1,
@@ -156,6 +283,11 @@ std::string InsertOptions::ToJson() const {
   j["shadows"] = shadows;
   j["shadow_reach_radii"] = shadow_reach_radii;
   j["shadow_epsilon"] = shadow_epsilon;
+  j["self_shadow_per_vertex"] = self_shadow_per_vertex;
+  j["occlusion_step"] = occlusion_step;
+  j["occlusion_clear_opacity"] = occlusion_clear_opacity;
+  j["kappa_cache_spacing_radii"] = kappa_cache_spacing_radii;
+  j["kappa_plane_upsampling"] = kappa_plane_upsampling;
   j["kappa_step"] = kappa_step;
   j["kappa_coarse_factor"] = kappa_coarse_factor;
   j["kappa_refine_delta"] = kappa_refine_delta;
@@ -221,6 +353,50 @@ void ReceiversFromDepth(const ImageF& depth_z, const CameraIntrinsics& camera, c
 }
 
 // ------------------------------------------------------------------ inserter
+
+// κ at world lattice nodes per receiver-normal cell, shared by the threads of
+// a frame (sharded locks); `key` says which objects and lights it holds.
+struct Inserter::KappaCache {
+  static constexpr size_t kShards = 64;
+  struct Shard {
+    std::mutex mutex;
+    std::unordered_map<uint64_t, float> values;
+  };
+  std::vector<double> key;
+  std::array<Shard, kShards> shards;
+
+  static size_t ShardOf(uint64_t key) { return (key * 0x9E3779B97F4A7C15ull) >> 58; }
+  bool Find(uint64_t node, float* value) {
+    Shard& s = shards[ShardOf(node)];
+    std::lock_guard<std::mutex> lock(s.mutex);
+    const auto it = s.values.find(node);
+    if (it == s.values.end()) return false;
+    *value = it->second;
+    return true;
+  }
+  void Insert(uint64_t node, float value) {
+    Shard& s = shards[ShardOf(node)];
+    std::lock_guard<std::mutex> lock(s.mutex);
+    s.values.emplace(node, value);
+  }
+  size_t Size() {
+    size_t n = 0;
+    for (Shard& s : shards) {
+      std::lock_guard<std::mutex> lock(s.mutex);
+      n += s.values.size();
+    }
+    return n;
+  }
+  void Clear() {
+    for (Shard& s : shards) {
+      std::lock_guard<std::mutex> lock(s.mutex);
+      s.values.clear();
+    }
+  }
+};
+
+Inserter::~Inserter() = default;
+Inserter::Inserter(Inserter&&) noexcept = default;
 
 Inserter::Inserter(const SceneField& scene, SgMixture environment, InsertOptions options)
     : scene_(scene), environment_(std::move(environment)), options_(std::move(options)) {
@@ -344,6 +520,50 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
     for (uint32_t i : covered) seen = seen || g.object[i] == static_cast<int32_t>(o);
     if (seen) prepare(o);
   }
+  // Self-shadow γ per mesh vertex, kept while the objects and the light
+  // stand still (it does not depend on the view).
+  const bool per_vertex = options_.self_shadow && options_.self_shadow_per_vertex;
+  vertex_gamma_.resize(n_objects);
+  std::vector<std::vector<Vec3f>> vertex_normals(n_objects);
+  for (size_t o = 0; o < n_objects; ++o) {
+    if (!per_vertex || !preps[o].shader || objects[o].mesh == nullptr) continue;
+    const TriangleMesh& mesh = *objects[o].mesh;
+    vertex_normals[o] = WorldVertexNormals(mesh, objects[o].T_world_object);
+    std::vector<double> key = {double(reinterpret_cast<uintptr_t>(&mesh)), options_.self_shadow_offset_radii,
+                               options_.self_shadow_horizon ? 1.0 : 0.0};
+    AppendLightKey(used_lights_[o], key);
+    for (size_t j = 0; j < n_objects; ++j) AppendObjectKey(objects[j], key);
+    VertexGamma& vg = vertex_gamma_[o];
+    if (key == vg.key) continue;
+    times.gamma_recomputed = true;
+    vg.key = std::move(key);
+    const LightPrep& p = preps[o];
+    const size_t m = p.axes.size(), nv = mesh.positions.size();
+    vg.gamma.assign(nv * m, 1.0f);
+    if (m == 0) continue;
+    const float offset = static_cast<float>(options_.self_shadow_offset_radii * spheres[o].radius);
+    std::vector<Vec3f> points(nv);
+    for (size_t v = 0; v < nv; ++v)
+      points[v] = Vec3f(objects[o].T_world_object * (Vec3(mesh.positions[v]) * objects[o].scale)) +
+                  vertex_normals[o][v] * offset;
+    constexpr size_t kVertexChunk = 128;
+    ParallelFor((nv + kVertexChunk - 1) / kVertexChunk,
+                [&](size_t c) {
+                  const size_t begin = c * kVertexChunk, end = std::min(nv, begin + kVertexChunk);
+                  std::vector<float> ssd((end - begin) * m),
+                      ssd_min((end - begin) * m, std::numeric_limits<float>::infinity());
+                  for (size_t j = 0; j < n_objects; ++j) {
+                    if (!p.queries[j]) continue;
+                    p.queries[j]->Ssd(&points[begin], end - begin, ssd.data());
+                    for (size_t q = 0; q < ssd.size(); ++q) ssd_min[q] = std::min(ssd_min[q], ssd[q]);
+                  }
+                  for (size_t v = begin; v < end; ++v)
+                    GammaFromSsd(p.axes, p.gamma_rows, vertex_normals[o][v], &ssd_min[(v - begin) * m],
+                                 options_.self_shadow_horizon, &vg.gamma[v * m]);
+                },
+                1);
+  }
+
   const Vec3f eye(T_world_camera.translation);
   constexpr size_t kChunk = 256;
   const size_t chunks = (covered.size() + kChunk - 1) / kChunk;
@@ -362,7 +582,19 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
           const Vec3f n = g.normal[i];
           const Vec3f v = Normalized(eye - g.position[i]);
           gamma.assign(m, 1.0f);
-          if (options_.self_shadow && m > 0) {
+          const VertexGamma* vg = per_vertex ? &vertex_gamma_[o] : nullptr;
+          const auto& tri = objects[o].mesh->triangles[g.triangle[i]];
+          const float b1 = g.bary[i][0], b2 = g.bary[i][1], b0 = 1.0f - b1 - b2;
+          // Per vertex unless the rasteriser flipped the normal (a back face
+          // seen): the vertices' γ belong to the other side.
+          if (vg && !vg->gamma.empty() &&
+              Dot(vertex_normals[o][tri[0]] * b0 + vertex_normals[o][tri[1]] * b1 + vertex_normals[o][tri[2]] * b2, n) >
+                  0.0f) {
+            const float* g0 = &vg->gamma[size_t(tri[0]) * m];
+            const float* g1 = &vg->gamma[size_t(tri[1]) * m];
+            const float* g2 = &vg->gamma[size_t(tri[2]) * m];
+            for (size_t l = 0; l < m; ++l) gamma[l] = b0 * g0[l] + b1 * g1[l] + b2 * g2[l];
+          } else if (options_.self_shadow && m > 0) {
             point = g.position[i] + n * static_cast<float>(options_.self_shadow_offset_radii * spheres[o].radius);
             ssd_min.assign(m, std::numeric_limits<float>::infinity());
             ssd.resize(m);
@@ -371,17 +603,7 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
               p.queries[j]->Ssd(&point, 1, ssd.data());
               for (size_t l = 0; l < m; ++l) ssd_min[l] = std::min(ssd_min[l], ssd[l]);
             }
-            for (size_t l = 0; l < m; ++l) {
-              if (!(ssd_min[l] < 0.5f * static_cast<float>(kPi))) continue;  // nothing in the way: γ = 1
-              if (options_.self_shadow_horizon) {
-                const float e = std::asin(std::clamp(Dot(p.axes[l], n), -1.0f, 1.0f));
-                const float full = GammaPrepared(p.gamma_rows[l], e);
-                gamma[l] = full > 1e-6f ? GammaPrepared(p.gamma_rows[l], std::min(ssd_min[l], e)) / full : 1.0f;
-              } else {
-                gamma[l] = GammaPrepared(p.gamma_rows[l], ssd_min[l]);
-              }
-              gamma[l] = std::isfinite(gamma[l]) ? std::clamp(gamma[l], 0.0f, 1.0f) : 1.0f;
-            }
+            GammaFromSsd(p.axes, p.gamma_rows, n, ssd_min.data(), options_.self_shadow_horizon, gamma.data());
           }
           const SgMaterial material = PixelMaterial(objects[o], g.uv[i]);
           Vec3f rgb = m > 0 ? p.shader->Shade(material, n, v, gamma.data()) : Vec3f{};
@@ -398,6 +620,60 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
   // 4. Occlusion and composite on object pixels (paper eq. 7 and Fig. "sample").
   t0 = Clock::now();
   const Aabb box = scene_.Box();
+  // The ray of pixel (x, y) over the scene up to `depth` (the object).
+  const auto add_ray = [&](SceneRays& rays, int x, int y, float depth) {
+    const Vec3f d = CameraRayDirection(camera, T_world_camera, x, y);
+    const auto range = IntersectBox(box, Vec3(eye), Vec3(d));
+    float t_near = 0.0f, t_far = 0.0f;
+    if (range) {
+      t_near = std::min(depth, static_cast<float>(range->first));
+      t_far = std::min(depth, static_cast<float>(range->second));
+    }
+    rays.Add(eye, d, t_near, t_far);
+  };
+  // Coarse pass: rays at the corners of occlusion_step-sized blocks, each up
+  // to the farthest object depth of the blocks it touches; blocks whose
+  // corners all see (almost) nothing need no ray per pixel.
+  std::vector<uint8_t> clear(g.object.size(), 0);
+  if (options_.occlusion_step > 1 && !covered.empty()) {
+    const int s = options_.occlusion_step, w = g.rect.width(), h = g.rect.height();
+    const int bx = (w + s - 1) / s, by = (h + s - 1) / s;
+    std::vector<float> block_far(static_cast<size_t>(bx) * by, 0.0f);
+    for (uint32_t i : covered) {
+      float& f = block_far[static_cast<size_t>(i / w / s) * bx + (i % w) / s];
+      f = std::max(f, g.t[i]);
+    }
+    const int nx = bx + 1, ny = by + 1;
+    std::vector<float> node_opacity(static_cast<size_t>(nx) * ny, 0.0f);
+    ParallelFor(
+        static_cast<size_t>(ny),
+        [&](size_t row) {
+          const int v = static_cast<int>(row);
+          SceneRays rays;
+          SceneSamples out;
+          std::vector<int> cols;
+          for (int u = 0; u < nx; ++u) {
+            float far = 0.0f;
+            for (int b = v - 1; b <= v; ++b)
+              for (int a = u - 1; a <= u; ++a)
+                if (a >= 0 && b >= 0 && a < bx && b < by) far = std::max(far, block_far[size_t(b) * bx + a]);
+            if (!(far > 0.0f)) continue;
+            add_ray(rays, g.rect.x0 + std::min(u * s, w - 1), g.rect.y0 + std::min(v * s, h - 1), far);
+            cols.push_back(u);
+          }
+          if (cols.empty()) return;
+          scene_.RenderRays(rays, out);
+          for (size_t k = 0; k < cols.size(); ++k)
+            node_opacity[row * nx + cols[k]] = std::isfinite(out.opacity[k]) ? out.opacity[k] : 1.0f;
+        },
+        1);
+    const float limit = static_cast<float>(options_.occlusion_clear_opacity);
+    for (uint32_t i : covered) {
+      const size_t u = (i % w) / s, v = i / w / s;
+      clear[i] = node_opacity[v * nx + u] < limit && node_opacity[v * nx + u + 1] < limit &&
+                 node_opacity[(v + 1) * nx + u] < limit && node_opacity[(v + 1) * nx + u + 1] < limit;
+    }
+  }
   std::vector<size_t> fixed_per_chunk(chunks, 0);
   ParallelFor(
       chunks,
@@ -406,27 +682,22 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
         SceneRays rays;
         SceneSamples out;
         rays.Reserve(end - begin);
+        std::vector<int> ray_of(end - begin, -1);
         for (size_t k = begin; k < end; ++k) {
           const uint32_t i = covered[k];
-          const int x = g.rect.x0 + static_cast<int>(i % g.rect.width());
-          const int y = g.rect.y0 + static_cast<int>(i / g.rect.width());
-          const Vec3f d = CameraRayDirection(camera, T_world_camera, x, y);
-          const auto range = IntersectBox(box, Vec3(eye), Vec3(d));
-          const float depth = g.t[i];
-          float t_near = 0.0f, t_far = 0.0f;
-          if (range) {
-            t_near = std::min(depth, static_cast<float>(range->first));
-            t_far = std::min(depth, static_cast<float>(range->second));
-          }
-          rays.Add(eye, d, t_near, t_far);
+          if (clear[i]) continue;
+          ray_of[k - begin] = static_cast<int>(rays.size());
+          add_ray(rays, g.rect.x0 + static_cast<int>(i % g.rect.width()),
+                  g.rect.y0 + static_cast<int>(i / g.rect.width()), g.t[i]);
         }
-        scene_.RenderRays(rays, out);
+        if (rays.size() > 0) scene_.RenderRays(rays, out);
         for (size_t k = begin; k < end; ++k) {
           const uint32_t i = covered[k];
           const int x = g.rect.x0 + static_cast<int>(i % g.rect.width());
           const int y = g.rect.y0 + static_cast<int>(i / g.rect.width());
-          float opacity = out.opacity[k - begin];
-          Vec3f front = out.colour[k - begin];
+          const int r = ray_of[k - begin];
+          float opacity = r >= 0 ? out.opacity[r] : 0.0f;
+          Vec3f front = r >= 0 ? out.colour[r] : Vec3f{};
           if (!std::isfinite(opacity) || !Finite(front)) {
             opacity = 0.0f;
             front = {};
@@ -482,6 +753,114 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
       const float reach = static_cast<float>(options_.shadow_reach_radii);
       const float min_opacity = static_cast<float>(options_.receiver_min_opacity);
       const double one_minus_eps = 1.0 - options_.shadow_epsilon;
+      std::vector<size_t> evaluated_per_row(ny, 0);
+      // κ at world point x with unit normal n (1 where no caster is within
+      // reach or the bounding spheres cannot darken it below 1 − ε); with
+      // bound_only, 0 for "needs the SSDF" instead of evaluating it.
+      const auto kappa_at = [&](const Vec3f& x, const Vec3f& n, KappaScratch& sc, bool* queried,
+                                bool bound_only = false) -> float {
+        // The owner of the light: the caster nearest in units of its radius.
+        size_t owner = casters[0];
+        float best = std::numeric_limits<float>::infinity();
+        for (size_t j : casters) {
+          const float rel = Length(x - spheres[j].center) / spheres[j].radius;
+          if (rel < best) {
+            best = rel;
+            owner = j;
+          }
+        }
+        if (!(best <= reach)) return 1.0f;
+        const LightPrep& p = preps[owner];
+        const size_t m = p.axes.size();
+        if (m == 0) return 1.0f;
+        const SgMixture cw = CosineWeightedLight(used_lights_[owner], Vec3(n));
+        // Lower bound of S from the bounding spheres: if even that leaves
+        // κ ≥ 1 − ε, nothing needs the SSDF.
+        sc.s_bound.assign(m, kPi);
+        for (size_t j : casters)
+          for (size_t l = 0; l < m; ++l)
+            sc.s_bound[l] =
+                std::min<double>(sc.s_bound[l], BallSsdLowerBound(spheres[j].center, spheres[j].radius, x, p.axes[l]));
+        if (ShadowRatio(cw, Vec3(n), sc.s_bound) >= one_minus_eps) return 1.0f;
+        if (bound_only) return 0.0f;
+        if (queried) *queried = true;
+        sc.s_exact.assign(m, kPi);
+        sc.cap.assign(m, 0.0);
+        sc.ssd.resize(m);
+        for (size_t j : casters) {
+          if (!p.queries[j]) continue;
+          p.queries[j]->Ssd(&x, 1, sc.ssd.data());
+          const float dist = Length(x - spheres[j].center);
+          const double alpha =
+              dist > spheres[j].radius ? std::asin(std::min(1.0f, spheres[j].radius / dist)) : 0.5 * kPi;
+          for (size_t l = 0; l < m; ++l) {
+            if (sc.ssd[l] < sc.s_exact[l]) {
+              sc.s_exact[l] = sc.ssd[l];
+              sc.cap[l] = alpha;
+            }
+          }
+        }
+        const double k = ShadowRatioCapped(cw, Vec3(n), sc.s_exact, sc.cap);
+        return std::isfinite(k) ? static_cast<float>(std::clamp(k, 0.0, 1.0)) : 1.0f;
+      };
+      // The world lattice of κ, dropped when a caster or a light changed.
+      KappaCache* cache = nullptr;
+      double spacing = 0.0;
+      if (options_.kappa_cache_spacing_radii > 0) {
+        float smallest = std::numeric_limits<float>::infinity();
+        for (size_t j : casters) smallest = std::min(smallest, spheres[j].radius);
+        spacing = options_.kappa_cache_spacing_radii * smallest;
+        std::vector<double> key = {spacing, options_.shadow_reach_radii, options_.shadow_epsilon};
+        for (size_t j : casters) AppendObjectKey(objects[j], key);
+        for (const SgMixture& light : used_lights_) AppendLightKey(light, key);
+        if (!kappa_cache_) kappa_cache_ = std::make_unique<KappaCache>();
+        if (key != kappa_cache_->key || kappa_cache_->Size() > kKappaCacheMaxNodes) {
+          kappa_cache_->Clear();
+          kappa_cache_->key = std::move(key);
+        }
+        cache = kappa_cache_.get();
+      }
+      // κ at receiver x (normal n): exact, or trilinear in the world lattice.
+      const auto receiver_kappa = [&](const Vec3f& x, const Vec3f& n, KappaScratch& sc, size_t row) -> float {
+        if (cache == nullptr) {
+          bool queried = false;
+          const float k = kappa_at(x, n, sc, &queried);
+          ++evaluated_per_row[row];
+          if (queried) ++queries_per_row[row];
+          return k;
+        }
+        // No bound test here: nodes that the bound clears hold κ = 1.
+        // Trilinear over the lattice nodes around x, for x's normal cell.
+        const uint32_t cell = NormalCell(n);
+        const Vec3f n_cell = CellNormal(cell);
+        const double fx = x.x / spacing, fy = x.y / spacing, fz = x.z / spacing;
+        const double bx = std::floor(fx), by = std::floor(fy), bz = std::floor(fz);
+        const double wx = fx - bx, wy = fy - by, wz = fz - bz;
+        double sum = 0.0, total = 0.0;
+        for (int corner = 0; corner < 8; ++corner) {
+          const int dx = corner & 1, dy = (corner >> 1) & 1, dz = corner >> 2;
+          const double weight = (dx ? wx : 1 - wx) * (dy ? wy : 1 - wy) * (dz ? wz : 1 - wz);
+          // Nodes that hardly count are not computed (a receiver plane on a
+          // lattice plane would otherwise pull in the layer beyond it).
+          if (weight < 1e-3) continue;
+          total += weight;
+          const int64_t i = int64_t(bx) + dx, j = int64_t(by) + dy, k = int64_t(bz) + dz;
+          const uint64_t key = LatticeKey(i, j, k, cell);
+          float value;
+          if (!cache->Find(key, &value)) {
+            bool queried = false;
+            value = kappa_at(Vec3f(Vec3(double(i), double(j), double(k)) * spacing), n_cell, sc, &queried);
+            cache->Insert(key, value);
+            ++evaluated_per_row[row];
+            if (queried) ++queries_per_row[row];
+          }
+          sum += weight * value;
+        }
+        return total > 0.0 ? static_cast<float>(std::clamp(sum / total, 0.0, 1.0)) : 1.0f;
+      };
+      // What the receiver pass found at each grid node (for the upsampling).
+      std::vector<Vec3f> node_point(nx * ny), node_normal(nx * ny);
+      std::vector<uint8_t> node_valid(nx * ny, 0);
       // κ at the grid nodes (row, cols[j]) of one row.
       const auto eval_row = [&](size_t row, const std::vector<size_t>& cols) {
         if (cols.empty()) return;
@@ -521,57 +900,17 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
         } else {
           scene_.Normals(points, normals);
         }
-        std::vector<double> s_bound, s_exact, cap;
-        std::vector<float> ssd;
+        KappaScratch scratch;
         for (size_t ix = 0; ix < nc; ++ix) {
           float& kappa = kappa_grid[row * nx + cols[ix]];
           if (opacity[ix] < min_opacity || !Finite(points[ix])) continue;
           Vec3f n = normals[ix];
           if (!Finite(n) || Dot(n, n) < 0.25f) continue;
           n = Normalized(n);
-          const Vec3f x = points[ix];
-          // The owner of the light: the caster nearest in units of its radius.
-          size_t owner = casters[0];
-          float best = std::numeric_limits<float>::infinity();
-          for (size_t j : casters) {
-            const float rel = Length(x - spheres[j].center) / spheres[j].radius;
-            if (rel < best) {
-              best = rel;
-              owner = j;
-            }
-          }
-          if (best > reach) continue;
-          const LightPrep& p = preps[owner];
-          const size_t m = p.axes.size();
-          if (m == 0) continue;
-          const SgMixture cw = CosineWeightedLight(used_lights_[owner], Vec3(n));
-          // Lower bound of S from the bounding spheres: if even that
-          // leaves κ ≥ 1 − ε, nothing needs the SSDF.
-          s_bound.assign(m, kPi);
-          for (size_t j : casters)
-            for (size_t l = 0; l < m; ++l)
-              s_bound[l] =
-                  std::min<double>(s_bound[l], BallSsdLowerBound(spheres[j].center, spheres[j].radius, x, p.axes[l]));
-          if (ShadowRatio(cw, Vec3(n), s_bound) >= one_minus_eps) continue;
-          ++queries_per_row[row];
-          s_exact.assign(m, kPi);
-          cap.assign(m, 0.0);
-          ssd.resize(m);
-          for (size_t j : casters) {
-            if (!p.queries[j]) continue;
-            p.queries[j]->Ssd(&x, 1, ssd.data());
-            const float dist = Length(x - spheres[j].center);
-            const double alpha =
-                dist > spheres[j].radius ? std::asin(std::min(1.0f, spheres[j].radius / dist)) : 0.5 * kPi;
-            for (size_t l = 0; l < m; ++l) {
-              if (ssd[l] < s_exact[l]) {
-                s_exact[l] = ssd[l];
-                cap[l] = alpha;
-              }
-            }
-          }
-          const double k = ShadowRatioCapped(cw, Vec3(n), s_exact, cap);
-          kappa = std::isfinite(k) ? static_cast<float>(std::clamp(k, 0.0, 1.0)) : 1.0f;
+          node_point[row * nx + cols[ix]] = points[ix];
+          node_normal[row * nx + cols[ix]] = n;
+          node_valid[row * nx + cols[ix]] = 1;
+          kappa = receiver_kappa(points[ix], n, scratch, row);
         }
       };
       // Coarse to fine: κ at every coarse_factor-th node; cells whose corners
@@ -604,15 +943,66 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
           }
         std::vector<uint8_t> is_coarse_col(nx, 0);
         for (size_t q : cx) is_coarse_col[q] = 1;
+        // Coarse cells whose four receivers lie on one plane (normals within
+        // 10° of their mean, points within 5% of the cell's size of the
+        // plane through their mean); only where the receivers were marched.
+        std::vector<CellPlane> planes((cy.size() - 1) * (cx.size() - 1));
+        if (options_.kappa_plane_upsampling && receivers.distance == nullptr) {
+          for (size_t j = 0; j + 1 < cy.size(); ++j)
+            for (size_t i = 0; i + 1 < cx.size(); ++i) {
+              const size_t corner[4] = {cy[j] * nx + cx[i], cy[j] * nx + cx[i + 1], cy[j + 1] * nx + cx[i],
+                                        cy[j + 1] * nx + cx[i + 1]};
+              CellPlane& plane = planes[j * (cx.size() - 1) + i];
+              Vec3f mean_p{}, mean_n{};
+              bool ok = true;
+              for (size_t c : corner) {
+                ok = ok && node_valid[c];
+                mean_p = mean_p + node_point[c] * 0.25f;
+                mean_n = mean_n + node_normal[c];
+              }
+              if (!ok || !(Dot(mean_n, mean_n) > 1e-6f)) continue;
+              mean_n = Normalized(mean_n);
+              float size = 0.0f, off = 0.0f;
+              plane.t_min = std::numeric_limits<float>::infinity();
+              plane.t_max = 0.0f;
+              for (size_t c : corner) {
+                ok = ok && Dot(node_normal[c], mean_n) > 0.985f;
+                size = std::max(size, Length(node_point[c] - mean_p));
+                off = std::max(off, std::abs(Dot(node_point[c] - mean_p, mean_n)));
+                const float t = Length(node_point[c] - eye);
+                plane.t_min = std::min(plane.t_min, t);
+                plane.t_max = std::max(plane.t_max, t);
+              }
+              if (!ok || off > 0.05f * size) continue;
+              plane.valid = true;
+              plane.point = mean_p;
+              plane.normal = mean_n;
+            }
+        }
         ParallelFor(
             ny,
             [&](size_t r) {
               std::vector<size_t> cols;
-              for (size_t q = 0; q < nx; ++q)
-                if (need[r * nx + q] && !(is_coarse_row[r] && is_coarse_col[q])) cols.push_back(q);
+              const size_t j = std::min<size_t>(r / factor, cy.size() - 2);
+              KappaScratch scratch;
+              for (size_t q = 0; q < nx; ++q) {
+                if (!need[r * nx + q] || (is_coarse_row[r] && is_coarse_col[q])) continue;
+                // Depth-aware upsampling: inside a planar coarse cell the
+                // receiver is where this node's ray meets the plane.
+                const CellPlane& plane = planes[j * (cx.size() - 1) + std::min<size_t>(q / factor, cx.size() - 2)];
+                if (plane.valid) {
+                  const Vec3f d = CameraRayDirection(camera, T_world_camera, xs[q], ys[r]);
+                  const float cosine = Dot(d, plane.normal);
+                  const float t = cosine < -0.05f ? Dot(plane.point - eye, plane.normal) / cosine : -1.0f;
+                  if (t >= 0.9f * plane.t_min && t <= 1.1f * plane.t_max) {
+                    kappa_grid[r * nx + q] = receiver_kappa(eye + d * t, plane.normal, scratch, r);
+                    continue;
+                  }
+                }
+                cols.push_back(q);
+              }
               eval_row(r, cols);
               // The rest: bilinear in their coarse cell.
-              const size_t j = std::min<size_t>(r / factor, cy.size() - 2);
               const float wy = float(r - cy[j]) / float(cy[j + 1] - cy[j]);
               for (size_t q = 0; q < nx; ++q) {
                 if (need[r * nx + q] || (is_coarse_row[r] && is_coarse_col[q])) continue;
@@ -627,6 +1017,7 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
             1);
       }
       for (size_t q : queries_per_row) layers.kappa_queries += q;
+      for (size_t q : evaluated_per_row) times.kappa_evaluated += q;
       // Bilinear from the sample grid to every pixel; multiply the background
       // where no object covers it.
       ParallelFor(

@@ -42,6 +42,18 @@ struct InsertOptions {
   // 0.01, 28.7 at 0.1, 29.2 at 0.15 (32² direction maps; 28.3 without γ).
   double self_shadow_offset_radii = 0.15;
 
+  // γ at the mesh vertices (view-independent: cached while the objects and
+  // the light stand still), interpolated over each triangle with the
+  // rasteriser's barycentrics; false: one SSDF query per pixel.
+  bool self_shadow_per_vertex = true;
+
+  // Occlusion first along every occlusion_step-th pixel ray of the object's
+  // screen box (each clipped at the farthest object depth around it); blocks
+  // whose four corner rays all see opacity below occlusion_clear_opacity take
+  // the object unoccluded, the others march every pixel (1: every pixel).
+  int occlusion_step = 2;
+  double occlusion_clear_opacity = 1e-3;
+
   bool shadows = true;               // κ on the scene (paper eq. 8)
   double shadow_reach_radii = 12.0;  // κ only within this distance (× bounding radius) of an object's centre
   // Receivers whose κ, bounded from below through each object's bounding
@@ -53,7 +65,18 @@ struct InsertOptions {
   // the others are interpolated (1: every node of the grid).
   int kappa_coarse_factor = 4;
   double kappa_refine_delta = 0.02;
+  // Refined nodes inside a coarse cell whose four receivers lie on one plane
+  // take their receiver where their ray meets that plane (no NeRF march, no
+  // normal query); false: every refined node is marched.
+  bool kappa_plane_upsampling = true;
   double receiver_min_opacity = 0.5;  // pixels whose scene opacity is below this have no surface: κ = 1
+  // κ depends on the receiver point, its normal, the objects and the light,
+  // not on the view: it is kept at the nodes of a world lattice of this
+  // spacing (× the smallest caster's bounding radius), one value per node and
+  // receiver-normal cell (32×32 octahedral cells), computed when a receiver
+  // first needs it and reused, trilinearly, until an object or a light
+  // changes. 0: κ evaluated exactly at every receiver, every frame.
+  double kappa_cache_spacing_radii = 0.1;
 
   // "fast", "balanced" (the defaults) or "accurate"; InputError otherwise.
   static InsertOptions Preset(const std::string& name);
@@ -87,6 +110,8 @@ struct InsertTimings {
   double kappa_ms = 0;      // receivers + κ + multiplying the background
   double total_ms = 0;
   int lights_recomputed = 0;
+  size_t kappa_evaluated = 0;     // κ values computed this frame (cache misses, or every receiver without the cache)
+  bool gamma_recomputed = false;  // the per-vertex self-shadow cache was (re)built this frame
 };
 
 // Per-frame outputs beside the composite: layers over the screen boxes where
@@ -152,6 +177,18 @@ class Inserter {
   InsertOptions options_;
   std::vector<IncidentLight> lights_;
   std::vector<SgMixture> used_lights_;
+  // γ per mesh vertex and lobe for each object, with what it was computed for.
+  struct VertexGamma {
+    std::vector<double> key;
+    std::vector<float> gamma;  // vertex-major, lobes per vertex
+  };
+  std::vector<VertexGamma> vertex_gamma_;
+  struct KappaCache;  // world lattice of κ (inserter.cpp)
+  std::unique_ptr<KappaCache> kappa_cache_;
+
+ public:
+  ~Inserter();
+  Inserter(Inserter&&) noexcept;
 };
 
 }  // namespace nerfar

@@ -155,8 +155,10 @@ ObjectGBuffer Rasterize(const CameraIntrinsics& camera, const Pose& T_world_came
   g.normal.assign(area, Vec3f{});
   g.uv.assign(area, {0.0f, 0.0f});
   std::vector<float> z_buffer(area, std::numeric_limits<float>::infinity());
-  std::vector<uint32_t> tri_id(area, 0);
-  std::vector<std::array<float, 2>> bary12(area, {0.0f, 0.0f});  // original barycentrics b1, b2
+  g.triangle.assign(area, 0);
+  g.bary.assign(area, {0.0f, 0.0f});  // original barycentrics b1, b2
+  std::vector<uint32_t>& tri_id = g.triangle;
+  std::vector<std::array<float, 2>>& bary12 = g.bary;
 
   // Scan in bands of rows so that threads never share a pixel.
   constexpr int kBand = 8;

@@ -44,13 +44,15 @@ struct RasterObject {
 
 // Per-pixel surface data over `rect`; index with At(x, y) (full-image coordinates).
 struct ObjectGBuffer {
-  PixelRect rect;                        // where the objects can be; empty when none is visible
-  std::vector<int32_t> object;           // index into the object list, −1 where no object is seen
-  std::vector<float> t;                  // distance from the camera centre along the unit pixel ray
-  std::vector<Vec3f> position;           // world, metres
-  std::vector<Vec3f> normal;             // world, unit (the shading normal, facing the camera)
-  std::vector<std::array<float, 2>> uv;  // (0, 0) where the mesh has no UVs
-  size_t covered = 0;                    // number of pixels with an object
+  PixelRect rect;                          // where the objects can be; empty when none is visible
+  std::vector<int32_t> object;             // index into the object list, −1 where no object is seen
+  std::vector<float> t;                    // distance from the camera centre along the unit pixel ray
+  std::vector<Vec3f> position;             // world, metres
+  std::vector<Vec3f> normal;               // world, unit (the shading normal, facing the camera)
+  std::vector<std::array<float, 2>> uv;    // (0, 0) where the mesh has no UVs
+  std::vector<uint32_t> triangle;          // index of the visible triangle in its object's mesh
+  std::vector<std::array<float, 2>> bary;  // its perspective-correct barycentrics (b1, b2); b0 = 1 − b1 − b2
+  size_t covered = 0;                      // number of pixels with an object
 
   size_t Index(int x, int y) const {
     return static_cast<size_t>(y - rect.y0) * static_cast<size_t>(rect.width()) + static_cast<size_t>(x - rect.x0);

@@ -152,7 +152,7 @@ void AnalyticScene::Normals(const std::vector<Vec3f>& points, std::vector<Vec3f>
     if (p.x >= params_.box.min.x && p.x <= params_.box.max.x && p.y >= params_.box.min.y && p.y <= params_.box.max.y &&
         std::abs(p.z) < best) {
       best = std::abs(p.z);
-      n = {0, 0, p.z >= 0 ? 1.0 : -1.0};
+      n = {0, 0, p.z >= -1e-4 ? 1.0 : -1.0};  // points marched onto the top may round to just below it
     }
     if (params_.has_sphere) {
       const double dist = std::abs(Length(p - params_.sphere_center) - params_.sphere_radius);
