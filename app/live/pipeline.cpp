@@ -83,6 +83,13 @@ Image8 Downsample(const Image8& image, int divisor) {
   return out;
 }
 
+bool SamePose(const Pose& a, const Pose& b) {
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c)
+      if (a.rotation(r, c) != b.rotation(r, c)) return false;
+  return a.translation == b.translation;
+}
+
 Image8 ToRgb(const Image8& image) {
   if (image.channels == 3) return image;
   Image8 rgb(image.width, image.height, 3);
@@ -390,10 +397,13 @@ LiveFrame LivePipeline::Process(Captured captured) {
   for (float& v : linear.pixels) v *= inv_gain;
   out.times.expose_ms = MsSince(t0);
 
-  // Objects of this frame.
-  std::vector<std::unique_ptr<SsdfVisibility>> visibility;
+  // Objects of this frame. A posed SSDF field is kept while its object
+  // stands still: the inserter's caches (per-vertex self-shadow, κ lattice)
+  // are keyed by the objects' fields and poses, so a still object reuses
+  // them frame after frame and a moved one recomputes them.
   std::vector<InsertObject> objects;
   std::vector<size_t> object_index;
+  visibility_.resize(states.size());
   for (size_t i = 0; i < states.size(); ++i) {
     if (!states[i].placed) continue;
     InsertObject o;
@@ -402,8 +412,13 @@ LiveFrame LivePipeline::Process(Captured captured) {
     o.scale = states[i].scale;
     o.material = states[i].material;
     if (assets_[i].field != nullptr) {
-      visibility.push_back(std::make_unique<SsdfVisibility>(*assets_[i].field, o.T_world_object, o.scale));
-      o.visibility = visibility.back().get();
+      PosedField& posed = visibility_[i];
+      if (!posed.field || !SamePose(posed.T_world_object, o.T_world_object) || posed.scale != o.scale) {
+        posed.field = std::make_unique<SsdfVisibility>(*assets_[i].field, o.T_world_object, o.scale);
+        posed.T_world_object = o.T_world_object;
+        posed.scale = o.scale;
+      }
+      o.visibility = posed.field.get();
     }
     objects.push_back(o);
     object_index.push_back(i);

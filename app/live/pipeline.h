@@ -27,6 +27,7 @@
 #include "calib/core/image.h"
 #include "calib/core/math.h"
 #include "render/insert/inserter.h"
+#include "render/insert/object_visibility.h"
 #include "render/insert/scene_field.h"
 #include "render/mesh/mesh.h"
 #include "render/sg/brdf.h"
@@ -203,6 +204,15 @@ class LivePipeline {
   bool preset_changed_ = false;
   std::atomic<int> views_{kViewAr};
   std::atomic<bool> hud_{true};
+
+  // Posed SSDF fields of the objects, kept while each stands still
+  // (processing thread only).
+  struct PosedField {
+    std::unique_ptr<ObjectVisibility> field;
+    Pose T_world_object;
+    double scale = 1;
+  };
+  std::vector<PosedField> visibility_;
 
   // Exposure gain (processing thread only).
   double gain_ = 1;

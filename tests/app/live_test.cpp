@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstdio>
 #include <memory>
+#include <vector>
 
 #include "app/live/pipeline.h"
 #include "render/insert/rasterizer.h"
@@ -242,6 +243,20 @@ TEST(LivePipeline, PresetSwitchTakesEffectAndMatchesARunStartedWithIt) {
   EXPECT_GT(mean_preset, 1.0);
   EXPECT_THROW(edited.pipeline->set_preset("turbo"), InputError);
   EXPECT_EQ(edited.pipeline->preset(), "accurate");
+}
+
+TEST(LivePipeline, TheLightIsReusedWhileTheObjectStandsStillAndRefittedWhenItMoves) {
+  LiveRun run(Red(), "fast");
+  std::vector<int> recomputed;
+  for (int i = 0; i < 3; ++i) recomputed.push_back(run.Step().times.insert.lights_recomputed);
+  LiveObjectState s = run.pipeline->object(0);
+  s.anchor_world = s.anchor_world + Vec3{0.05, 0, 0};  // what a drag does
+  run.pipeline->set_object(0, s);
+  for (int i = 0; i < 2; ++i) recomputed.push_back(run.Step().times.insert.lights_recomputed);
+  s.yaw_rad += 0.3;  // a rotation about the vertical keeps the centre: the light stays
+  run.pipeline->set_object(0, s);
+  recomputed.push_back(run.Step().times.insert.lights_recomputed);
+  EXPECT_EQ(recomputed, (std::vector<int>{1, 0, 0, 1, 0, 0}));
 }
 
 TEST(LivePipeline, MedianHitDistanceFindsTheTableBehindFog) {
