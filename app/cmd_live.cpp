@@ -96,7 +96,8 @@ int RunLive(const CommandArgs& args) {
   parser.Option("--contact-sheet", &sheet_path, "FILE",
                 "headless: views of four frames (default SESSION/contact_sheet.png)");
   parser.Epilog(
-      "window keys: click place, drag move, A/D rotate, W/S scale, 1/2/3 preset, N alongside, L layers,\n"
+      "window keys: click place, drag move, Tab next object, A/D rotate, W/S scale, 1/2/3 preset, N alongside,\n"
+      "L layers, "
       "H HUD, R record (SESSION/recording.mp4), P screenshot, Esc quit.\n"
       "session files: session.json, report.json, report.png, last_ar.png [, last_alongside.png, last_layers.png]\n"
       "example:\n"

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <vector>
 
 #include "calib/core/atomic_file.h"
 #include "calib/core/error.h"
@@ -111,6 +112,10 @@ void LiveUi::HandleEvent(const InputEvent& e) {
         if (k == 'S') s.scale /= kScaleStep;
         pipeline_.set_object(selected_, s);
       }
+      if (k == kKeyTab && pipeline_.object_count() > 0) {
+        selected_ = (selected_ + 1) % pipeline_.object_count();
+        status_ = "selected " + pipeline_.object_name(selected_);
+      }
       if (k == '1') pipeline_.set_preset("fast");
       if (k == '2') pipeline_.set_preset("balanced");
       if (k == '3') pipeline_.set_preset("accurate");
@@ -151,6 +156,14 @@ void LiveUi::DrawPanel() {
   const std::string current = pipeline_.preset();
   int preset = current == "fast" ? 0 : (current == "balanced" ? 1 : 2);
   if (ImGui::Combo("preset", &preset, presets, 3)) pipeline_.set_preset(presets[preset]);
+  if (pipeline_.object_count() > 1) {
+    // Which object clicks, keys and sliders act on (Tab cycles).
+    std::vector<const char*> names;
+    for (size_t i = 0; i < pipeline_.object_count(); ++i) names.push_back(pipeline_.object_name(i).c_str());
+    int selected = static_cast<int>(selected_);
+    if (ImGui::Combo("object (Tab)", &selected, names.data(), static_cast<int>(names.size())))
+      selected_ = static_cast<size_t>(selected);
+  }
   if (pipeline_.object_count() > 0) {
     LiveObjectState s = pipeline_.object(selected_);
     bool changed = false;

@@ -4,9 +4,9 @@
 // drag moves it along the surface, keys and sliders rotate, scale and edit
 // the material, preset switch), draws the ImGui panel (stage times, tracking
 // state, latency) and records video and screenshots into the session folder.
-// Keys: A/D rotate ±15°, W/S scale ×1.1 / ÷1.1, 1/2/3 preset fast / balanced /
-// accurate, N alongside view, L layers, H HUD, R record on/off, P screenshot,
-// Esc quit.
+// Keys: Tab selects the next object, A/D rotate ±15°, W/S scale ×1.1 / ÷1.1,
+// 1/2/3 preset fast / balanced / accurate, N alongside view, L layers, H HUD,
+// R record on/off, P screenshot, Esc quit.
 #pragma once
 
 #include <memory>
@@ -33,6 +33,7 @@ class LiveUi {
   void HandleEvent(const InputEvent& event);
 
   const std::optional<LiveFrame>& shown() const { return shown_; }
+  size_t selected() const { return selected_; }
   int frames_shown() const { return frames_shown_; }
   void StartRecording();
   void StopRecording();

@@ -163,6 +163,7 @@ class LivePipeline {
 
   // Edits (thread-safe; applied from the next processed frame).
   size_t object_count() const { return assets_.size(); }
+  const std::string& object_name(size_t i) const { return assets_.at(i).name; }
   LiveObjectState object(size_t i) const;
   void set_object(size_t i, const LiveObjectState& state);
   void set_preset(const std::string& preset);  // InputError for an unknown name

@@ -171,7 +171,7 @@ LiveWindow::LiveWindow(const std::string& title, int width, int height) : impl_(
     if (action != GLFW_PRESS || (ImGui::GetCurrentContext() && ImGui::GetIO().WantCaptureKeyboard)) return;
     InputEvent event;
     event.kind = InputEvent::Kind::kKey;
-    event.key = key == GLFW_KEY_ESCAPE ? kKeyEscape : (key == GLFW_KEY_F1 ? kKeyF1 : key);
+    event.key = key == GLFW_KEY_ESCAPE ? kKeyEscape : key == GLFW_KEY_TAB ? kKeyTab : key == GLFW_KEY_F1 ? kKeyF1 : key;
     event.shift = (mods & GLFW_MOD_SHIFT) != 0;
     event.control = (mods & GLFW_MOD_CONTROL) != 0;
     ImplOf(w)->events.push_back(event);

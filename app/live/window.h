@@ -27,7 +27,7 @@ struct InputEvent {
   bool shift = false, control = false;
 };
 
-enum KeyCode { kKeyEscape = 256, kKeyF1 = 290 };
+enum KeyCode { kKeyEscape = 256, kKeyTab = 258, kKeyF1 = 290 };
 
 class LiveWindow {
  public:

@@ -157,8 +157,13 @@ class LiveAppTest : public WindowTest {
     options.tracker.confirm_frames = 0;
     options.render_divisor = 2;
     const SgMixture sky = {Sg{{0, 0, 1}, 3.0, {3.0, 3.0, 3.0}}};
+    // A second object, not placed (nothing of it is drawn): Tab selects it.
+    cube_ = MakeBox({0.03, 0.03, 0.03});
+    LiveAsset cube = asset;
+    cube.name = "cube";
+    cube.mesh = &cube_;
     pipeline_ = std::make_unique<LivePipeline>(*source_, source_->board(), source_->camera(), *scene_, sky,
-                                               std::vector<LiveAsset>{asset}, options);
+                                               std::vector<LiveAsset>{asset, cube}, options);
   }
 
   // Ticks until `done` holds (at most ~20 s; frames keep coming meanwhile).
@@ -195,7 +200,7 @@ class LiveAppTest : public WindowTest {
 
   std::unique_ptr<synth::SyntheticCameraSource> source_;
   std::unique_ptr<AnalyticScene> scene_;
-  TriangleMesh ball_;
+  TriangleMesh ball_, cube_;
   std::unique_ptr<LivePipeline> pipeline_;
 };
 
@@ -310,6 +315,17 @@ TEST_F(LiveAppTest, KeysTakeAScreenshotToggleRecordingAndQuit) {
   }
   EXPECT_EQ(count, recorded);
   EXPECT_GE(count, 5);
+
+  // Tab selects the next object; W (scale) then acts on it alone.
+  ASSERT_EQ(ui.selected(), 0u);
+  ASSERT_EQ(key("Tab"), 0);
+  ASSERT_TRUE(TickUntil(ui, [&] { return ui.selected() == 1; })) << "Tab did not select the second object";
+  ASSERT_EQ(key("w"), 0);
+  ASSERT_TRUE(TickUntil(ui, [&] { return pipeline_->object(1).scale > 1.05; })) << "W did not scale the selected one";
+  EXPECT_NEAR(pipeline_->object(1).scale, 1.1, 1e-12);
+  EXPECT_EQ(pipeline_->object(0).scale, 1.0);
+  ASSERT_EQ(key("Tab"), 0);
+  ASSERT_TRUE(TickUntil(ui, [&] { return ui.selected() == 0; }));
 
   // Esc closes the window: Tick says so.
   ASSERT_EQ(key("Escape"), 0);
