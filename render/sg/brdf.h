@@ -60,12 +60,14 @@ double BurleyFactor(double roughness, const Vec3& n, const Vec3& v, const Vec3& 
 Vec3 ShadeSg(const SgMixture& light, const SgMaterial& material, const Vec3& n, const Vec3& v,
              const std::vector<double>& gamma = {});
 
-// The same for many pixels: the light prepared once per frame (float
-// structure of arrays padded to a multiple of kSgLanes lobes, each lobe's
-// irradiance table row blended for its sharpness), then Shade per pixel, a
-// loop over lobes that the compiler vectorises (FastExp, no branches per
-// lobe). At most kMaxSgLobes lobes. Agrees with ShadeSg to ~1e-4 relative
-// (differential test). docs/SG.md "Shading cost" counts its FLOPs.
+// The same in float for many pixels: the light prepared once per frame
+// (structure of arrays padded to a multiple of kSgLanes lobes, each lobe's
+// irradiance table row blended for its sharpness), then Shade for a span of
+// pixels (fast: lanes are pixels) or for one pixel (lanes are lobes). Both
+// are branch-free loops (FastExp, selects) compiled for AVX-512, AVX2 + FMA
+// and SSE2 and picked at run time. At most kMaxSgLobes lobes. Both agree
+// with ShadeSg to ~1e-4 relative (differential tests). docs/SG.md "Shading
+// cost" counts their FLOPs and instructions.
 inline constexpr int kSgLanes = 16;
 // Which part of eq. 5 SgShader::Shade (many pixels) returns.
 enum class SgTerms { kAll, kDiffuse, kSpecular };
@@ -73,7 +75,8 @@ class SgShader {
  public:
   explicit SgShader(const SgMixture& light);
   int lobe_count() const { return count_; }
-  // gamma: lobe_count() factors or nullptr (all 1). Returns linear RGB.
+  // One pixel. gamma: lobe_count() factors or nullptr (all 1). Returns
+  // linear RGB. Prefer the many-pixel call below where pixels come in spans.
   Vec3f Shade(const SgMaterial& material, const Vec3f& n, const Vec3f& v, const float* gamma = nullptr) const;
   // The same for `count` pixels at once: the fast path (~2× the per-pixel
   // call's speed for 32 lobes; lanes are pixels, so the per-pixel set-up and
