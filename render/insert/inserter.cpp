@@ -284,6 +284,7 @@ std::string InsertOptions::ToJson() const {
   j["shadow_reach_radii"] = shadow_reach_radii;
   j["shadow_epsilon"] = shadow_epsilon;
   j["self_shadow_per_vertex"] = self_shadow_per_vertex;
+  j["antialias_edges"] = antialias_edges;
   j["occlusion_step"] = occlusion_step;
   j["occlusion_clear_opacity"] = occlusion_clear_opacity;
   j["kappa_cache_spacing_radii"] = kappa_cache_spacing_radii;
@@ -480,7 +481,9 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
   auto t0 = Clock::now();
   std::vector<RasterObject> raster(n_objects);
   for (size_t i = 0; i < n_objects; ++i) raster[i] = {objects[i].mesh, objects[i].T_world_object, objects[i].scale};
-  layers.gbuffer = Rasterize(camera, T_world_camera, raster);
+  RasterOptions raster_options;
+  raster_options.coverage_grid = options_.antialias_edges ? 4 : 0;
+  layers.gbuffer = Rasterize(camera, T_world_camera, raster, raster_options);
   const ObjectGBuffer& g = layers.gbuffer;
   times.raster_ms = Ms(t0);
 
@@ -714,8 +717,12 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
           const float w = 1.0f - opacity;
           layers.alpha.pixels[i] = w;
           // Ĉ = I_α·I_c (opacity-weighted), so this is I_α·I_c + (1 − I_α)·I_v.
-          for (int ch = 0; ch < 3; ++ch)
-            frame.at(x, y, ch) = front[ch] + w * layers.object.pixels[static_cast<size_t>(i) * 3 + ch];
+          // Edge pixels: the object over the part of the pixel it covers.
+          const float cover = g.coverage.empty() ? 1.0f : g.coverage[i];
+          for (int ch = 0; ch < 3; ++ch) {
+            const float composite = front[ch] + w * layers.object.pixels[static_cast<size_t>(i) * 3 + ch];
+            frame.at(x, y, ch) = cover * composite + (1.0f - cover) * frame.at(x, y, ch);
+          }
         }
       },
       1);
@@ -1044,6 +1051,45 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
     }
   }
   times.kappa_ms = Ms(t0);
+
+  // Pixels partly covered by an object whose centre misses it: the
+  // composite of the nearest covered neighbour over the covered part.
+  if (!g.coverage.empty() && g.covered > 0) {
+    std::vector<std::array<float, 3>> partial;
+    std::vector<std::pair<int, int>> where;
+    for (int y = g.rect.y0; y < g.rect.y1; ++y)
+      for (int x = g.rect.x0; x < g.rect.x1; ++x) {
+        const size_t i = g.Index(x, y);
+        if (g.object[i] >= 0 || !(g.coverage[i] > 0.0f)) continue;
+        int best = -1;
+        float best_d = 3.0f;
+        for (int dy = -1; dy <= 1; ++dy)
+          for (int dx = -1; dx <= 1; ++dx) {
+            const int xx = x + dx, yy = y + dy;
+            if (!g.rect.Contains(xx, yy)) continue;
+            const size_t j = g.Index(xx, yy);
+            const float d = float(dx * dx + dy * dy);
+            if (g.object[j] >= 0 && layers.alpha.pixels[j] > 0.0f && d < best_d) {
+              best_d = d;
+              best = static_cast<int>(j);
+            }
+          }
+        if (best < 0) continue;
+        if (receivers.occlude_with_distance && receivers.distance) {
+          const float scene_t = receivers.distance->at(x, y);
+          if (scene_t > 0.0f && scene_t < 0.99f * g.t[best]) continue;  // the scene is in front here
+        }
+        // The neighbour's object radiance weighted by its visibility.
+        const float a = layers.alpha.pixels[best], c = g.coverage[i] * a;
+        std::array<float, 3> v;
+        for (int ch = 0; ch < 3; ++ch)
+          v[ch] = c * layers.object.pixels[static_cast<size_t>(best) * 3 + ch] + (1.0f - c) * frame.at(x, y, ch);
+        partial.push_back(v);
+        where.push_back({x, y});
+      }
+    for (size_t k = 0; k < partial.size(); ++k)
+      for (int ch = 0; ch < 3; ++ch) frame.at(where[k].first, where[k].second, ch) = partial[k][ch];
+  }
   times.total_ms = Ms(t_start);
   return times;
 }

@@ -47,6 +47,11 @@ struct InsertOptions {
   // rasteriser's barycentrics; false: one SSDF query per pixel.
   bool self_shadow_per_vertex = true;
 
+  // Object edges blended with the background by the fraction of each pixel
+  // the objects cover (4×4 sub-samples of the rasteriser), as a camera's
+  // pixel integrates its square; false: a pixel is the object or not.
+  bool antialias_edges = true;
+
   // Occlusion first along every occlusion_step-th pixel ray of the object's
   // screen box (each clipped at the farthest object depth around it); blocks
   // whose four corner rays all see opacity below occlusion_clear_opacity take

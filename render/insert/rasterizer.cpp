@@ -1,6 +1,7 @@
 #include "render/insert/rasterizer.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <limits>
 
@@ -96,6 +97,8 @@ ObjectGBuffer Rasterize(const CameraIntrinsics& camera, const Pose& T_world_came
   const PixelRect image{0, 0, camera.width, camera.height};
 
   // Set-up: near-clip and project every triangle; their boxes give the rect.
+  const int grid = std::clamp(options.coverage_grid, 0, 4);
+  const bool coverage = grid > 1;
   std::vector<ScreenTriangle> tris;
   std::vector<std::vector<Vec3>> camera_positions(objects.size());
   for (size_t o = 0; o < objects.size(); ++o) {
@@ -137,8 +140,10 @@ ObjectGBuffer Rasterize(const CameraIntrinsics& camera, const Pose& T_world_came
         // Pixels whose centre (i + 0.5) can fall inside [min, max].
         const double big = 4.0 * (camera.width + camera.height);
         const auto clampi = [big](double v) { return static_cast<int>(std::clamp(v, -big, big)); };
-        s.box = ClipToImage({clampi(std::ceil(x_min - 0.5)), clampi(std::ceil(y_min - 0.5)),
-                             clampi(std::floor(x_max - 0.5)) + 1, clampi(std::floor(y_max - 0.5)) + 1},
+        // With coverage, one more pixel each side (their sub-samples can fall inside).
+        const int grow = coverage ? 1 : 0;
+        s.box = ClipToImage({clampi(std::ceil(x_min - 0.5)) - grow, clampi(std::ceil(y_min - 0.5)) - grow,
+                             clampi(std::floor(x_max - 0.5)) + 1 + grow, clampi(std::floor(y_max - 0.5)) + 1 + grow},
                             image.x1, image.y1);
         if (s.box.empty()) continue;
         g.rect = Union(g.rect, s.box);
@@ -155,6 +160,7 @@ ObjectGBuffer Rasterize(const CameraIntrinsics& camera, const Pose& T_world_came
   g.normal.assign(area, Vec3f{});
   g.uv.assign(area, {0.0f, 0.0f});
   std::vector<float> z_buffer(area, std::numeric_limits<float>::infinity());
+  std::vector<uint16_t> cover_bits(coverage ? area : 0, 0);  // sub-samples inside any triangle
   g.triangle.assign(area, 0);
   g.bary.assign(area, {0.0f, 0.0f});  // original barycentrics b1, b2
   std::vector<uint32_t>& tri_id = g.triangle;
@@ -172,6 +178,9 @@ ObjectGBuffer Rasterize(const CameraIntrinsics& camera, const Pose& T_world_came
           if (s.box.y1 <= y_begin || s.box.y0 >= y_end) continue;
           const double area2 = (s.sx[1] - s.sx[0]) * (s.sy[2] - s.sy[0]) - (s.sx[2] - s.sx[0]) * (s.sy[1] - s.sy[0]);
           const double inv_area = 1.0 / area2;
+          // d l0/dx, d l0/dy, d l1/dx, d l1/dy (for the coverage sub-samples).
+          const double dl0x = (s.sy[1] - s.sy[2]) * inv_area, dl0y = (s.sx[2] - s.sx[1]) * inv_area;
+          const double dl1x = (s.sy[2] - s.sy[0]) * inv_area, dl1y = (s.sx[0] - s.sx[2]) * inv_area;
           const int y0 = std::max(y_begin, s.box.y0), y1 = std::min(y_end, s.box.y1);
           for (int y = y0; y < y1; ++y) {
             const double py = y + 0.5;
@@ -181,6 +190,18 @@ ObjectGBuffer Rasterize(const CameraIntrinsics& camera, const Pose& T_world_came
               const double l0 = ((s.sx[1] - px) * (s.sy[2] - py) - (s.sx[2] - px) * (s.sy[1] - py)) * inv_area;
               const double l1 = ((s.sx[2] - px) * (s.sy[0] - py) - (s.sx[0] - px) * (s.sy[2] - py)) * inv_area;
               const double l2 = 1.0 - l0 - l1;
+              if (coverage) {
+                // The barycentrics are affine in the sample position.
+                uint16_t& bits = cover_bits[g.Index(x, y)];
+                for (int sy = 0; sy < grid; ++sy)
+                  for (int sx = 0; sx < grid; ++sx) {
+                    const int bit = sy * grid + sx;
+                    if (bits & (1u << bit)) continue;
+                    const double ox = (sx + 0.5) / grid - 0.5, oy = (sy + 0.5) / grid - 0.5;
+                    const double m0 = l0 + (dl0x * ox + dl0y * oy), m1 = l1 + (dl1x * ox + dl1y * oy);
+                    if (m0 >= 0.0 && m1 >= 0.0 && 1.0 - m0 - m1 >= 0.0) bits = uint16_t(bits | (1u << bit));
+                  }
+              }
               if (l0 < 0.0 || l1 < 0.0 || l2 < 0.0) continue;
               const double inv_z = l0 * s.inv_z[0] + l1 * s.inv_z[1] + l2 * s.inv_z[2];
               if (!(inv_z > 0.0)) continue;
@@ -242,6 +263,11 @@ ObjectGBuffer Rasterize(const CameraIntrinsics& camera, const Pose& T_world_came
       },
       4);
   for (size_t c : covered_per_row) g.covered += c;
+  if (coverage) {
+    g.coverage.resize(area);
+    const float per_sample = 1.0f / static_cast<float>(grid * grid);
+    for (size_t i = 0; i < area; ++i) g.coverage[i] = static_cast<float>(std::popcount(cover_bits[i])) * per_sample;
+  }
   return g;
 }
 

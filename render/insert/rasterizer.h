@@ -52,7 +52,10 @@ struct ObjectGBuffer {
   std::vector<std::array<float, 2>> uv;    // (0, 0) where the mesh has no UVs
   std::vector<uint32_t> triangle;          // index of the visible triangle in its object's mesh
   std::vector<std::array<float, 2>> bary;  // its perspective-correct barycentrics (b1, b2); b0 = 1 − b1 − b2
-  size_t covered = 0;                      // number of pixels with an object
+  // Fraction of the pixel's square covered by any object (coverage_grid² sub-samples; empty when off).
+  // Pixels whose centre misses every object can still be partly covered.
+  std::vector<float> coverage;
+  size_t covered = 0;  // number of pixels with an object
 
   size_t Index(int x, int y) const {
     return static_cast<size_t>(y - rect.y0) * static_cast<size_t>(rect.width()) + static_cast<size_t>(x - rect.x0);
@@ -61,6 +64,7 @@ struct ObjectGBuffer {
 
 struct RasterOptions {
   double z_near_m = 1e-3;  // triangles are clipped at this camera depth (parts behind are not drawn)
+  int coverage_grid = 0;   // > 1: coverage of each pixel from coverage_grid² sub-samples (at most 4); else none
 };
 
 // Rasterises every object into one depth buffer (the nearest surface wins).
