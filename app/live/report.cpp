@@ -187,6 +187,11 @@ void WriteSession(const std::string& session_dir, const SessionInfo& info, const
     for (const auto& [name, value] : StageList(r.times)) ms[name] = value;
     f["ms"] = ms;
     if (r.light_fit_loss >= 0) f["light_fit_loss"] = r.light_fit_loss;
+    // The inserter's caches at work: κ values computed this frame (cache
+    // misses) and whether the per-vertex self-shadow was rebuilt.
+    f["kappa_evaluated"] = r.times.insert.kappa_evaluated;
+    f["gamma_recomputed"] = r.times.insert.gamma_recomputed;
+    f["lights_recomputed"] = r.times.insert.lights_recomputed;
     frames.push_back(f);
   }
   Json objects = Json::array();
