@@ -128,11 +128,25 @@ void SharedScene(const std::string& scenes_dir, const std::string& scene, const 
   namespace fs = std::filesystem;
   const fs::path dir = fs::path(scenes_dir) / scene;
   const NerfField field = LoadNerf(model);
-  const std::string note = scene + ", " + model + ", preset " + preset;
   EnvEstimateOptions o = EnvEstimateOptions::Preset(preset);
+  // $NERFAR_BENCH_ENV_SET: "key=value;key=value" overrides (as `nerfar env --set`).
+  if (const char* sets = std::getenv("NERFAR_BENCH_ENV_SET")) {
+    std::stringstream in(sets);
+    std::string kv;
+    while (std::getline(in, kv, ';'))
+      if (!kv.empty()) o.Set(kv);
+  }
+  const std::string note = scene + ", " + model + ", preset " + preset +
+                           (o.ToJson() == EnvEstimateOptions::Preset(preset).ToJson()
+                                ? ""
+                                : ", " + std::string(std::getenv("NERFAR_BENCH_ENV_SET")));
   double t0 = NowSeconds();
-  const EnvLight est = EstimateEnvironment(field, o);
+  EnvEstimateReport report;
+  const EnvLight est = EstimateEnvironment(field, o, &report);
   figures.push_back({"env_" + scene + "_s", NowSeconds() - t0, "s", note});
+  figures.push_back({"env_" + scene + "_samples", static_cast<double>(report.samples), "", note});
+  figures.push_back({"env_" + scene + "_near_field_gain", report.fit.near_field_gain, "", note});
+  figures.push_back({"env_" + scene + "_fit_rel_rms", report.fit.relative_rms, "", note});
   o.ignore_near_field = true;
   t0 = NowSeconds();
   const EnvLight physg = EstimateEnvironment(field, o);
@@ -157,6 +171,18 @@ void SharedScene(const std::string& scenes_dir, const std::string& scene, const 
   if (true_energy > 0) {
     figures.push_back({"env_" + scene + "_env_rel_rms", RelativeIrradianceRms(e_est, e_true), "",
                        note + "; irradiance of the estimate vs env.exr, 64 upper normals"});
+    // The same after the best single scale factor (shape only, not the overall brightness).
+    double ab = 0, bb = 0;
+    for (size_t i = 0; i < e_est.size(); ++i) {
+      ab += LuminanceOf(e_est[i]) * LuminanceOf(e_true[i]);
+      bb += LuminanceOf(e_est[i]) * LuminanceOf(e_est[i]);
+    }
+    const double best = bb > 0 ? ab / bb : 0;
+    std::vector<Vec3> e_scaled;
+    for (const Vec3& e : e_est) e_scaled.push_back(e * best);
+    figures.push_back({"env_" + scene + "_env_rel_rms_best_scale", RelativeIrradianceRms(e_scaled, e_true), "",
+                       note + "; the estimate times the best single factor vs env.exr (shape alone)"});
+    figures.push_back({"env_" + scene + "_env_best_scale", best, "", note + "; that factor"});
     figures.push_back({"env_" + scene + "_physg_env_rel_rms", RelativeIrradianceRms(e_physg, e_true), "",
                        note + "; PhySG-like baseline vs env.exr"});
     figures.push_back({"env_" + scene + "_nearonly_env_rel_rms", RelativeIrradianceRms(e_none, e_true), "",
@@ -199,7 +225,8 @@ void SharedScene(const std::string& scenes_dir, const std::string& scene, const 
   if (scene == "window" && std::getenv("NERFAR_BENCH_ENV_TRADE") != nullptr) {
     for (int pixels : {16, 64})
       for (int rays : {64, 256}) {
-        EnvEstimateOptions t = EnvEstimateOptions::Preset(preset);
+        EnvEstimateOptions t = o;
+        t.ignore_near_field = false;
         t.pixels_per_view = pixels;
         t.rays_per_point = rays;
         const double start = NowSeconds();

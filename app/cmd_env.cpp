@@ -84,10 +84,16 @@ int RunEnv(const CommandArgs& args) {
   char line[512];
   std::snprintf(line, sizeof line,
                 "env: %d views rendered, %d kept; %zu surface samples; %d lobes (dictionary %d); fit relative RMS "
-                "%.3f, mean albedo %.3f; times: views %.1fs, rays %.1fs, fit %.1fs",
+                "%.3f, mean albedo %.3f, near-field gain %.2f; times: views %.1fs, rays %.1fs, fit %.1fs",
                 report.views.rendered, report.views.accepted, report.samples, report.fit.active_lobes,
-                report.fit.dictionary_size, report.fit.relative_rms, report.fit.mean_albedo, report.seconds_views,
-                report.seconds_near_field, report.seconds_fit);
+                report.fit.dictionary_size, report.fit.relative_rms, report.fit.mean_albedo, report.fit.near_field_gain,
+                report.seconds_views, report.seconds_near_field, report.seconds_fit);
+  LogInfo(line);
+  std::snprintf(line, sizeof line,
+                "env: of %ld picked pixels, %ld dropped as not surface-like (fog), %ld without a normal (depth "
+                "edges), %ld seen too grazing",
+                report.views.pixels_tried, report.views.pixels_not_surface, report.views.pixels_no_normal,
+                report.views.pixels_grazing);
   LogInfo(line);
   std::snprintf(line, sizeof line,
                 "env: environment / near-field irradiance: %.4f over the surface samples, %.4f at the volume centre",

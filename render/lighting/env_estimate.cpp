@@ -68,6 +68,13 @@ std::vector<OptionField> Fields(EnvEstimateOptions& o) {
           {"max_view_attempts", F::kInt, &o.max_view_attempts},
           {"min_pixel_opacity", F::kDouble, &o.min_pixel_opacity},
           {"min_view_cosine", F::kDouble, &o.min_view_cosine},
+          {"max_surface_spread_voxels", F::kDouble, &o.max_surface_spread_voxels},
+          {"max_pixel_tries_factor", F::kInt, &o.max_pixel_tries_factor},
+          {"surface_step_voxels", F::kFloat, &o.surface_step_voxels},
+          {"normal_from_depth", F::kBool, &o.normal_from_depth},
+          {"normal_baseline_px", F::kDouble, &o.normal_baseline_px},
+          {"normal_scale_voxels", F::kDouble, &o.normal_scale_voxels},
+          {"radiance_over_opacity", F::kBool, &o.radiance_over_opacity},
           {"rays_per_point", F::kInt, &o.rays_per_point},
           {"ray_offset_voxels", F::kDouble, &o.ray_offset_voxels},
           {"near_field_pool_m", F::kDouble, &o.near_field_pool_m},
@@ -85,6 +92,7 @@ std::vector<OptionField> Fields(EnvEstimateOptions& o) {
           {"loss_epsilon", F::kDouble, &o.loss_epsilon},
           {"robust_scale", F::kDouble, &o.robust_scale},
           {"light_energy_weight", F::kDouble, &o.light_energy_weight},
+          {"near_field_gain_max", F::kDouble, &o.near_field_gain_max},
           {"negligible_ratio", F::kDouble, &o.negligible_ratio},
           {"seed", F::kU64, &o.seed}};
 }
@@ -132,6 +140,11 @@ std::vector<std::string> EnvEstimateOptions::Validate() const {
   range("max_view_attempts", max_view_attempts, views, 1e6);
   range("min_pixel_opacity", min_pixel_opacity, 0, 1);
   range("min_view_cosine", min_view_cosine, 0, 1);
+  range("max_surface_spread_voxels", max_surface_spread_voxels, 0.1, 1e6);
+  range("surface_step_voxels", surface_step_voxels, 0.05, 10);
+  range("max_pixel_tries_factor", max_pixel_tries_factor, 1, 1e6);
+  range("normal_baseline_px", normal_baseline_px, 0.25, 64);
+  range("normal_scale_voxels", normal_scale_voxels, 0.25, 64);
   range("rays_per_point", rays_per_point, 8, 65536);
   range("ray_offset_voxels", ray_offset_voxels, 0, 100);
   range("near_field_pool_m", near_field_pool_m, 0, 10);
@@ -151,6 +164,7 @@ std::vector<std::string> EnvEstimateOptions::Validate() const {
   range("loss_epsilon", loss_epsilon, 1e-6, 1e3);
   range("robust_scale", robust_scale, 1e-3, 1e6);
   range("light_energy_weight", light_energy_weight, 0, 1e3);
+  range("near_field_gain_max", near_field_gain_max, 1, 1e3);
   range("negligible_ratio", negligible_ratio, 0, 1);
   return p;
 }
@@ -222,11 +236,11 @@ void EnvEstimateOptions::Set(const std::string& key_value) {
 namespace {
 
 // Surface normal −∇σ/|∇σ| averaged (unit gradients, equal weights) over the
-// point and 6 points 1.5 voxels away along the axes: a trained grid's
+// point and 6 points `scale` voxels away along the axes: a trained grid's
 // gradient is noisy from vertex to vertex, and the average is the normal of
-// the surface smoothed over ~3 voxels. False when no gradient is usable.
-bool SmoothedNormal(const NerfField& field, const Vec3f& x, Vec3f* normal) {
-  const float h = 1.5f * field.voxel_m;
+// the surface smoothed over ~2·scale voxels. False when no gradient is usable.
+bool SmoothedNormal(const NerfField& field, const Vec3f& x, float scale, Vec3f* normal) {
+  const float h = scale * field.voxel_m;
   const Vec3f offsets[7] = {{0, 0, 0}, {h, 0, 0}, {-h, 0, 0}, {0, h, 0}, {0, -h, 0}, {0, 0, h}, {0, 0, -h}};
   Vec3f sum;
   for (const Vec3f& o : offsets) {
@@ -240,8 +254,81 @@ bool SmoothedNormal(const NerfField& field, const Vec3f& x, Vec3f* normal) {
   return true;
 }
 
+// Where a camera ray's opacity builds up: the distances at which the
+// accumulated opacity 1 − T(t) reaches 1/4, 1/2 and 3/4 of the ray's total.
+// The median t50 is the surface: in fog in front of a surface the expected
+// depth Σ w t / O is pulled towards the camera by every bit of fog, the median
+// only by fog that holds half the ray's opacity; on an opaque ray it is the
+// point where T crosses 1/2, and on a translucent surface (a trained table of
+// opacity 0.3) it still lies on the surface. The quartile spread t75 − t25
+// says whether the opacity comes from a surface (a few voxels) or from a
+// layer of fog (centimetres).
+struct RaySurface {
+  float opacity = 0;  // 1 − T at the end of the march
+  float t25 = 0, t50 = 0, t75 = 0;
+  bool valid = false;  // opacity > 0 and the quartiles found
+};
+RaySurface MarchSurface(const NerfField& field, const NerfRay& ray, float step_voxels) {
+  RaySurface out;
+  if (!(ray.t_far > ray.t_near)) return out;
+  const float dt = std::max(1e-6f, step_voxels * field.voxel_m);
+  // Accumulated opacity at the end of each step (midpoint rule), as in rendering.
+  std::vector<float> t_end, acc;
+  double optical = 0;
+  for (float t = ray.t_near; t < ray.t_far; t += dt) {
+    const float len = std::min(dt, ray.t_far - t);
+    optical += static_cast<double>(field.Density(ray.origin + ray.dir * (t + 0.5f * len))) * len;
+    t_end.push_back(t + len);
+    acc.push_back(static_cast<float>(-std::expm1(-optical)));
+    if (optical > 9.2) break;  // T < 1e-4
+  }
+  if (acc.empty() || !(acc.back() > 0)) return out;
+  out.opacity = acc.back();
+  const float quantiles[3] = {0.25f, 0.5f, 0.75f};
+  float* dest[3] = {&out.t25, &out.t50, &out.t75};
+  for (int q = 0; q < 3; ++q) {
+    const float level = quantiles[q] * out.opacity;
+    const size_t k = static_cast<size_t>(std::lower_bound(acc.begin(), acc.end(), level) - acc.begin());
+    const float a0 = k == 0 ? 0.0f : acc[k - 1], t0 = k == 0 ? ray.t_near : t_end[k - 1];
+    const float f = acc[k] > a0 ? (level - a0) / (acc[k] - a0) : 0.5f;
+    *dest[q] = t0 + f * (t_end[k] - t0);
+  }
+  out.valid = true;
+  return out;
+}
+
+// The normal of the surface seen through pixel (px, py) from the surfaces of
+// the four pixels `b` away (central differences of the median-depth map),
+// turned to face the camera. False at depth edges (the two one-sided
+// estimates disagree by more than ~25 degrees) or when a neighbour has no surface.
+bool DepthNormal(const NerfField& field, const CameraIntrinsics& camera, const Pose& pose, double px, double py,
+                 const Vec3f& x, const Vec3f& view_dir, const EnvEstimateOptions& o, Vec3f* normal) {
+  const double b = o.normal_baseline_px;
+  const double offsets[4][2] = {{b, 0}, {-b, 0}, {0, b}, {0, -b}};
+  Vec3f p[4];
+  for (int k = 0; k < 4; ++k) {
+    const double u = (px + offsets[k][0] - camera.cx) / camera.fx, v = (py + offsets[k][1] - camera.cy) / camera.fy;
+    const Vec3 dir = Normalized(pose.rotation * Vec3{u, v, 1});
+    NerfRay ray{Vec3f(pose.translation), Vec3f(dir), 0, 0};
+    if (!IntersectAabb(field.aabb, ray.origin, ray.dir, ray.t_near, ray.t_far)) return false;
+    const RaySurface s = MarchSurface(field, ray, o.surface_step_voxels);
+    if (!s.valid || s.opacity < o.min_pixel_opacity) return false;
+    p[k] = ray.origin + ray.dir * s.t50;
+  }
+  const Vec3f central = Cross(p[0] - p[1], p[2] - p[3]);
+  const Vec3f forward = Cross(p[0] - x, p[2] - x), backward = Cross(x - p[1], x - p[3]);
+  const float lc = Length(central), lf = Length(forward), lb = Length(backward);
+  if (!(lc > 0 && lf > 0 && lb > 0)) return false;
+  if (Dot(forward, backward) < 0.9f * lf * lb) return false;  // cos 25°: a depth edge or a fold
+  Vec3f n = central * (1.0f / lc);
+  if (Dot(n, view_dir) > 0) n = -n;
+  *normal = n;
+  return true;
+}
+
 struct ViewPick {
   double score = -1;
+  int tried = 0, not_surface = 0, no_normal = 0, grazing = 0;
   std::vector<Vec3f> positions, normals, radiance;
 };
 
@@ -290,21 +377,48 @@ EnvSurfaceSamples SampleSurfaces(const NerfField& field, const EnvEstimateOption
       if (results[i].opacity > options.min_pixel_opacity && rays[i].t_far > rays[i].t_near)
         eligible.push_back(static_cast<uint32_t>(i));
     // Partial Fisher-Yates with counter-based draws: the first P of a random order.
-    for (size_t k = 0; k < eligible.size() && pick.positions.size() < static_cast<size_t>(options.pixels_per_view);
+    const size_t max_tries = static_cast<size_t>(options.max_pixel_tries_factor) * options.pixels_per_view;
+    for (size_t k = 0;
+         k < eligible.size() && k < max_tries && pick.positions.size() < static_cast<size_t>(options.pixels_per_view);
          ++k) {
       const size_t j = k + static_cast<size_t>(Uniform(options.seed, kPixelPick, a, k) * (eligible.size() - k));
       std::swap(eligible[k], eligible[std::min(j, eligible.size() - 1)]);
       const NerfRay& ray = rays[eligible[k]];
       const NerfRayResult& res = results[eligible[k]];
-      const Vec3f x = ray.origin + ray.dir * res.depth;
+      // The surface: the median of the ray's opacity (see MarchSurface),
+      // kept only where the opacity builds up within a few voxels.
+      const RaySurface surf = MarchSurface(field, ray, options.surface_step_voxels);
+      ++pick.tried;
+      if (!surf.valid || surf.t75 - surf.t25 > options.max_surface_spread_voxels * field.voxel_m) {
+        ++pick.not_surface;
+        continue;
+      }
+      const Vec3f x = ray.origin + ray.dir * surf.t50;
       Vec3f n;
-      if (!SmoothedNormal(field, x, &n)) continue;
-      if (Dot(n, ray.dir) > 0) n = -n;  // the camera sees the surface: face it
+      if (options.normal_from_depth) {
+        const double px = eligible[k] % camera.width + 0.5, py = eligible[k] / camera.width + 0.5;
+        if (!DepthNormal(field, camera, pose, px, py, x, ray.dir, options, &n)) {
+          ++pick.no_normal;
+          continue;
+        }
+      } else {
+        if (!SmoothedNormal(field, x, static_cast<float>(options.normal_scale_voxels), &n)) {
+          ++pick.no_normal;
+          continue;
+        }
+        if (Dot(n, ray.dir) > 0) n = -n;  // the camera sees the surface: face it
+      }
       // A surface seen at a grazing angle is where a noisy density gradient
       // most often gives a wrong normal (e.g. the table top's normal turned
       // sideways or down); such samples drive light from below the horizon.
-      if (-Dot(n, ray.dir) < options.min_view_cosine) continue;
-      const Vec3f radiance = res.color * (1.0f / res.opacity);
+      if (-Dot(n, ray.dir) < options.min_view_cosine) {
+        ++pick.grazing;
+        continue;
+      }
+      // Observed radiance: the pixel as rendered (what the camera saw; the
+      // scenes' background is black, so a translucent trained surface's pixel
+      // is its radiance), or divided by the opacity (partial coverage).
+      const Vec3f radiance = options.radiance_over_opacity ? res.color * (1.0f / res.opacity) : res.color;
       if (!std::isfinite(radiance.x + radiance.y + radiance.z)) continue;
       pick.positions.push_back(x);
       pick.normals.push_back(n);
@@ -334,6 +448,10 @@ EnvSurfaceSamples SampleSurfaces(const NerfField& field, const EnvEstimateOption
   EnvSurfaceSamples samples;
   for (size_t v = 0; v < views.size(); ++v) {
     if (!local.kept[v]) continue;
+    local.pixels_tried += views[v].tried;
+    local.pixels_not_surface += views[v].not_surface;
+    local.pixels_no_normal += views[v].no_normal;
+    local.pixels_grazing += views[v].grazing;
     samples.positions.insert(samples.positions.end(), views[v].positions.begin(), views[v].positions.end());
     samples.normals.insert(samples.normals.end(), views[v].normals.begin(), views[v].normals.end());
     samples.radiance.insert(samples.radiance.end(), views[v].radiance.begin(), views[v].radiance.end());
@@ -544,6 +662,9 @@ struct FitState {
   double energy_weight = 0, typical_irradiance = 1;
   Vec3 eps;                           // loss floor per channel
   std::vector<double> lobe_integral;  // ∫ G_k over the sphere per unit amplitude
+  // g: the near field enters the model as g·E_nerf, g in [1, gain_max] (see
+  // EnvEstimateOptions::near_field_gain_max).
+  double gain = 1, gain_max = 1;
 };
 
 double Channel(const Vec3f& v, int c) { return v[c]; }
@@ -552,7 +673,7 @@ double Channel(const Vec3f& v, int c) { return v[c]; }
 Eigen::MatrixXd Shading(const FitState& st) {
   Eigen::MatrixXd S = st.A * st.mu;
   for (size_t i = 0; i < st.s->size(); ++i)
-    for (int c = 0; c < 3; ++c) S(i, c) += Channel(st.s->e_nerf[i], c);
+    for (int c = 0; c < 3; ++c) S(i, c) += st.gain * Channel(st.s->e_nerf[i], c);
   return S;
 }
 
@@ -586,7 +707,7 @@ void SolveLight(FitState& st) {
       const double w = std::sqrt(st.robust[i]) * st.inv_scale[i][c];
       const double a = st.albedo[st.cell[i]][c] / kPi;
       B.row(i) = st.A.row(i) * (w * a);
-      y[i] = w * (Channel(st.s->radiance[i], c) - a * Channel(st.s->e_nerf[i], c));
+      y[i] = w * (Channel(st.s->radiance[i], c) - a * st.gain * Channel(st.s->e_nerf[i], c));
     }
     const Eigen::MatrixXd G = B.transpose() * B;
     Eigen::VectorXd h = B.transpose() * y;
@@ -629,7 +750,7 @@ void SolveScale(FitState& st) {
     for (int c = 0; c < 3; ++c) {
       const double w = st.robust[i] * st.inv_scale[i][c] * st.inv_scale[i][c];
       const double a = st.albedo[st.cell[i]][c] / kPi;
-      const double e = a * Channel(st.s->e_nerf[i], c), rest = Channel(st.s->radiance[i], c) - a * Amu(i, c);
+      const double e = a * st.gain * Channel(st.s->e_nerf[i], c), rest = Channel(st.s->radiance[i], c) - a * Amu(i, c);
       qa += w * e * e;
       qb += w * e * rest;
     }
@@ -659,6 +780,23 @@ void SolveScale(FitState& st) {
   t = std::clamp(t, 0.1, 10.0);  // one step at most a decade: the alternation does the rest
   for (Vec3& a : st.albedo) a = a * t;
   st.mu /= t;
+}
+
+// The near-field gain g for fixed albedo and light: the data term is
+// quadratic in g, solved exactly and clamped to [1, gain_max].
+void SolveGain(FitState& st) {
+  if (!(st.gain_max > 1)) return;
+  const Eigen::MatrixXd Amu = st.A * st.mu;
+  double qa = 0, qb = 0;
+  for (size_t i = 0; i < st.s->size(); ++i)
+    for (int c = 0; c < 3; ++c) {
+      const double w = st.robust[i] * st.inv_scale[i][c] * st.inv_scale[i][c];
+      const double a = st.albedo[st.cell[i]][c] / kPi;
+      const double e = a * Channel(st.s->e_nerf[i], c), rest = Channel(st.s->radiance[i], c) - a * Amu(i, c);
+      qa += w * e * e;
+      qb += w * e * rest;
+    }
+  if (qa > 0 && std::isfinite(qb / qa)) st.gain = std::clamp(qb / qa, 1.0, st.gain_max);
 }
 
 std::vector<int> AlbedoCells(const EnvSurfaceSamples& s, const Aabb& aabb, double cell_m, size_t* count) {
@@ -697,6 +835,7 @@ SgMixture FitEnvironment(const EnvSurfaceSamples& samples, const Aabb& aabb, con
   st.prior = options.albedo_prior;
   st.prior_weight = options.albedo_prior_weight;
   st.robust_scale = options.robust_scale;
+  st.gain_max = options.ignore_near_field ? 1.0 : options.near_field_gain_max;
   size_t cells = 0;
   st.cell = AlbedoCells(samples, aabb, options.albedo_cell_m, &cells);
   st.albedo.assign(cells, Vec3{1, 1, 1} * options.albedo_prior);
@@ -721,6 +860,9 @@ SgMixture FitEnvironment(const EnvSurfaceSamples& samples, const Aabb& aabb, con
   int step = 0;
   auto iterate = [&](int count) {
     for (int it = 0; it < count; ++it, ++step) {
+      // The gain first: at the start (no light yet) it takes all that the
+      // near field's pattern explains before any lobe can.
+      SolveGain(st);
       SolveLight(st);
       SolveAlbedo(st, Shading(st));
       SolveScale(st);
@@ -777,6 +919,7 @@ SgMixture FitEnvironment(const EnvSurfaceSamples& samples, const Aabb& aabb, con
   }
   local.mean_albedo = albedo_sum / samples.size();
   local.relative_rms = ref2 > 0 ? std::sqrt(err2 / ref2) : 0;
+  local.near_field_gain = st.gain;
   if (report) *report = local;
   return result;
 }
