@@ -161,6 +161,7 @@ ObjectGBuffer Rasterize(const CameraIntrinsics& camera, const Pose& T_world_came
   g.uv.assign(area, {0.0f, 0.0f});
   std::vector<float> z_buffer(area, std::numeric_limits<float>::infinity());
   std::vector<uint16_t> cover_bits(coverage ? area : 0, 0);  // sub-samples inside any triangle
+  const uint16_t full_bits = static_cast<uint16_t>((1u << (grid * grid)) - 1u);
   g.triangle.assign(area, 0);
   g.bary.assign(area, {0.0f, 0.0f});  // original barycentrics b1, b2
   std::vector<uint32_t>& tri_id = g.triangle;
@@ -181,6 +182,9 @@ ObjectGBuffer Rasterize(const CameraIntrinsics& camera, const Pose& T_world_came
           // d l0/dx, d l0/dy, d l1/dx, d l1/dy (for the coverage sub-samples).
           const double dl0x = (s.sy[1] - s.sy[2]) * inv_area, dl0y = (s.sx[2] - s.sx[1]) * inv_area;
           const double dl1x = (s.sy[2] - s.sy[0]) * inv_area, dl1y = (s.sx[0] - s.sx[2]) * inv_area;
+          const double reach0 = 0.5 * (std::abs(dl0x) + std::abs(dl0y)),
+                       reach1 = 0.5 * (std::abs(dl1x) + std::abs(dl1y));
+          const double reach2 = 0.5 * (std::abs(dl0x + dl1x) + std::abs(dl0y + dl1y));
           const int y0 = std::max(y_begin, s.box.y0), y1 = std::min(y_end, s.box.y1);
           for (int y = y0; y < y1; ++y) {
             const double py = y + 0.5;
@@ -191,16 +195,26 @@ ObjectGBuffer Rasterize(const CameraIntrinsics& camera, const Pose& T_world_came
               const double l1 = ((s.sx[2] - px) * (s.sy[0] - py) - (s.sx[0] - px) * (s.sy[2] - py)) * inv_area;
               const double l2 = 1.0 - l0 - l1;
               if (coverage) {
-                // The barycentrics are affine in the sample position.
+                // The barycentrics are affine in the sample position; a
+                // sub-sample is within half a pixel on each axis of the
+                // centre, so each changes by at most its reach.
                 uint16_t& bits = cover_bits[g.Index(x, y)];
-                for (int sy = 0; sy < grid; ++sy)
-                  for (int sx = 0; sx < grid; ++sx) {
-                    const int bit = sy * grid + sx;
-                    if (bits & (1u << bit)) continue;
-                    const double ox = (sx + 0.5) / grid - 0.5, oy = (sy + 0.5) / grid - 0.5;
-                    const double m0 = l0 + (dl0x * ox + dl0y * oy), m1 = l1 + (dl1x * ox + dl1y * oy);
-                    if (m0 >= 0.0 && m1 >= 0.0 && 1.0 - m0 - m1 >= 0.0) bits = uint16_t(bits | (1u << bit));
+                const double lo = std::min({l0 - reach0, l1 - reach1, l2 - reach2});
+                const bool none = l0 < -reach0 || l1 < -reach1 || l2 < -reach2;
+                if (!none && bits != full_bits) {
+                  if (lo >= 0.0) {
+                    bits = full_bits;
+                  } else {
+                    for (int sy = 0; sy < grid; ++sy)
+                      for (int sx = 0; sx < grid; ++sx) {
+                        const int bit = sy * grid + sx;
+                        if (bits & (1u << bit)) continue;
+                        const double ox = (sx + 0.5) / grid - 0.5, oy = (sy + 0.5) / grid - 0.5;
+                        const double m0 = l0 + (dl0x * ox + dl0y * oy), m1 = l1 + (dl1x * ox + dl1y * oy);
+                        if (m0 >= 0.0 && m1 >= 0.0 && 1.0 - m0 - m1 >= 0.0) bits = uint16_t(bits | (1u << bit));
+                      }
                   }
+                }
               }
               if (l0 < 0.0 || l1 < 0.0 || l2 < 0.0) continue;
               const double inv_z = l0 * s.inv_z[0] + l1 * s.inv_z[1] + l2 * s.inv_z[2];
