@@ -1,7 +1,6 @@
 #include "render/sg/brdf.h"
 
 #include <algorithm>
-#include <bit>
 #include <cmath>
 #include <cstdlib>
 #include <string>
