@@ -52,7 +52,7 @@ int RunDemo(const CommandArgs& args) {
               "tiny everything (tests, a first look): 100x75 views, a 2 cm NeRF trained 300 steps, the whole demo "
               "in about a minute");
   parser.Option("--minutes", &minutes, "M",
-                "cap training at M minutes (default: the whole schedule, ~2 min on a quiet 2-core machine; "
+                "cap training at M minutes (default: the whole schedule, 85 CPU-s, ~1 min on a quiet 2-core machine; "
                 "a cap on a busy machine trains fewer steps)");
   parser.Option("--frames", &frames, "N", "live frames (headless default 60, --quick 12; window: until closed)");
   parser.Option("--size", &size, "WxH",

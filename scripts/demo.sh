@@ -9,7 +9,7 @@
 # OUT_DIR/session/). Re-running reuses finished stages.
 # Usage: scripts/demo.sh [OUT_DIR] [nerfar demo options, e.g. --headless]
 # (default OUT_DIR demo_out; NERFAR_DEMO_MINUTES caps training at that many
-# minutes, default: the fast preset's whole schedule, ~2 minutes on a quiet
+# minutes, default: the fast preset's whole schedule, ~1 minute on a quiet
 # 2-core machine).
 set -euo pipefail
 cd "$(dirname "$0")/.."
