@@ -11,7 +11,8 @@
 // (near field alone; environment fitted ignoring the near field and NeRF
 // visibility, PhySG-like) and for env.exr itself seen through the NeRF (what
 // the NeRF alone limits). $NERFAR_BENCH_ENV_TRADE=1 adds the pixels x rays
-// table on the window scene.
+// table on the window scene. $NERFAR_BENCH_ENV_SET="key=value;..." overrides
+// options as `nerfar env --set` does (the PhySG-like baseline takes them too).
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
@@ -130,16 +131,15 @@ void SharedScene(const std::string& scenes_dir, const std::string& scene, const 
   const NerfField field = LoadNerf(model);
   EnvEstimateOptions o = EnvEstimateOptions::Preset(preset);
   // $NERFAR_BENCH_ENV_SET: "key=value;key=value" overrides (as `nerfar env --set`).
-  if (const char* sets = std::getenv("NERFAR_BENCH_ENV_SET")) {
+  const char* sets = std::getenv("NERFAR_BENCH_ENV_SET");
+  if (sets != nullptr) {
     std::stringstream in(sets);
     std::string kv;
     while (std::getline(in, kv, ';'))
       if (!kv.empty()) o.Set(kv);
   }
-  const std::string note = scene + ", " + model + ", preset " + preset +
-                           (o.ToJson() == EnvEstimateOptions::Preset(preset).ToJson()
-                                ? ""
-                                : ", " + std::string(std::getenv("NERFAR_BENCH_ENV_SET")));
+  const std::string note =
+      scene + ", " + model + ", preset " + preset + (sets != nullptr && *sets != 0 ? ", " + std::string(sets) : "");
   double t0 = NowSeconds();
   EnvEstimateReport report;
   const EnvLight est = EstimateEnvironment(field, o, &report);

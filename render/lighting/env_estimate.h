@@ -104,10 +104,10 @@ struct EnvEstimateOptions {
   double albedo_prior = 0.5;          // grey-world prior that fixes the scale when the near field does not
   double albedo_prior_weight = 1e-3;  // its weight, per cell, relative to one sample
   double loss_epsilon = 0.05;         // relative loss floor in units of the mean observed luminance
-  double robust_scale = 0.3;
+  double robust_scale = 0.3;          // Cauchy scale of the log residual (outliers: emitters, tags, bad normals)
   // Minimum-energy prior on the light (relative to the data term): light that
   // no sample sees stays dark. 0 disables it.
-  double light_energy_weight = 1e-3;  // Cauchy scale of the relative residual (outliers: emitters, tags, bad normals)
+  double light_energy_weight = 1e-3;
   // The near field enters the model as g·E_nerf with one gain g in [1, this]
   // fitted with the rest. A trained NeRF's emitters are often much dimmer
   // towards directions no camera saw (the underside of a lamp seen from the
