@@ -29,7 +29,9 @@ int RunRender(const CommandArgs& args) {
   parser.Option("-o", &output, "OUT", "output folder (required)");
   parser.Flag("--png", &options.write_png, "also write OUT/<name>.png: render beside reference, tone-mapped");
   parser.Option("--step-voxels", &step_voxels, "S", "sample spacing in voxels (default 0.5)");
-  parser.Epilog("Writes OUT/<name>.exr, OUT/<name>_depth.exr, OUT/<name>_opacity.exr and OUT/report.json.");
+  parser.Epilog(
+      "Writes OUT/<name>.exr, OUT/<name>_depth.exr, OUT/<name>_surface_depth.exr, OUT/<name>_opacity.exr and "
+      "OUT/report.json.");
   if (!parser.Parse(args)) return 0;
   if (dataset.empty() || output.empty())
     throw InputError("nerfar render: --dataset DIR and -o OUT are required (see 'nerfar render --help')");
@@ -50,6 +52,7 @@ int RunRender(const CommandArgs& args) {
     Json j = {{"name", v.name}, {"psnr_tm_dataset_db", v.psnr_dataset}, {"render_ms", v.render_ms}};
     if (v.psnr_reference >= 0) j["psnr_tm_reference_db"] = v.psnr_reference;
     if (v.depth_median_m >= 0) j["depth_median_error_m"] = v.depth_median_m;
+    if (v.surface_depth_median_m >= 0) j["surface_depth_median_error_m"] = v.surface_depth_median_m;
     views.push_back(j);
   }
   std::printf("%-10s %18.2f %22s %16s\n", "mean", eval.mean_psnr_dataset,
@@ -66,6 +69,10 @@ int RunRender(const CommandArgs& args) {
     report["reference"] = eval.reference_folder + "/bg_XXX.exr";
   }
   if (eval.depth_median_m >= 0) report["depth_median_error_m"] = eval.depth_median_m;
+  if (eval.surface_depth_median_m >= 0) {
+    report["surface_depth_median_error_m"] = eval.surface_depth_median_m;
+    std::printf("surface depth (transmittance 0.5) median error: %.2f mm\n", eval.surface_depth_median_m * 1e3);
+  }
   WriteJsonFile((std::filesystem::path(output) / "report.json").string(), report);
   LogInfo("render: wrote " + std::to_string(eval.views.size()) + " views and report.json to " + output);
   return 0;

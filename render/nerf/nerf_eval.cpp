@@ -46,7 +46,7 @@ NerfEvaluation EvaluateNerf(const NerfField& field, const std::string& dataset_d
   std::sort(object_dirs.begin(), object_dirs.end());
   if (!options.output_dir.empty()) MakeDirectories(options.output_dir);
 
-  std::vector<float> all_depth_errors;
+  std::vector<float> all_depth_errors, all_surface_errors;
   double sum_dataset = 0, sum_reference = 0;
   int count_reference = 0;
   const size_t n_views =
@@ -73,7 +73,7 @@ NerfEvaluation EvaluateNerf(const NerfField& field, const std::string& dataset_d
         sum_reference += score.psnr_reference;
         ++count_reference;
       }
-      std::vector<float> errors;
+      std::vector<float> errors, surface_errors;
       for (const fs::path& object : object_dirs) {
         const fs::path depth_path = object / ("depth_" + digits + ".exr");
         const fs::path mask_path = object / ("mask_" + digits + ".png");
@@ -86,10 +86,13 @@ NerfEvaluation EvaluateNerf(const NerfField& field, const std::string& dataset_d
         for (size_t p = 0; p < depth.PixelCount(); ++p) {
           if (!(depth.pixels[p] > 0) || mask.pixels[p * mask.channels] > 127) continue;
           errors.push_back(std::fabs(images.depth.pixels[p] - depth.pixels[p]));
+          surface_errors.push_back(std::fabs(images.surface_depth.pixels[p] - depth.pixels[p]));
         }
       }
       all_depth_errors.insert(all_depth_errors.end(), errors.begin(), errors.end());
+      all_surface_errors.insert(all_surface_errors.end(), surface_errors.begin(), surface_errors.end());
       score.depth_median_m = Median(errors);
+      score.surface_depth_median_m = Median(surface_errors);
     }
     if (!options.output_dir.empty()) {
       const fs::path out(options.output_dir);
@@ -97,6 +100,7 @@ NerfEvaluation EvaluateNerf(const NerfField& field, const std::string& dataset_d
       CheckNotSameFile(color_path, {frame.image_path});
       WriteExrRgb(color_path, images.color, ExrPixelType::kFloat);
       WriteExr((out / (score.name + "_depth.exr")).string(), images.depth, {"Y"}, ExrPixelType::kFloat);
+      WriteExr((out / (score.name + "_surface_depth.exr")).string(), images.surface_depth, {"Y"}, ExrPixelType::kFloat);
       WriteExr((out / (score.name + "_opacity.exr")).string(), images.opacity, {"Y"}, ExrPixelType::kHalf);
       if (options.write_png) {
         const int w = images.color.width, h = images.color.height;
@@ -116,6 +120,7 @@ NerfEvaluation EvaluateNerf(const NerfField& field, const std::string& dataset_d
   if (n_views > 0) eval.mean_psnr_dataset = sum_dataset / double(n_views);
   if (count_reference > 0) eval.mean_psnr_reference = sum_reference / count_reference;
   eval.depth_median_m = Median(all_depth_errors);
+  eval.surface_depth_median_m = Median(all_surface_errors);
   return eval;
 }
 

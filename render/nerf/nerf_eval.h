@@ -13,19 +13,21 @@
 namespace nerfar {
 
 struct NerfViewScore {
-  std::string name;            // "r_003"
-  double psnr_dataset = 0;     // vs the split's image (noisy), dB
-  double psnr_reference = -1;  // vs insert/bg_XXX.exr, dB; -1 when absent
-  double depth_median_m = -1;  // median |depth error| on surfaces, metres; -1 when absent
-  double render_ms = 0;        // colour+depth+opacity render time
+  std::string name;                    // "r_003"
+  double psnr_dataset = 0;             // vs the split's image (noisy), dB
+  double psnr_reference = -1;          // vs insert/bg_XXX.exr, dB; -1 when absent
+  double depth_median_m = -1;          // median |depth error| on surfaces, metres; -1 when absent
+  double surface_depth_median_m = -1;  // the same for the surface depth (transmittance 0.5)
+  double render_ms = 0;                // colour+depth+opacity render time
 };
 
 struct NerfEvaluation {
   std::vector<NerfViewScore> views;
   double mean_psnr_dataset = 0;
-  double mean_psnr_reference = -1;  // -1 when the scene has no insert/ folder
-  double depth_median_m = -1;       // median over all surface pixels of all views
-  std::string reference_folder;     // the folder used for psnr_reference ("" if none)
+  double mean_psnr_reference = -1;     // -1 when the scene has no insert/ folder
+  double depth_median_m = -1;          // median over all surface pixels of all views
+  double surface_depth_median_m = -1;  // the same for the surface depth
+  std::string reference_folder;        // the folder used for psnr_reference ("" if none)
 };
 
 struct NerfEvalOptions {

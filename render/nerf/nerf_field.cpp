@@ -206,11 +206,18 @@ NerfRayResult NerfField::RenderRay(const NerfRay& ray, const NerfRenderOptions& 
     nerf_detail::ColorCoeffs(*this, c, q);
     result.color += nerf_detail::ColorFromCoeffs(q, ray.dir) * w;
     depth_sum += w * t;
-    transmittance *= 1.0f - alpha;
+    const float next = transmittance * (1.0f - alpha);
+    if (transmittance > 0.5f && next <= 0.5f) {
+      // T(x) = T exp(-σ x) inside the interval (sample at its middle): T(x) = 0.5 at x = ln(2T)/σ.
+      const float x = std::min(std::log(2.0f * transmittance) / sigma, dt);
+      result.surface_depth = t - 0.5f * dt + x;
+    }
+    transmittance = next;
     return transmittance >= options.min_transmittance;
   });
   result.opacity = 1.0f - transmittance;
   result.depth = result.opacity > 0.0f ? depth_sum / result.opacity : 0.0f;
+  if (!(result.opacity >= 0.5f) || result.surface_depth == 0.0f) result.surface_depth = result.depth;
   return result;
 }
 
@@ -281,14 +288,16 @@ NerfImages RenderView(const NerfField& field, const CameraIntrinsics& camera, co
   std::vector<NerfRayResult> results(rays.size());
   field.RenderRays(rays.data(), rays.size(), results.data(), options);
   NerfImages out{ImageF(camera.width, camera.height, 3), ImageF(camera.width, camera.height, 1),
-                 ImageF(camera.width, camera.height, 1)};
+                 ImageF(camera.width, camera.height, 1), ImageF(camera.width, camera.height, 1)};
   const Vec3f forward(T_world_camera.rotation.Column(2));
   for (size_t n = 0; n < rays.size(); ++n) {
     out.color.pixels[3 * n] = results[n].color.x;
     out.color.pixels[3 * n + 1] = results[n].color.y;
     out.color.pixels[3 * n + 2] = results[n].color.z;
     out.opacity.pixels[n] = results[n].opacity;
-    out.depth.pixels[n] = results[n].opacity > 0.0f ? results[n].depth * Dot(rays[n].dir, forward) : 0.0f;
+    const float axial = Dot(rays[n].dir, forward);
+    out.depth.pixels[n] = results[n].opacity > 0.0f ? results[n].depth * axial : 0.0f;
+    out.surface_depth.pixels[n] = results[n].opacity > 0.0f ? results[n].surface_depth * axial : 0.0f;
   }
   return out;
 }

@@ -27,7 +27,11 @@ inline constexpr int kNerfColorCoeffs = 12;  // per vertex: 3 channels x (a, bx,
 inline constexpr float kNerfEmptyDensityRaw = -30.0f;
 // Raw values are clamped to these ranges by the trainer and the file reader.
 inline constexpr float kNerfDensityRawMin = -30.0f, kNerfDensityRawMax = 14.0f;  // σ up to 1.2e6 / m
-inline constexpr float kNerfLogColorMin = -20.0f, kNerfLogColorMax = 14.0f;      // radiance 2e-9 .. 1.2e6
+// Raw log-density given to vertices that pruning empties (σ ≈ 1e-3 / m): below
+// any occupancy threshold, yet close enough that a vertex beside a surface can
+// grow back within a few dozen Adam steps.
+inline constexpr float kNerfPrunedDensityRaw = -7.0f;
+inline constexpr float kNerfLogColorMin = -20.0f, kNerfLogColorMax = 14.0f;  // radiance 2e-9 .. 1.2e6
 
 // A ray x(t) = origin + t·dir (dir unit) integrated over [t_near, t_far].
 struct NerfRay {
@@ -39,10 +43,15 @@ struct NerfRay {
 // Volume rendering of one ray (paper §3): colour C = Σ T_k α_k c_k, opacity
 // O = Σ T_k α_k, depth = Σ T_k α_k t_k / O (the expected termination distance
 // along the ray, 0 when O = 0; the paper's unnormalised D is O·depth).
+// surface_depth is where the transmittance falls to 0.5 (the median of the
+// termination distribution: a fog or a thick surface in front moves it far
+// less than the mean); where the ray's opacity stays below 0.5 it is the
+// expected depth (0 when O = 0).
 struct NerfRayResult {
   Vec3f color;
   float opacity = 0;
   float depth = 0;
+  float surface_depth = 0;
 };
 
 struct NerfRenderOptions {
@@ -128,8 +137,9 @@ std::vector<NerfRay> PointRays(const Vec3f& origin, const std::vector<Vec3f>& di
 // A rendered view: colour (RGB), opacity (1 channel) and depth along the
 // camera's viewing axis (1 channel, metres; 0 where opacity is 0), the
 // convention of the scenes' depth maps.
+// surface_depth (1 channel) is NerfRayResult::surface_depth along the viewing axis.
 struct NerfImages {
-  ImageF color, opacity, depth;
+  ImageF color, opacity, depth, surface_depth;
 };
 NerfImages RenderView(const NerfField& field, const CameraIntrinsics& camera, const Pose& T_world_camera,
                       const NerfRenderOptions& options = {});

@@ -13,6 +13,7 @@
 #include "calib/core/exr.h"
 #include "calib/core/image_io.h"
 #include "calib/core/json.h"
+#include "calib/core/log.h"
 #include "calib/core/metrics.h"
 #include "calib/core/parallel.h"
 #include "calib/core/random.h"
@@ -107,11 +108,15 @@ std::vector<std::string> NerfTrainOptions::Validate() const {
   check(lr_final_factor > 0 && lr_final_factor <= 1, "lr_final_factor: (expected 0 < x <= 1)");
   check(tv_density >= 0 && tv_color >= 0, "tv_density, tv_color: (expected >= 0)");
   check(background_weight >= 0, "background_weight: (expected >= 0)");
+  check(foreground_weight >= 0, "foreground_weight: (expected >= 0)");
   check(distortion_weight >= 0 && distortion_weight < 1e3, "distortion_weight: (expected 0..1000 per metre)");
+  check(sparsity_weight >= 0 && sparsity_weight < 1e3, "sparsity_weight: (expected 0..1000)");
   check(loss_epsilon > 0, "loss_epsilon: (expected > 0)");
   check(occupancy_every >= 1, "occupancy_every: (expected >= 1)");
   check(occupancy_sigma >= 0 && occupancy_sigma < 1e3, "occupancy_sigma: (expected 0..1000 per metre)");
   check(prune_delay >= 0, "prune_delay: (expected >= 0)");
+  check(prune_weight >= 0 && prune_weight < 1, "prune_weight: (expected 0 <= x < 1)");
+  check(prune_every >= 1, "prune_every: (expected >= 1)");
   check(initial_sigma > 0 && initial_sigma < 1e4, "initial_sigma: (expected 0..1e4 per metre)");
   check(max_seconds >= 0, "max_seconds: (expected >= 0)");
   check(eval_views >= 0, "eval_views: (expected >= 0)");
@@ -134,11 +139,15 @@ void VisitFields(NerfTrainOptions& o, Visit&& visit) {
   visit("tv_density", o.tv_density);
   visit("tv_color", o.tv_color);
   visit("background_weight", o.background_weight);
+  visit("foreground_weight", o.foreground_weight);
   visit("distortion_weight", o.distortion_weight);
+  visit("sparsity_weight", o.sparsity_weight);
   visit("loss_epsilon", o.loss_epsilon);
   visit("occupancy_every", o.occupancy_every);
   visit("occupancy_sigma", o.occupancy_sigma);
   visit("prune_delay", o.prune_delay);
+  visit("prune_weight", o.prune_weight);
+  visit("prune_every", o.prune_every);
   visit("initial_sigma", o.initial_sigma);
   visit("seed", o.seed);
   visit("max_seconds", o.max_seconds);
@@ -197,6 +206,7 @@ struct Record {
   float weight[8];
   float g_density;   // dL/d(raw density)
   float g_color[3];  // dL/d(log radiance) per channel
+  float w;           // the sample's rendering weight T·α (for pruning)
   Vec3f dir;
 };
 
@@ -218,6 +228,7 @@ struct NerfTrainer::State {
   std::vector<float> m_density, v_density, g_density;
   std::vector<float> m_color, v_color, g_color;
   std::vector<uint8_t> touched;
+  std::vector<float> max_weight;                    // per slot: largest sample weight T·α since the last prune
   std::vector<std::vector<Record>> records;         // per chunk
   std::vector<std::vector<int32_t>> touched_lists;  // per scatter partition
 
@@ -245,8 +256,10 @@ struct NerfTrainer::State {
     v_color.assign(n * kNerfColorCoeffs, 0.0f);
     g_color.assign(n * kNerfColorCoeffs, 0.0f);
     touched.assign(n, 0);
+    max_weight.assign(n, 0.0f);
     adam_t = 0;
   }
+  void PruneByWeight();
   void Upsample();
   double DoStep();
 };
@@ -325,7 +338,10 @@ double NerfTrainer::State::DoStep() {
   const float inv_batch = 1.0f / float(batch);
   const float eps = float(epsilon);
   const float bg_w = float(options.background_weight);
+  const float fg_w = float(options.foreground_weight);
   const float dist_w = float(options.distortion_weight);
+  const float sparse_w = float(options.sparsity_weight);
+  const float sparse_g = sparse_w * inv_batch;
   const uint64_t step_key = Mix64(options.seed * 0x9e37ull + uint64_t(step));
 
   ParallelForChunks(chunks, 1, [&](size_t chunk_begin, size_t chunk_end) {
@@ -353,7 +369,16 @@ double NerfTrainer::State::DoStep() {
         NerfRay ray;
         ray.origin = Vec3f(view.T_world_camera.translation);
         ray.dir = Vec3f(view.T_world_camera.Rotate(dir_c));
-        const bool background = target[0] == 0.0f && target[1] == 0.0f && target[2] == 0.0f;
+        auto is_zero = [&](int x, int y) {
+          const float* q = view.rgb.Pixel(x, y);
+          return q[0] == 0.0f && q[1] == 0.0f && q[2] == 0.0f;
+        };
+        const bool background = is_zero(px, py);
+        // Foreground (opaque) only away from silhouettes: a pixel partly covered is not 0,
+        // yet a jittered ray through it may pass beside the object.
+        const bool foreground = fg_w > 0.0f && !background && px > 0 && py > 0 && px + 1 < view.camera.width &&
+                                py + 1 < view.camera.height && !is_zero(px - 1, py) && !is_zero(px + 1, py) &&
+                                !is_zero(px, py - 1) && !is_zero(px, py + 1);
         if (!IntersectAabb(field.aabb, ray.origin, ray.dir, ray.t_near, ray.t_far)) {
           // Nothing to learn from a ray outside the box; count its (constant) loss.
           for (int ch = 0; ch < 3; ++ch) loss_sum += double(target[ch]) * target[ch] / (double(eps) * eps) / 3.0;
@@ -392,6 +417,9 @@ double NerfTrainer::State::DoStep() {
         if (background) {
           loss_sum += double(bg_w) * opacity * opacity;
           g_o = 2.0f * bg_w * opacity * inv_batch;
+        } else if (foreground) {
+          loss_sum += double(fg_w) * (1.0f - opacity) * (1.0f - opacity);
+          g_o = -2.0f * fg_w * (1.0f - opacity) * inv_batch;
         }
         // Distortion prior: dL/dw_i = λ (2 Σ_j w_j |t_i - t_j| + 2 w_i δ_i / 3), the
         // sum split at i into prefix and suffix sums of w and w·t (samples are in
@@ -423,6 +451,11 @@ double NerfTrainer::State::DoStep() {
         } else {
           for (Sample& s : samples) s.g_w = 0.0f;
         }
+        if (sparse_w > 0.0f) {
+          double alpha_sum = 0;
+          for (const Sample& s : samples) alpha_sum += s.alpha;
+          loss_sum += double(sparse_w) * alpha_sum;
+        }
         // Backward (front to back with the suffix colour S_i = C - prefix).
         float t_i = 1.0f;
         Vec3f prefix;
@@ -440,7 +473,9 @@ double NerfTrainer::State::DoStep() {
           g_raw += g_o * transmittance;
           suffix_w -= w * s.g_w;
           g_raw += t_next * s.g_w - suffix_w;
+          g_raw += sparse_g * (1.0f - s.alpha);  // d(λ α)/d(σ δ)
           rec.g_density = g_raw * s.dt * s.sigma;
+          rec.w = w;
           std::memcpy(rec.slot, s.corners.slot, sizeof rec.slot);
           std::memcpy(rec.weight, s.corners.weight, sizeof rec.weight);
           rec.dir = ray.dir;
@@ -472,6 +507,7 @@ double NerfTrainer::State::DoStep() {
               list.push_back(s);
             }
             g_density[s] += w * rec.g_density;
+            max_weight[s] = std::max(max_weight[s], rec.w);
             float* g = &g_color[size_t(s) * kNerfColorCoeffs];
             for (int ch = 0; ch < 3; ++ch) {
               const float gc = w * rec.g_color[ch];
@@ -552,11 +588,46 @@ double NerfTrainer::State::DoStep() {
       4096);
 
   ++step;
-  if (step % options.occupancy_every == 0 && (level == 0 || adam_t > options.prune_delay))
+  if (options.prune_weight > 0 && adam_t >= options.prune_every && adam_t % options.prune_every == 0) {
+    PruneByWeight();
     field.UpdateOccupancy(OccupancySigma());
+  } else if (step % options.occupancy_every == 0 && (level == 0 || adam_t > options.prune_delay)) {
+    field.UpdateOccupancy(OccupancySigma());
+  }
   double loss = 0.0;
   for (double l : chunk_loss) loss += l;
   return loss / double(batch);
+}
+
+void NerfTrainer::State::PruneByWeight() {
+  const float raw_threshold = std::log(std::max(OccupancySigma(), 1e-30f));
+  const float w_min = float(options.prune_weight);
+  // Measurement for the log: vertices above the occupancy threshold by their max weight.
+  constexpr int kBins = 6;
+  const float edges[kBins - 1] = {1e-4f, 1e-3f, 1e-2f, 3e-2f, 1e-1f};
+  size_t bins[kBins] = {}, pruned = 0;
+  for (size_t s = 0; s < field.SlotCount(); ++s) {
+    float& d = field.density[s];
+    const float w = max_weight[s];
+    if (d > raw_threshold) {
+      int b = 0;
+      while (b < kBins - 1 && w >= edges[b]) ++b;
+      ++bins[b];
+    }
+    if (w < w_min && d > kNerfPrunedDensityRaw) {
+      if (d > raw_threshold) ++pruned;
+      d = kNerfPrunedDensityRaw;
+      m_density[s] = 0.0f;
+      v_density[s] = 0.0f;
+    }
+    max_weight[s] = 0.0f;
+  }
+  std::string text =
+      "nerf prune step " + std::to_string(step) + " level " + std::to_string(level) +
+      ": vertices above the occupancy threshold by max weight [<1e-4, <1e-3, <1e-2, <3e-2, <0.1, >=0.1]:";
+  for (size_t b : bins) text += " " + std::to_string(b);
+  text += "; emptied " + std::to_string(pruned);
+  LogVerbose(text);
 }
 
 NerfTrainer::NerfTrainer(const NerfTrainData& data, const NerfTrainOptions& options)
@@ -629,7 +700,7 @@ NerfField NerfTrainer::FinalField() const {
 // ------------------------------------------------------------ checkpoints
 
 namespace {
-constexpr char kCheckpointMagic[8] = {'N', 'E', 'R', 'F', 'C', 'K', 'P', '1'};
+constexpr char kCheckpointMagic[8] = {'N', 'E', 'R', 'F', 'C', 'K', 'P', '2'};
 
 template <typename T>
 void PutVec(std::string& out, const std::vector<T>& v) {
@@ -716,6 +787,7 @@ void NerfTrainer::SaveCheckpoint(const std::string& path) const {
   PutVec(out, s.v_density);
   PutVec(out, s.m_color);
   PutVec(out, s.v_color);
+  PutVec(out, s.max_weight);
   Put(out, Checksum(out, out.size()));
   WriteFileAtomic(path, out);
 }
@@ -724,7 +796,7 @@ void NerfTrainer::LoadCheckpoint(const std::string& path) {
   State& s = *state_;
   const std::string bytes = ReadFileBytes(path, size_t{16} << 30);
   if (bytes.size() < 16 || std::memcmp(bytes.data(), kCheckpointMagic, 8) != 0)
-    ThrowInputError(path, "not a nerfar training checkpoint (expected the magic 'NERFCKP1')");
+    ThrowInputError(path, "not a nerfar training checkpoint (expected the magic 'NERFCKP2')");
   uint64_t sum;
   std::memcpy(&sum, bytes.data() + bytes.size() - 8, 8);
   if (Checksum(bytes, bytes.size() - 8) != sum)
@@ -773,6 +845,7 @@ void NerfTrainer::LoadCheckpoint(const std::string& path) {
   s.v_density = r.GetVec<float>(slots);
   s.m_color = r.GetVec<float>(slots * kNerfColorCoeffs);
   s.v_color = r.GetVec<float>(slots * kNerfColorCoeffs);
+  s.max_weight = r.GetVec<float>(slots);
   r.Get<uint64_t>();
   if (!r.AtEnd()) ThrowInputError(path, "checkpoint has trailing data");
   f.occupancy_sigma = s.OccupancySigma();
