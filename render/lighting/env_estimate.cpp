@@ -376,53 +376,86 @@ EnvSurfaceSamples SampleSurfaces(const NerfField& field, const EnvEstimateOption
     for (size_t i = 0; i < results.size(); ++i)
       if (results[i].opacity > options.min_pixel_opacity && rays[i].t_far > rays[i].t_near)
         eligible.push_back(static_cast<uint32_t>(i));
-    // Partial Fisher-Yates with counter-based draws: the first P of a random order.
-    const size_t max_tries = static_cast<size_t>(options.max_pixel_tries_factor) * options.pixels_per_view;
-    for (size_t k = 0;
-         k < eligible.size() && k < max_tries && pick.positions.size() < static_cast<size_t>(options.pixels_per_view);
-         ++k) {
+    // Partial Fisher-Yates with counter-based draws: a random order of the
+    // first `tries` eligible pixels, taken in that order until P are accepted.
+    const size_t per_view = static_cast<size_t>(options.pixels_per_view);
+    const size_t tries = std::min(eligible.size(), static_cast<size_t>(options.max_pixel_tries_factor) * per_view);
+    for (size_t k = 0; k < tries; ++k) {
       const size_t j = k + static_cast<size_t>(Uniform(options.seed, kPixelPick, a, k) * (eligible.size() - k));
       std::swap(eligible[k], eligible[std::min(j, eligible.size() - 1)]);
+    }
+    enum Outcome { kAccepted, kNotSurface, kNoNormal, kGrazing, kNotFinite };
+    struct Candidate {
+      Outcome outcome = kNotFinite;
+      Vec3f x, n, radiance;
+    };
+    const auto evaluate = [&](size_t k, Candidate& c) {
       const NerfRay& ray = rays[eligible[k]];
       const NerfRayResult& res = results[eligible[k]];
       // The surface: the median of the ray's opacity (see MarchSurface),
       // kept only where the opacity builds up within a few voxels.
       const RaySurface surf = MarchSurface(field, ray, options.surface_step_voxels);
-      ++pick.tried;
       if (!surf.valid || surf.t75 - surf.t25 > options.max_surface_spread_voxels * field.voxel_m) {
-        ++pick.not_surface;
-        continue;
+        c.outcome = kNotSurface;
+        return;
       }
-      const Vec3f x = ray.origin + ray.dir * surf.t50;
-      Vec3f n;
+      c.x = ray.origin + ray.dir * surf.t50;
       if (options.normal_from_depth) {
         const double px = eligible[k] % camera.width + 0.5, py = eligible[k] / camera.width + 0.5;
-        if (!DepthNormal(field, camera, pose, px, py, x, ray.dir, options, &n)) {
-          ++pick.no_normal;
-          continue;
+        if (!DepthNormal(field, camera, pose, px, py, c.x, ray.dir, options, &c.n)) {
+          c.outcome = kNoNormal;
+          return;
         }
       } else {
-        if (!SmoothedNormal(field, x, static_cast<float>(options.normal_scale_voxels), &n)) {
-          ++pick.no_normal;
-          continue;
+        if (!SmoothedNormal(field, c.x, static_cast<float>(options.normal_scale_voxels), &c.n)) {
+          c.outcome = kNoNormal;
+          return;
         }
-        if (Dot(n, ray.dir) > 0) n = -n;  // the camera sees the surface: face it
+        if (Dot(c.n, ray.dir) > 0) c.n = -c.n;  // the camera sees the surface: face it
       }
       // A surface seen at a grazing angle is where a noisy density gradient
       // most often gives a wrong normal (e.g. the table top's normal turned
       // sideways or down); such samples drive light from below the horizon.
-      if (-Dot(n, ray.dir) < options.min_view_cosine) {
-        ++pick.grazing;
-        continue;
+      if (-Dot(c.n, ray.dir) < options.min_view_cosine) {
+        c.outcome = kGrazing;
+        return;
       }
       // Observed radiance: the pixel as rendered (what the camera saw; the
       // scenes' background is black, so a translucent trained surface's pixel
       // is its radiance), or divided by the opacity (partial coverage).
-      const Vec3f radiance = options.radiance_over_opacity ? res.color * (1.0f / res.opacity) : res.color;
-      if (!std::isfinite(radiance.x + radiance.y + radiance.z)) continue;
-      pick.positions.push_back(x);
-      pick.normals.push_back(n);
-      pick.radiance.push_back(radiance);
+      c.radiance = options.radiance_over_opacity ? res.color * (1.0f / res.opacity) : res.color;
+      c.outcome = std::isfinite(c.radiance.x + c.radiance.y + c.radiance.z) ? kAccepted : kNotFinite;
+    };
+    // Candidates are evaluated in parallel, a batch at a time, and taken in
+    // order: the result does not depend on the thread count.
+    for (size_t next = 0; next < tries && pick.positions.size() < per_view;) {
+      const size_t end = std::min(tries, next + std::max<size_t>(per_view - pick.positions.size(), 16));
+      std::vector<Candidate> batch(end - next);
+      ParallelFor(
+          batch.size(), [&](size_t i) { evaluate(next + i, batch[i]); }, 1);
+      for (const Candidate& c : batch) {
+        if (pick.positions.size() >= per_view) break;
+        ++pick.tried;
+        switch (c.outcome) {
+          case kAccepted:
+            pick.positions.push_back(c.x);
+            pick.normals.push_back(c.n);
+            pick.radiance.push_back(c.radiance);
+            break;
+          case kNotSurface:
+            ++pick.not_surface;
+            break;
+          case kNoNormal:
+            ++pick.no_normal;
+            break;
+          case kGrazing:
+            ++pick.grazing;
+            break;
+          case kNotFinite:
+            break;
+        }
+      }
+      next = end;
     }
     const bool ok = !use_brisque || pick.score <= options.brisque_max;
     local.scores.push_back(pick.score);
