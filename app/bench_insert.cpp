@@ -73,6 +73,7 @@ TriangleMesh BenchMesh(const std::string& scenes_dir, std::string* name) {
 struct StageMedians {
   double light = 0, fit_warm = 0, raster = 0, shade = 0, occlusion = 0, kappa = 0, frame_still = 0, frame_moving = 0;
   double coverage = 0;
+  double kappa_rect_px = 0, kappa_marched = 0;  // a still frame's κ rectangle and receiver rays marched
 };
 
 StageMedians TimePreset(const NerfScene& scene, const SgMixture& environment, const InsertObject& object_template,
@@ -99,6 +100,8 @@ StageMedians TimePreset(const NerfScene& scene, const SgMixture& environment, co
     occlusion.push_back(t.occlusion_ms);
     kappa.push_back(t.kappa_ms);
     still.push_back(t.total_ms);
+    m.kappa_rect_px = double(layers.kappa_rect.area());
+    m.kappa_marched = double(t.kappa_marched);
     // The object moved by 1 mm: new rays from its centre and a warm-started fit.
     object.T_world_object.translation.x += (r % 2 ? -1e-3 : 1e-3);
     frame = background;
@@ -252,6 +255,9 @@ std::vector<BenchFigure> BenchInsert(const BenchOptions& options) {
     figures.push_back({p + "shade_ms", m.shade, "ms", note + " (with self-shadow)"});
     figures.push_back({p + "occlusion_ms", m.occlusion, "ms", note + " (incl. composite)"});
     figures.push_back({p + "kappa_ms", m.kappa, "ms", note + "; step " + std::to_string(insert_options.kappa_step)});
+    figures.push_back({p + "kappa_rect_still_px", m.kappa_rect_px, "px", note + "; where κ was passed, still frame"});
+    figures.push_back(
+        {p + "kappa_marched_still", m.kappa_marched, "rays", note + "; κ receivers marched, still frame"});
     figures.push_back({p + "frame_still_ms", m.frame_still, "ms", note + "; light cached"});
     figures.push_back({p + "frame_moving_ms", m.frame_moving, "ms", note + "; light + warm fit"});
   }

@@ -394,7 +394,26 @@ struct Inserter::KappaCache {
       std::lock_guard<std::mutex> lock(s.mutex);
       s.values.clear();
     }
+    std::lock_guard<std::mutex> lock(box_mutex);
+    shadow_min = Vec3f{std::numeric_limits<float>::infinity(), std::numeric_limits<float>::infinity(),
+                       std::numeric_limits<float>::infinity()};
+    shadow_max = shadow_min * -1.0f;
+    explored.clear();
   }
+  // World box of the nodes computed with κ < 1 − ε (all others hold κ ≥ 1 − ε).
+  void GrowShadow(const Vec3f& node) {
+    std::lock_guard<std::mutex> lock(box_mutex);
+    shadow_min = {std::min(shadow_min.x, node.x), std::min(shadow_min.y, node.y), std::min(shadow_min.z, node.z)};
+    shadow_max = {std::max(shadow_max.x, node.x), std::max(shadow_max.y, node.y), std::max(shadow_max.z, node.z)};
+  }
+  std::mutex box_mutex;
+  Vec3f shadow_min{std::numeric_limits<float>::infinity(), std::numeric_limits<float>::infinity(),
+                   std::numeric_limits<float>::infinity()};
+  Vec3f shadow_max{-std::numeric_limits<float>::infinity(), -std::numeric_limits<float>::infinity(),
+                   -std::numeric_limits<float>::infinity()};
+  // Views (camera pose, intrinsics) whose whole reach rectangle was passed
+  // under the current key: each visible receiver there has its nodes here.
+  std::vector<std::vector<double>> explored;
 };
 
 Inserter::~Inserter() = default;
@@ -571,51 +590,74 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
   const Vec3f eye(T_world_camera.translation);
   constexpr size_t kChunk = 256;
   const size_t chunks = (covered.size() + kChunk - 1) / kChunk;
+  // γ per pixel (interpolated or queried), then render/sg's many-pixel Shade
+  // over each run of pixels of one object in the chunk.
   ParallelFor(
       chunks,
       [&](size_t c) {
         const size_t begin = c * kChunk, end = std::min(covered.size(), begin + kChunk);
         std::vector<float> ssd, ssd_min;
         std::vector<float> gamma;
+        std::vector<SgMaterial> materials;
+        std::vector<Vec3f> normals, views, rgb;
+        materials.reserve(end - begin);
+        normals.reserve(end - begin);
+        views.reserve(end - begin);
         Vec3f point;
-        for (size_t k = begin; k < end; ++k) {
-          const uint32_t i = covered[k];
-          const int32_t o = g.object[i];
+        for (size_t run = begin; run < end;) {
+          const int32_t o = g.object[covered[run]];
+          size_t run_end = run + 1;
+          while (run_end < end && g.object[covered[run_end]] == o) ++run_end;
           const LightPrep& p = preps[o];
           const size_t m = p.axes.size();
-          const Vec3f n = g.normal[i];
-          const Vec3f v = Normalized(eye - g.position[i]);
-          gamma.assign(m, 1.0f);
+          const size_t count = run_end - run;
+          gamma.assign(count * m, 1.0f);
+          materials.clear();
+          normals.clear();
+          views.clear();
           const VertexGamma* vg = per_vertex ? &vertex_gamma_[o] : nullptr;
-          const auto& tri = objects[o].mesh->triangles[g.triangle[i]];
-          const float b1 = g.bary[i][0], b2 = g.bary[i][1], b0 = 1.0f - b1 - b2;
-          // Per vertex unless the rasteriser flipped the normal (a back face
-          // seen): the vertices' γ belong to the other side.
-          if (vg && !vg->gamma.empty() &&
-              Dot(vertex_normals[o][tri[0]] * b0 + vertex_normals[o][tri[1]] * b1 + vertex_normals[o][tri[2]] * b2, n) >
-                  0.0f) {
-            const float* g0 = &vg->gamma[size_t(tri[0]) * m];
-            const float* g1 = &vg->gamma[size_t(tri[1]) * m];
-            const float* g2 = &vg->gamma[size_t(tri[2]) * m];
-            for (size_t l = 0; l < m; ++l) gamma[l] = b0 * g0[l] + b1 * g1[l] + b2 * g2[l];
-          } else if (options_.self_shadow && m > 0) {
-            point = g.position[i] + n * static_cast<float>(options_.self_shadow_offset_radii * spheres[o].radius);
-            ssd_min.assign(m, std::numeric_limits<float>::infinity());
-            ssd.resize(m);
-            for (size_t j = 0; j < n_objects; ++j) {
-              if (!p.queries[j]) continue;
-              p.queries[j]->Ssd(&point, 1, ssd.data());
-              for (size_t l = 0; l < m; ++l) ssd_min[l] = std::min(ssd_min[l], ssd[l]);
+          for (size_t k = run; k < run_end; ++k) {
+            const uint32_t i = covered[k];
+            const Vec3f n = g.normal[i];
+            float* gp = gamma.data() + (k - run) * m;
+            const auto& tri = objects[o].mesh->triangles[g.triangle[i]];
+            const float b1 = g.bary[i][0], b2 = g.bary[i][1], b0 = 1.0f - b1 - b2;
+            // Per vertex unless the rasteriser flipped the normal (a back face
+            // seen): the vertices' γ belong to the other side.
+            if (vg && !vg->gamma.empty() &&
+                Dot(vertex_normals[o][tri[0]] * b0 + vertex_normals[o][tri[1]] * b1 + vertex_normals[o][tri[2]] * b2,
+                    n) > 0.0f) {
+              const float* g0 = &vg->gamma[size_t(tri[0]) * m];
+              const float* g1 = &vg->gamma[size_t(tri[1]) * m];
+              const float* g2 = &vg->gamma[size_t(tri[2]) * m];
+              for (size_t l = 0; l < m; ++l) gp[l] = b0 * g0[l] + b1 * g1[l] + b2 * g2[l];
+            } else if (options_.self_shadow && m > 0) {
+              point = g.position[i] + n * static_cast<float>(options_.self_shadow_offset_radii * spheres[o].radius);
+              ssd_min.assign(m, std::numeric_limits<float>::infinity());
+              ssd.resize(m);
+              for (size_t j = 0; j < n_objects; ++j) {
+                if (!p.queries[j]) continue;
+                p.queries[j]->Ssd(&point, 1, ssd.data());
+                for (size_t l = 0; l < m; ++l) ssd_min[l] = std::min(ssd_min[l], ssd[l]);
+              }
+              GammaFromSsd(p.axes, p.gamma_rows, n, ssd_min.data(), options_.self_shadow_horizon, gp);
             }
-            GammaFromSsd(p.axes, p.gamma_rows, n, ssd_min.data(), options_.self_shadow_horizon, gamma.data());
+            materials.push_back(PixelMaterial(objects[o], g.uv[i]));
+            normals.push_back(n);
+            views.push_back(Normalized(eye - g.position[i]));
           }
-          const SgMaterial material = PixelMaterial(objects[o], g.uv[i]);
-          Vec3f rgb = m > 0 ? p.shader->Shade(material, n, v, gamma.data()) : Vec3f{};
-          if (!Finite(rgb)) rgb = {};
-          const size_t px = i;  // same layout as the G-buffer
-          layers.object.pixels[px * 3 + 0] = std::max(rgb.x, 0.0f);
-          layers.object.pixels[px * 3 + 1] = std::max(rgb.y, 0.0f);
-          layers.object.pixels[px * 3 + 2] = std::max(rgb.z, 0.0f);
+          rgb.assign(count, Vec3f{});
+          if (m > 0)
+            p.shader->Shade(materials.data(), normals.data(), views.data(), gamma.data(), static_cast<int>(count),
+                            rgb.data());
+          for (size_t k = run; k < run_end; ++k) {
+            const size_t px = covered[k];  // same layout as the G-buffer
+            const Vec3f value = Finite(rgb[k - run]) ? rgb[k - run] : Vec3f{};
+            layers.object.pixels[px * 3 + 0] = std::max(value.x, 0.0f);
+            layers.object.pixels[px * 3 + 1] = std::max(value.y, 0.0f);
+            layers.object.pixels[px * 3 + 2] = std::max(value.z, 0.0f);
+          }
+          run = run_end;
         }
       },
       1);
@@ -741,6 +783,63 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
       rect = Union(rect, ProjectBall(camera, T_world_camera, Vec3(spheres[j].center),
                                      options_.shadow_reach_radii * spheres[j].radius));
     rect = ClipToImage(rect, camera.width, camera.height);
+    // The world lattice of κ, dropped when a caster or a light changed.
+    KappaCache* cache = nullptr;
+    double spacing = 0.0;
+    if (options_.kappa_cache_spacing_radii > 0) {
+      float smallest = std::numeric_limits<float>::infinity();
+      for (size_t j : casters) smallest = std::min(smallest, spheres[j].radius);
+      spacing = options_.kappa_cache_spacing_radii * smallest;
+      std::vector<double> key = {spacing, options_.shadow_reach_radii, options_.shadow_epsilon};
+      for (size_t j : casters) AppendObjectKey(objects[j], key);
+      for (const SgMixture& light : used_lights_) AppendLightKey(light, key);
+      if (!kappa_cache_) kappa_cache_ = std::make_unique<KappaCache>();
+      if (key != kappa_cache_->key || kappa_cache_->Size() > kKappaCacheMaxNodes) {
+        kappa_cache_->Clear();
+        kappa_cache_->key = std::move(key);
+      }
+      cache = kappa_cache_.get();
+    }
+    // A view already passed whole under this cache (receivers marched by
+    // the NeRF, the same camera within a lattice spacing and 0.1 mrad): its
+    // receivers' κ < 1 − ε lie within one spacing of the shadowed nodes'
+    // box, so only that box's projection needs a pass (aligned to the
+    // coarse grid of the whole rectangle, so its values are unchanged).
+    if (cache != nullptr && receivers.distance == nullptr && !rect.empty()) {
+      std::vector<double> view = {
+          camera.fx, camera.fy, camera.cx, camera.cy, double(camera.width), double(camera.height)};
+      AppendPoseKey(T_world_camera, 1.0, view);
+      bool seen = false;
+      for (const std::vector<double>& e : cache->explored) {
+        bool same = e.size() == view.size();
+        for (size_t i = 0; same && i < 6; ++i) same = e[i] == view[i];
+        for (size_t i = 6; same && i < 15; ++i) same = std::abs(e[i] - view[i]) <= 1e-4;            // rotation entries
+        for (size_t i = 15; same && i < 18; ++i) same = std::abs(e[i] - view[i]) <= 0.5 * spacing;  // translation
+        seen = seen || same;
+      }
+      if (!seen) {
+        if (cache->explored.size() >= 16) cache->explored.erase(cache->explored.begin());  // a moving camera
+        cache->explored.push_back(std::move(view));
+      } else {
+        PixelRect shadow;
+        const Vec3f lo = cache->shadow_min, hi = cache->shadow_max;
+        if (lo.x <= hi.x) {
+          const Vec3 centre = Vec3((lo + hi) * 0.5f);
+          const double radius = 0.5 * Length(Vec3(hi - lo)) + 1.75 * spacing;  // + the nodes' trilinear support
+          shadow = ClipToImage(ProjectBall(camera, T_world_camera, centre, radius), camera.width, camera.height);
+        }
+        if (shadow.empty()) {
+          rect = {};
+        } else {
+          const int unit = options_.kappa_step * std::max(1, options_.kappa_coarse_factor);
+          const auto down = [&](int v, int origin) { return origin + (std::max(v, origin) - origin) / unit * unit; };
+          PixelRect r{down(shadow.x0 - unit, rect.x0), down(shadow.y0 - unit, rect.y0),
+                      down(shadow.x1 + 2 * unit, rect.x0) + 1, down(shadow.y1 + 2 * unit, rect.y0) + 1};
+          r = {std::max(r.x0, rect.x0), std::max(r.y0, rect.y0), std::min(r.x1, rect.x1), std::min(r.y1, rect.y1)};
+          rect = r.empty() ? PixelRect{} : r;
+        }
+      }
+    }
     layers.kappa_rect = rect;
     layers.kappa = ImageF(rect.width(), rect.height(), 1, 1.0f);
     if (!rect.empty()) {
@@ -761,7 +860,7 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
       const float reach = static_cast<float>(options_.shadow_reach_radii);
       const float min_opacity = static_cast<float>(options_.receiver_min_opacity);
       const double one_minus_eps = 1.0 - options_.shadow_epsilon;
-      std::vector<size_t> evaluated_per_row(ny, 0);
+      std::vector<size_t> evaluated_per_row(ny, 0), marched_per_row(ny, 0);
       // κ at world point x with unit normal n (1 where no caster is within
       // reach or the bounding spheres cannot darken it below 1 − ε); with
       // bound_only, 0 for "needs the SSDF" instead of evaluating it.
@@ -811,23 +910,6 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
         const double k = ShadowRatioCapped(cw, Vec3(n), sc.s_exact, sc.cap);
         return std::isfinite(k) ? static_cast<float>(std::clamp(k, 0.0, 1.0)) : 1.0f;
       };
-      // The world lattice of κ, dropped when a caster or a light changed.
-      KappaCache* cache = nullptr;
-      double spacing = 0.0;
-      if (options_.kappa_cache_spacing_radii > 0) {
-        float smallest = std::numeric_limits<float>::infinity();
-        for (size_t j : casters) smallest = std::min(smallest, spheres[j].radius);
-        spacing = options_.kappa_cache_spacing_radii * smallest;
-        std::vector<double> key = {spacing, options_.shadow_reach_radii, options_.shadow_epsilon};
-        for (size_t j : casters) AppendObjectKey(objects[j], key);
-        for (const SgMixture& light : used_lights_) AppendLightKey(light, key);
-        if (!kappa_cache_) kappa_cache_ = std::make_unique<KappaCache>();
-        if (key != kappa_cache_->key || kappa_cache_->Size() > kKappaCacheMaxNodes) {
-          kappa_cache_->Clear();
-          kappa_cache_->key = std::move(key);
-        }
-        cache = kappa_cache_.get();
-      }
       // κ at receiver x (normal n): exact, or trilinear in the world lattice.
       const auto receiver_kappa = [&](const Vec3f& x, const Vec3f& n, KappaScratch& sc, size_t row) -> float {
         if (cache == nullptr) {
@@ -857,8 +939,10 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
           float value;
           if (!cache->Find(key, &value)) {
             bool queried = false;
-            value = kappa_at(Vec3f(Vec3(double(i), double(j), double(k)) * spacing), n_cell, sc, &queried);
+            const Vec3f node(Vec3(double(i), double(j), double(k)) * spacing);
+            value = kappa_at(node, n_cell, sc, &queried);
             cache->Insert(key, value);
+            if (value < one_minus_eps) cache->GrowShadow(node);
             ++evaluated_per_row[row];
             if (queried) ++queries_per_row[row];
           }
@@ -894,6 +978,7 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
                      range ? static_cast<float>(range->second) : 0.0f);
           }
           scene_.RenderRays(rays, out);
+          marched_per_row[row] += nc;
           for (size_t ix = 0; ix < nc; ++ix) {
             opacity[ix] = std::isfinite(out.opacity[ix]) ? out.opacity[ix] : 0.0f;
             const float t = std::isfinite(out.depth[ix]) ? out.depth[ix] : 0.0f;
@@ -1026,6 +1111,7 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
       }
       for (size_t q : queries_per_row) layers.kappa_queries += q;
       for (size_t q : evaluated_per_row) times.kappa_evaluated += q;
+      for (size_t q : marched_per_row) times.kappa_marched += q;
       // Bilinear from the sample grid to every pixel; multiply the background
       // where no object covers it.
       ParallelFor(

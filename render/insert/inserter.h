@@ -116,6 +116,7 @@ struct InsertTimings {
   double total_ms = 0;
   int lights_recomputed = 0;
   size_t kappa_evaluated = 0;     // κ values computed this frame (cache misses, or every receiver without the cache)
+  size_t kappa_marched = 0;       // receiver rays marched through the scene for κ this frame
   bool gamma_recomputed = false;  // the per-vertex self-shadow cache was (re)built this frame
 };
 
