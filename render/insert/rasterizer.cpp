@@ -235,40 +235,63 @@ ObjectGBuffer Rasterize(const CameraIntrinsics& camera, const Pose& T_world_came
       },
       1);
 
-  // Resolve: attributes once per covered pixel.
+  // Resolve: attributes once per covered pixel, interpolated from world-space
+  // vertex positions and normals and per-triangle face normals computed once
+  // per object (not re-transformed per pixel).
+  struct WorldMesh {
+    std::vector<Vec3f> position, normal, face;  // per vertex, per vertex (unnormalised, may be empty), per triangle
+  };
+  std::vector<WorldMesh> world(objects.size());
+  for (size_t o = 0; o < objects.size(); ++o) {
+    const TriangleMesh* mesh = objects[o].mesh;
+    if (mesh == nullptr) continue;
+    const RasterObject& obj = objects[o];
+    WorldMesh& w = world[o];
+    w.position.resize(mesh->positions.size());
+    for (size_t v = 0; v < w.position.size(); ++v)
+      w.position[v] = Vec3f(obj.T_world_object * (Vec3(mesh->positions[v]) * obj.scale));
+    if (mesh->normals.size() == mesh->positions.size()) {
+      w.normal.resize(mesh->normals.size());
+      for (size_t v = 0; v < w.normal.size(); ++v)
+        w.normal[v] = Vec3f(obj.T_world_object.Rotate(Vec3(mesh->normals[v])));
+    }
+    w.face.resize(mesh->triangles.size());
+    for (size_t t = 0; t < w.face.size(); ++t) {
+      const auto& idx = mesh->triangles[t];
+      if (idx[0] >= w.position.size() || idx[1] >= w.position.size() || idx[2] >= w.position.size()) continue;
+      const Vec3 face = Cross(Vec3(mesh->positions[idx[1]] - mesh->positions[idx[0]]),
+                              Vec3(mesh->positions[idx[2]] - mesh->positions[idx[0]]));
+      w.face[t] = Vec3f(obj.T_world_object.Rotate(face));
+    }
+  }
+  const Vec3f eye(T_world_camera.translation);
   std::vector<size_t> covered_per_row(static_cast<size_t>(g.rect.height()), 0);
   ParallelFor(
       static_cast<size_t>(g.rect.height()),
       [&](size_t row) {
         const int y = g.rect.y0 + static_cast<int>(row);
+        const double v = (y + 0.5 - camera.cy) / camera.fy;
         for (int x = g.rect.x0; x < g.rect.x1; ++x) {
           const size_t i = g.Index(x, y);
           const int32_t o = g.object[i];
           if (o < 0) continue;
           ++covered_per_row[row];
           const TriangleMesh& mesh = *objects[o].mesh;
-          const RasterObject& obj = objects[o];
+          const WorldMesh& w = world[o];
           const auto& idx = mesh.triangles[tri_id[i]];
           const float b1 = bary12[i][0], b2 = bary12[i][1], b0 = 1.0f - b1 - b2;
-          const Vec3 p_local =
-              Vec3(mesh.positions[idx[0]] * b0 + mesh.positions[idx[1]] * b1 + mesh.positions[idx[2]] * b2) * obj.scale;
-          g.position[i] = Vec3f(obj.T_world_object * p_local);
-          const Vec3f ray = CameraRayDirection(camera, T_world_camera, x, y);
-          const float z = z_buffer[i];
+          g.position[i] = w.position[idx[0]] * b0 + w.position[idx[1]] * b1 + w.position[idx[2]] * b2;
           // t = z / cos(angle to the optical axis) = z · |(u, v, 1)|.
-          const double u = (x + 0.5 - camera.cx) / camera.fx, v = (y + 0.5 - camera.cy) / camera.fy;
-          g.t[i] = static_cast<float>(z * std::sqrt(u * u + v * v + 1.0));
-          Vec3 n;
-          if (mesh.normals.size() == mesh.positions.size()) {
-            n = Vec3(mesh.normals[idx[0]] * b0 + mesh.normals[idx[1]] * b1 + mesh.normals[idx[2]] * b2);
-          }
-          const Vec3 face = Cross(Vec3(mesh.positions[idx[1]] - mesh.positions[idx[0]]),
-                                  Vec3(mesh.positions[idx[2]] - mesh.positions[idx[0]]));
-          if (!(Dot(n, n) > 1e-20)) n = face;
-          Vec3 n_world = Normalized(obj.T_world_object.Rotate(n));
+          const double u = (x + 0.5 - camera.cx) / camera.fx;
+          g.t[i] = static_cast<float>(z_buffer[i] * std::sqrt(u * u + v * v + 1.0));
+          const Vec3f face = w.face[tri_id[i]];
+          Vec3f n;
+          if (!w.normal.empty()) n = w.normal[idx[0]] * b0 + w.normal[idx[1]] * b1 + w.normal[idx[2]] * b2;
+          if (!(Dot(n, n) > 1e-20f)) n = face;
+          n = Normalized(n);
           // A back face seen (open meshes, inner faces): shade the side the camera sees.
-          if (Dot(obj.T_world_object.Rotate(face), Vec3(ray)) > 0.0) n_world = -n_world;
-          g.normal[i] = Vec3f(n_world);
+          if (Dot(face, g.position[i] - eye) > 0.0f) n = n * -1.0f;
+          g.normal[i] = n;
           if (mesh.uvs.size() == mesh.positions.size()) {
             for (int c = 0; c < 2; ++c)
               g.uv[i][c] = mesh.uvs[idx[0]][c] * b0 + mesh.uvs[idx[1]][c] * b1 + mesh.uvs[idx[2]][c] * b2;
