@@ -188,7 +188,31 @@ ObjectGBuffer Rasterize(const CameraIntrinsics& camera, const Pose& T_world_came
           const int y0 = std::max(y_begin, s.box.y0), y1 = std::min(y_end, s.box.y1);
           for (int y = y0; y < y1; ++y) {
             const double py = y + 0.5;
-            for (int x = s.box.x0; x < s.box.x1; ++x) {
+            // The span of this row where each barycentric can reach its
+            // threshold (0, or minus its reach with coverage): l_k is affine
+            // in x, so solve for x and widen by a pixel; the exact test below
+            // still decides every pixel, the span only skips the box's
+            // pixels that cannot pass it.
+            double span_lo = s.box.x0, span_hi = s.box.x1 - 1;
+            {
+              const double px0 = s.box.x0 + 0.5;
+              const double a0 = ((s.sx[1] - px0) * (s.sy[2] - py) - (s.sx[2] - px0) * (s.sy[1] - py)) * inv_area;
+              const double a1 = ((s.sx[2] - px0) * (s.sy[0] - py) - (s.sx[0] - px0) * (s.sy[2] - py)) * inv_area;
+              const double value[3] = {a0, a1, 1.0 - a0 - a1}, slope[3] = {dl0x, dl1x, -dl0x - dl1x};
+              const double margin[3] = {coverage ? reach0 : 0.0, coverage ? reach1 : 0.0, coverage ? reach2 : 0.0};
+              for (int k = 0; k < 3; ++k) {
+                const double need = -margin[k] - value[k];  // slope · (x − x0) ≥ need
+                if (slope[k] > 1e-12) {
+                  span_lo = std::max(span_lo, s.box.x0 + need / slope[k] - 1.0);
+                } else if (slope[k] < -1e-12) {
+                  span_hi = std::min(span_hi, s.box.x0 + need / slope[k] + 1.0);
+                }
+              }
+            }
+            if (!(span_lo <= span_hi)) continue;
+            const int x_first = std::max(s.box.x0, static_cast<int>(std::floor(span_lo)));
+            const int x_last = std::min(s.box.x1 - 1, static_cast<int>(std::ceil(span_hi)));
+            for (int x = x_first; x <= x_last; ++x) {
               const double px = x + 0.5;
               // Screen-space barycentrics (edge functions over the signed area).
               const double l0 = ((s.sx[1] - px) * (s.sy[2] - py) - (s.sx[2] - px) * (s.sy[1] - py)) * inv_area;
