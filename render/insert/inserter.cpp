@@ -399,6 +399,8 @@ struct Inserter::KappaCache {
                        std::numeric_limits<float>::infinity()};
     shadow_max = shadow_min * -1.0f;
     explored.clear();
+    last_view.clear();
+    last_kappa = ImageF();
   }
   // World box of the nodes computed with κ < 1 − ε (all others hold κ ≥ 1 − ε).
   void GrowShadow(const Vec3f& node) {
@@ -414,6 +416,10 @@ struct Inserter::KappaCache {
   // Views (camera pose, intrinsics) whose whole reach rectangle was passed
   // under the current key: each visible receiver there has its nodes here.
   std::vector<std::vector<double>> explored;
+  // The last frame's κ layer, its rectangle and its exact view.
+  std::vector<double> last_view;
+  PixelRect last_rect;
+  ImageF last_kappa;
 };
 
 Inserter::~Inserter() = default;
@@ -805,10 +811,10 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
     // receivers' κ < 1 − ε lie within one spacing of the shadowed nodes'
     // box, so only that box's projection needs a pass (aligned to the
     // coarse grid of the whole rectangle, so its values are unchanged).
+    std::vector<double> view = {
+        camera.fx, camera.fy, camera.cx, camera.cy, double(camera.width), double(camera.height)};
+    AppendPoseKey(T_world_camera, 1.0, view);
     if (cache != nullptr && receivers.distance == nullptr && !rect.empty()) {
-      std::vector<double> view = {
-          camera.fx, camera.fy, camera.cx, camera.cy, double(camera.width), double(camera.height)};
-      AppendPoseKey(T_world_camera, 1.0, view);
       bool seen = false;
       for (const std::vector<double>& e : cache->explored) {
         bool same = e.size() == view.size();
@@ -819,7 +825,7 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
       }
       if (!seen) {
         if (cache->explored.size() >= 16) cache->explored.erase(cache->explored.begin());  // a moving camera
-        cache->explored.push_back(std::move(view));
+        cache->explored.push_back(view);
       } else {
         PixelRect shadow;
         const Vec3f lo = cache->shadow_min, hi = cache->shadow_max;
@@ -842,7 +848,26 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
     }
     layers.kappa_rect = rect;
     layers.kappa = ImageF(rect.width(), rect.height(), 1, 1.0f);
-    if (!rect.empty()) {
+    // The same camera exactly, the same rectangle, nothing moved: the last
+    // frame's κ layer holds (NeRF receivers only).
+    const bool reuse = cache != nullptr && receivers.distance == nullptr && !rect.empty() && view == cache->last_view &&
+                       rect.x0 == cache->last_rect.x0 && rect.y0 == cache->last_rect.y0 &&
+                       rect.x1 == cache->last_rect.x1 && rect.y1 == cache->last_rect.y1;
+    if (reuse) {
+      layers.kappa = cache->last_kappa;
+      ParallelFor(
+          static_cast<size_t>(rect.height()),
+          [&](size_t r) {
+            const int y = rect.y0 + static_cast<int>(r);
+            for (int x = rect.x0; x < rect.x1; ++x) {
+              const float k = layers.kappa.at(x - rect.x0, y - rect.y0);
+              if (k >= 1.0f) continue;
+              if (g.rect.Contains(x, y) && g.object[g.Index(x, y)] >= 0) continue;
+              for (int ch = 0; ch < 3; ++ch) frame.at(x, y, ch) *= k;
+            }
+          },
+          4);
+    } else if (!rect.empty()) {
       // Light owners: each receiver takes the light of its nearest object
       // (relative to size); queries of every caster at each owner's lobe axes.
       for (size_t o = 0; o < n_objects; ++o) prepare(o);
@@ -1135,6 +1160,11 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
             }
           },
           4);
+      if (cache != nullptr && receivers.distance == nullptr) {
+        cache->last_view = view;
+        cache->last_rect = rect;
+        cache->last_kappa = layers.kappa;
+      }
     }
   }
   times.kappa_ms = Ms(t0);

@@ -221,6 +221,18 @@ TEST(FastPath, RepeatedViewPassesOnlyTheShadowedArea) {
   }
   EXPECT_GT(shadow, 10.0);
   for (size_t i = 0; i < f1.pixels.size(); ++i) ASSERT_NEAR(f1.pixels[i], f2.pixels[i], 2e-3f);
+  // The same view a third time (same rectangle as the second): the last κ
+  // layer is reused, nothing is marched, the frame is the second's exactly.
+  ImageF f3 = frame;
+  InsertLayers l3;
+  const InsertTimings third = inserter.Render(camera, cam, {object.Object(&light)}, f3, &l3);
+  EXPECT_EQ(third.kappa_marched, 0u);
+  for (size_t i = 0; i < f3.pixels.size(); ++i) ASSERT_EQ(f3.pixels[i], f2.pixels[i]);
+  // A new view (1 cm away) is passed again.
+  ImageF f4 = frame;
+  EXPECT_GT(
+      inserter.Render(camera, LookAt({0.26, -0.3, 0.35}, {0.02, 0.0, 0.0}), {object.Object(&light)}, f4).kappa_marched,
+      0u);
 }
 
 TEST(FastPath, VertexGammaIsKeptWhileStillAndRebuiltWhenTheLightChanges) {
