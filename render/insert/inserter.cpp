@@ -796,7 +796,15 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
       float smallest = std::numeric_limits<float>::infinity();
       for (size_t j : casters) smallest = std::min(smallest, spheres[j].radius);
       spacing = options_.kappa_cache_spacing_radii * smallest;
-      std::vector<double> key = {spacing, options_.shadow_reach_radii, options_.shadow_epsilon};
+      // Also what shapes the κ layer kept for an unchanged camera.
+      std::vector<double> key = {spacing,
+                                 options_.shadow_reach_radii,
+                                 options_.shadow_epsilon,
+                                 double(options_.kappa_step),
+                                 double(options_.kappa_coarse_factor),
+                                 options_.kappa_refine_delta,
+                                 options_.kappa_plane_upsampling ? 1.0 : 0.0,
+                                 options_.receiver_min_opacity};
       for (size_t j : casters) AppendObjectKey(objects[j], key);
       for (const SgMixture& light : used_lights_) AppendLightKey(light, key);
       if (!kappa_cache_) kappa_cache_ = std::make_unique<KappaCache>();
