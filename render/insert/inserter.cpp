@@ -237,6 +237,7 @@ InsertOptions InsertOptions::Preset(const std::string& name) {
     o.occlusion_step = 1;
     o.kappa_cache_spacing_radii = 0.0;
     o.kappa_plane_upsampling = false;
+    o.kappa_receiver_reuse = false;
     o.kappa_coarse_factor = 2;
     o.kappa_refine_delta = 0.01;
   } else {
@@ -261,6 +262,9 @@ std::vector<std::string> InsertOptions::Validate() const {
         "occlusion_clear_opacity: out of range (expected 0 <= value < 1)");
   check(std::isfinite(kappa_cache_spacing_radii) && kappa_cache_spacing_radii >= 0 && kappa_cache_spacing_radii <= 10,
         "kappa_cache_spacing_radii: out of range (expected 0 to 10)");
+  check(std::isfinite(kappa_reuse_tolerance_radii) && kappa_reuse_tolerance_radii >= 0 &&
+            kappa_reuse_tolerance_radii <= 1,
+        "kappa_reuse_tolerance_radii: out of range (expected 0 to 1)");
   check(kappa_step >= 1 && kappa_step <= 64, "kappa_step: out of range (expected 1 to 64)");
   check(kappa_coarse_factor >= 1 && kappa_coarse_factor <= 64, "kappa_coarse_factor: out of range (expected 1 to 64)");
   check(std::isfinite(kappa_refine_delta) && kappa_refine_delta >= 0 && kappa_refine_delta <= 1,
@@ -290,6 +294,8 @@ std::string InsertOptions::ToJson() const {
   j["occlusion_clear_opacity"] = occlusion_clear_opacity;
   j["kappa_cache_spacing_radii"] = kappa_cache_spacing_radii;
   j["kappa_plane_upsampling"] = kappa_plane_upsampling;
+  j["kappa_receiver_reuse"] = kappa_receiver_reuse;
+  j["kappa_reuse_tolerance_radii"] = kappa_reuse_tolerance_radii;
   j["kappa_step"] = kappa_step;
   j["kappa_coarse_factor"] = kappa_coarse_factor;
   j["kappa_refine_delta"] = kappa_refine_delta;
@@ -353,6 +359,107 @@ void ReceiversFromDepth(const ImageF& depth_z, const CameraIntrinsics& camera, c
       for (int c = 0; c < 3; ++c) normal.at(x, y, c) = static_cast<float>(n[c]);
     }
 }
+
+namespace {
+
+// The last frame's NeRF receivers at its κ grid nodes.
+struct ReceiverFrame {
+  bool valid = false;
+  float min_opacity = 0;
+  CameraIntrinsics camera;
+  Pose T_world_camera, T_camera_world;
+  std::vector<int> xs, ys;     // the grid's pixel columns and rows
+  std::vector<size_t> cx, cy;  // its coarse nodes (indices into xs, ys)
+  size_t factor = 1;
+  int step = 1;
+  std::vector<uint8_t> state;  // per node: 0 unknown, 1 surface, 2 no surface
+  std::vector<Vec3f> point, normal;
+};
+
+// The last frame's receiver for a new grid node's ray (eye, d), if its
+// receivers can give it (InsertOptions::kappa_receiver_reuse): 1 with
+// `point`/`normal`, 2 for no surface, 0 to march.
+int ReuseReceiver(const ReceiverFrame& r, const Vec3f& eye, const Vec3f& d, int x, int y, float tolerance, Vec3f& point,
+                  Vec3f& normal) {
+  const size_t nx = r.xs.size(), ny = r.ys.size();
+  if (!r.valid || nx < 2 || ny < 2) return 0;
+  // The four receivers of the last grid's cell holding pixel (u, v): the fine
+  // cell when all four are known, else its coarse cell (always known).
+  const auto cell = [&](double u, double v, size_t idx[4]) -> bool {
+    if (!(u >= r.xs.front() && u <= r.xs.back() && v >= r.ys.front() && v <= r.ys.back())) return false;
+    const size_t ix = std::min<size_t>(static_cast<size_t>((u - r.xs.front()) / r.step), nx - 2);
+    const size_t iy = std::min<size_t>(static_cast<size_t>((v - r.ys.front()) / r.step), ny - 2);
+    const size_t fine[4] = {iy * nx + ix, iy * nx + ix + 1, (iy + 1) * nx + ix, (iy + 1) * nx + ix + 1};
+    if (r.state[fine[0]] && r.state[fine[1]] && r.state[fine[2]] && r.state[fine[3]]) {
+      std::copy(fine, fine + 4, idx);
+      return true;
+    }
+    const size_t i = std::min<size_t>(ix / r.factor, r.cx.size() - 2),
+                 j = std::min<size_t>(iy / r.factor, r.cy.size() - 2);
+    const size_t coarse[4] = {r.cy[j] * nx + r.cx[i], r.cy[j] * nx + r.cx[i + 1], r.cy[j + 1] * nx + r.cx[i],
+                              r.cy[j + 1] * nx + r.cx[i + 1]};
+    for (size_t c : coarse)
+      if (!r.state[c]) return false;
+    std::copy(coarse, coarse + 4, idx);
+    return true;
+  };
+  // The corner nearest (u, v) in pixels.
+  const auto nearest = [&](double u, double v, const size_t idx[4]) {
+    size_t best = idx[0];
+    double best_d = std::numeric_limits<double>::infinity();
+    for (int c = 0; c < 4; ++c) {
+      const double du = r.xs[idx[c] % nx] - u, dv = r.ys[idx[c] / nx] - v;
+      if (du * du + dv * dv < best_d) {
+        best_d = du * du + dv * dv;
+        best = idx[c];
+      }
+    }
+    return best;
+  };
+  size_t idx[4];
+  if (!cell(x, y, idx)) return 0;
+  int surfaces = 0;
+  for (size_t c : idx) surfaces += r.state[c] == 1;
+  if (surfaces == 0) {
+    // No surface around the same pixel of the last view: kept while this
+    // pixel's ray moved by less than a grid step (its eye by the tolerance).
+    const Vec3f old_eye(r.T_world_camera.translation);
+    const Vec3f old_d = CameraRayDirection(r.camera, r.T_world_camera, x, y);
+    const float max_angle = static_cast<float>(r.step / std::max(r.camera.fx, r.camera.fy));
+    return Length(eye - old_eye) <= tolerance && Dot(d, old_d) >= std::cos(max_angle) ? 2 : 0;
+  }
+  if (surfaces < 4) return 0;
+  size_t guess = nearest(x, y, idx);
+  for (int iteration = 0; iteration < 2; ++iteration) {
+    const Vec3f& q = r.point[guess];
+    const Vec3f& n = r.normal[guess];
+    const float cosine = Dot(d, n);
+    if (!(cosine < -0.05f)) return 0;  // grazing or back-facing: march
+    const float t = Dot(q - eye, n) / cosine;
+    if (!(t > 0.0f)) return 0;
+    const Vec3f p = eye + d * t;
+    const Vec3 c = r.T_camera_world * Vec3(p);
+    if (!(c.z > 1e-6)) return 0;
+    const double u = r.camera.fx * c.x / c.z + r.camera.cx - 0.5, v = r.camera.fy * c.y / c.z + r.camera.cy - 0.5;
+    if (!cell(u, v, idx)) return 0;
+    bool ok = true;
+    for (size_t k : idx) {
+      ok = ok && r.state[k] == 1 && Dot(r.normal[k], n) > 0.985f &&
+           std::abs(Dot(p - r.point[k], r.normal[k])) <= tolerance;
+    }
+    const size_t best = nearest(u, v, idx);
+    if (ok) {
+      point = p;
+      normal = r.normal[best];
+      return 1;
+    }
+    if (best == guess) return 0;
+    guess = best;  // once more with the plane of the receiver it landed by
+  }
+  return 0;
+}
+
+}  // namespace
 
 // ------------------------------------------------------------------ inserter
 
@@ -420,6 +527,9 @@ struct Inserter::KappaCache {
   std::vector<double> last_view;
   PixelRect last_rect;
   ImageF last_kappa;
+  // The last frame's NeRF receivers (kept across Clear: they depend on the
+  // scene and the opacity threshold only).
+  ReceiverFrame receivers;
 };
 
 Inserter::~Inserter() = default;
@@ -792,9 +902,9 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
     // The world lattice of κ, dropped when a caster or a light changed.
     KappaCache* cache = nullptr;
     double spacing = 0.0;
+    float smallest = std::numeric_limits<float>::infinity();
+    for (size_t j : casters) smallest = std::min(smallest, spheres[j].radius);
     if (options_.kappa_cache_spacing_radii > 0) {
-      float smallest = std::numeric_limits<float>::infinity();
-      for (size_t j : casters) smallest = std::min(smallest, spheres[j].radius);
       spacing = options_.kappa_cache_spacing_radii * smallest;
       // Also what shapes the κ layer kept for an unchanged camera.
       std::vector<double> key = {spacing,
@@ -893,7 +1003,12 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
       const float reach = static_cast<float>(options_.shadow_reach_radii);
       const float min_opacity = static_cast<float>(options_.receiver_min_opacity);
       const double one_minus_eps = 1.0 - options_.shadow_epsilon;
-      std::vector<size_t> evaluated_per_row(ny, 0), marched_per_row(ny, 0);
+      std::vector<size_t> evaluated_per_row(ny, 0), marched_per_row(ny, 0), reused_per_row(ny, 0);
+      // The last frame's receivers, when they can stand for marching.
+      const bool reuse_receivers = cache != nullptr && receivers.distance == nullptr && options_.kappa_receiver_reuse &&
+                                   cache->receivers.valid &&
+                                   cache->receivers.min_opacity == static_cast<float>(options_.receiver_min_opacity);
+      const float reuse_tolerance = static_cast<float>(options_.kappa_reuse_tolerance_radii * smallest);
       // κ at world point x with unit normal n (1 where no caster is within
       // reach or the bounding spheres cannot darken it below 1 − ε); with
       // bound_only, 0 for "needs the SSDF" instead of evaluating it.
@@ -986,6 +1101,7 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
       // What the receiver pass found at each grid node (for the upsampling).
       std::vector<Vec3f> node_point(nx * ny), node_normal(nx * ny);
       std::vector<uint8_t> node_valid(nx * ny, 0);
+      std::vector<uint8_t> node_state(nx * ny, 0);  // 0 not found, 1 surface, 2 no surface (as ReceiverFrame)
       // κ at the grid nodes (row, cols[j]) of one row.
       const auto eval_row = [&](size_t row, const std::vector<size_t>& cols) {
         if (cols.empty()) return;
@@ -1004,35 +1120,57 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
             points[ix] = eye + dirs[ix] * (opacity[ix] > 0 ? t : 0.0f);
           }
         } else {
-          rays.Reserve(nc);
+          // Receivers the last frame gives (state 1 or 2); the rest marched.
+          std::vector<uint8_t> given(nc, 0);
+          std::vector<Vec3f> given_normal(nc);
+          std::vector<size_t> march;
+          march.reserve(nc);
           for (size_t ix = 0; ix < nc; ++ix) {
-            const auto range = IntersectBox(box, Vec3(eye), Vec3(dirs[ix]));
-            rays.Add(eye, dirs[ix], range ? static_cast<float>(range->first) : 0.0f,
-                     range ? static_cast<float>(range->second) : 0.0f);
+            if (reuse_receivers)
+              given[ix] = static_cast<uint8_t>(ReuseReceiver(cache->receivers, eye, dirs[ix], xs[cols[ix]], y,
+                                                             reuse_tolerance, points[ix], given_normal[ix]));
+            if (given[ix] == 1) opacity[ix] = 1.0f;
+            if (given[ix] == 0) march.push_back(ix);
           }
-          scene_.RenderRays(rays, out);
-          marched_per_row[row] += nc;
-          for (size_t ix = 0; ix < nc; ++ix) {
-            opacity[ix] = std::isfinite(out.opacity[ix]) ? out.opacity[ix] : 0.0f;
-            const float t = std::isfinite(out.depth[ix]) ? out.depth[ix] : 0.0f;
-            points[ix] = eye + dirs[ix] * t;
+          reused_per_row[row] += nc - march.size();
+          if (!march.empty()) {
+            rays.Reserve(march.size());
+            for (size_t ix : march) {
+              const auto range = IntersectBox(box, Vec3(eye), Vec3(dirs[ix]));
+              rays.Add(eye, dirs[ix], range ? static_cast<float>(range->first) : 0.0f,
+                       range ? static_cast<float>(range->second) : 0.0f);
+            }
+            scene_.RenderRays(rays, out);
+            marched_per_row[row] += march.size();
+            std::vector<Vec3f> marched_points(march.size()), marched_normals;
+            for (size_t m = 0; m < march.size(); ++m) {
+              const size_t ix = march[m];
+              opacity[ix] = std::isfinite(out.opacity[m]) ? out.opacity[m] : 0.0f;
+              const float t = std::isfinite(out.depth[m]) ? out.depth[m] : 0.0f;
+              points[ix] = marched_points[m] = eye + dirs[ix] * t;
+            }
+            scene_.Normals(marched_points, marched_normals);
+            for (size_t m = 0; m < march.size(); ++m) given_normal[march[m]] = marched_normals[m];
           }
+          normals = std::move(given_normal);
         }
         if (receivers.normal) {
           normals.resize(nc);
           for (size_t ix = 0; ix < nc; ++ix)
             normals[ix] = {receivers.normal->at(xs[cols[ix]], y, 0), receivers.normal->at(xs[cols[ix]], y, 1),
                            receivers.normal->at(xs[cols[ix]], y, 2)};
-        } else {
+        } else if (receivers.distance) {
           scene_.Normals(points, normals);
         }
         KappaScratch scratch;
         for (size_t ix = 0; ix < nc; ++ix) {
           float& kappa = kappa_grid[row * nx + cols[ix]];
+          node_state[row * nx + cols[ix]] = 2;
           if (opacity[ix] < min_opacity || !Finite(points[ix])) continue;
           Vec3f n = normals[ix];
           if (!Finite(n) || Dot(n, n) < 0.25f) continue;
           n = Normalized(n);
+          node_state[row * nx + cols[ix]] = 1;
           node_point[row * nx + cols[ix]] = points[ix];
           node_normal[row * nx + cols[ix]] = n;
           node_valid[row * nx + cols[ix]] = 1;
@@ -1145,6 +1283,26 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
       for (size_t q : queries_per_row) layers.kappa_queries += q;
       for (size_t q : evaluated_per_row) times.kappa_evaluated += q;
       for (size_t q : marched_per_row) times.kappa_marched += q;
+      for (size_t q : reused_per_row) times.kappa_reused += q;
+      if (cache != nullptr && receivers.distance == nullptr && options_.kappa_receiver_reuse) {
+        // Kept for the next frame (nodes only interpolated or plane-placed
+        // stay unknown).
+        ReceiverFrame& kept = cache->receivers;
+        kept.valid = true;
+        kept.min_opacity = static_cast<float>(options_.receiver_min_opacity);
+        kept.camera = camera;
+        kept.T_world_camera = T_world_camera;
+        kept.T_camera_world = T_world_camera.Inverse();
+        kept.xs = xs;
+        kept.ys = ys;
+        kept.cx = cx;
+        kept.cy = cy;
+        kept.factor = factor;
+        kept.step = step;
+        kept.state = std::move(node_state);
+        kept.point = std::move(node_point);
+        kept.normal = std::move(node_normal);
+      }
       // Bilinear from the sample grid to every pixel; multiply the background
       // where no object covers it.
       ParallelFor(

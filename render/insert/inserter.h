@@ -82,6 +82,19 @@ struct InsertOptions {
   // first needs it and reused, trilinearly, until an object or a light
   // changes. 0: κ evaluated exactly at every receiver, every frame.
   double kappa_cache_spacing_radii = 0.1;
+  // With the lattice (spacing > 0) and NeRF receivers: a grid node's receiver
+  // is first sought among the last frame's receivers instead of marching its
+  // ray. The ray is met with the tangent plane of the last receiver at its
+  // pixel, the point is projected into the last view, and it is taken when it
+  // lies within kappa_reuse_tolerance_radii (× the smallest caster's bounding
+  // radius) of the tangent planes of all four receivers of the last grid cell
+  // it falls in, their normals within 10° (normal: the nearest of the four's,
+  // so the κ lattice's normal cell is kept); a cell of four "no surface"
+  // nodes is taken as no surface when the ray moved by less than a grid step.
+  // Anything else is marched. The receivers do not depend on objects or
+  // light and survive their changes. false: every receiver marched.
+  bool kappa_receiver_reuse = true;
+  double kappa_reuse_tolerance_radii = 0.02;
 
   // "fast", "balanced" (the defaults) or "accurate"; InputError otherwise.
   static InsertOptions Preset(const std::string& name);
@@ -117,6 +130,7 @@ struct InsertTimings {
   int lights_recomputed = 0;
   size_t kappa_evaluated = 0;     // κ values computed this frame (cache misses, or every receiver without the cache)
   size_t kappa_marched = 0;       // receiver rays marched through the scene for κ this frame
+  size_t kappa_reused = 0;        // receivers taken from the last frame's instead of marching (kappa_receiver_reuse)
   bool gamma_recomputed = false;  // the per-vertex self-shadow cache was (re)built this frame
 };
 
