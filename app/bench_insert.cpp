@@ -75,7 +75,76 @@ struct StageMedians {
   double coverage = 0;
   double kappa_rect_px = 0, kappa_marched = 0;            // a still frame's κ rectangle and receiver rays marched
   double kappa_camera_moved = 0, frame_camera_moved = 0;  // object still, camera moved 1 mm
+  // A hand-held sequence (object still, camera 3 mm per frame): medians over
+  // its frames after the first, with receivers reused and all marched.
+  double handheld_kappa = 0, handheld_frame = 0, handheld_marched = 0, handheld_reused = 0;
+  double handheld_kappa_marched_all = 0, handheld_frame_marched_all = 0, handheld_marched_all = 0;
+  // κ of the reused path against all marched: worst frame's Σ|Δκ| / Σ(1 − κ), worst pixel |Δκ|.
+  double handheld_error_mean = 0, handheld_error_max = 0;
+  // The all-marched path against itself with the camera 0.1 mm further (the
+  // NeRF receivers' own frame-to-frame noise), same measures.
+  double handheld_noise_mean = 0, handheld_noise_max = 0;
 };
+
+// Worst |Δκ| and Σ|Δκ| / Σ(1 − κ_b) of two κ layers, as full frames.
+void KappaDifference(const InsertLayers& la, const InsertLayers& lb, const CameraIntrinsics& camera, double& mean,
+                     double& max) {
+  const ImageF ka = ExpandLayer(la.kappa, la.kappa_rect, camera.width, camera.height, 1.0f);
+  const ImageF kb = ExpandLayer(lb.kappa, lb.kappa_rect, camera.width, camera.height, 1.0f);
+  double diff = 0, shadow = 0;
+  for (size_t i = 0; i < ka.pixels.size(); ++i) {
+    const double d = std::abs(double(ka.pixels[i]) - kb.pixels[i]);
+    diff += d;
+    shadow += 1.0 - kb.pixels[i];
+    max = std::max(max, d);
+  }
+  if (shadow > 0) mean = std::max(mean, diff / shadow);
+}
+
+// Object still, the camera translated by 3 mm (and 1 mm sideways) per frame
+// from T_world_camera: `frames` frames with the receivers reused and the
+// same ones with every receiver marched (kappa_receiver_reuse off).
+void TimeHandHeld(const NerfScene& scene, const SgMixture& environment, const InsertObject& object,
+                  const CameraIntrinsics& camera, const Pose& T_world_camera, const InsertOptions& options, int frames,
+                  StageMedians& m) {
+  InsertOptions marched_options = options;
+  marched_options.kappa_receiver_reuse = false;
+  Inserter reuse(scene, environment, options), marched(scene, environment, marched_options),
+      jitter(scene, environment, marched_options);
+  const ImageF background(camera.width, camera.height, 3, 0.3f);
+  std::vector<double> kappa, frame_ms, n_marched, n_reused, kappa_all, frame_all, n_marched_all;
+  for (int f = 0; f < frames; ++f) {
+    Pose cam = T_world_camera;
+    cam.translation.x += 3e-3 * f;
+    cam.translation.y += 1e-3 * f;
+    ImageF fa = background, fb = background;
+    InsertLayers la, lb;
+    const InsertTimings ta = reuse.Render(camera, cam, {object}, fa, &la);
+    const InsertTimings tb = marched.Render(camera, cam, {object}, fb, &lb);
+    if (f == 0) continue;  // the first frame builds the caches
+    kappa.push_back(ta.kappa_ms);
+    frame_ms.push_back(ta.total_ms);
+    n_marched.push_back(double(ta.kappa_marched));
+    n_reused.push_back(double(ta.kappa_reused));
+    kappa_all.push_back(tb.kappa_ms);
+    frame_all.push_back(tb.total_ms);
+    n_marched_all.push_back(double(tb.kappa_marched));
+    KappaDifference(la, lb, camera, m.handheld_error_mean, m.handheld_error_max);
+    Pose jittered = cam;
+    jittered.translation.x += 1e-4;
+    ImageF fc = background;
+    InsertLayers lc;
+    jitter.Render(camera, jittered, {object}, fc, &lc);
+    KappaDifference(lc, lb, camera, m.handheld_noise_mean, m.handheld_noise_max);
+  }
+  m.handheld_kappa = MedianOf(kappa);
+  m.handheld_frame = MedianOf(frame_ms);
+  m.handheld_marched = MedianOf(n_marched);
+  m.handheld_reused = MedianOf(n_reused);
+  m.handheld_kappa_marched_all = MedianOf(kappa_all);
+  m.handheld_frame_marched_all = MedianOf(frame_all);
+  m.handheld_marched_all = MedianOf(n_marched_all);
+}
 
 StageMedians TimePreset(const NerfScene& scene, const SgMixture& environment, const InsertObject& object_template,
                         const CameraIntrinsics& camera, const Pose& T_world_camera, const InsertOptions& options,
@@ -131,6 +200,7 @@ StageMedians TimePreset(const NerfScene& scene, const SgMixture& environment, co
   m.frame_moving = MedianOf(moving);
   m.kappa_camera_moved = MedianOf(kappa_cam);
   m.frame_camera_moved = MedianOf(still_cam);
+  TimeHandHeld(scene, environment, object, camera, T_world_camera, options, 6, m);
   return m;
 }
 
@@ -275,6 +345,22 @@ std::vector<BenchFigure> BenchInsert(const BenchOptions& options) {
     figures.push_back({p + "frame_moving_ms", m.frame_moving, "ms", note + "; light + warm fit"});
     figures.push_back({p + "kappa_camera_moved_ms", m.kappa_camera_moved, "ms", note + "; object still, camera 1 mm"});
     figures.push_back({p + "frame_camera_moved_ms", m.frame_camera_moved, "ms", note + "; object still, camera 1 mm"});
+    const std::string hh = note + "; hand-held: object still, camera 3 mm per frame, median of 5 frames";
+    figures.push_back({p + "handheld_kappa_ms", m.handheld_kappa, "ms", hh + ", receivers reused"});
+    figures.push_back({p + "handheld_frame_ms", m.handheld_frame, "ms", hh + ", receivers reused"});
+    figures.push_back({p + "handheld_marched", m.handheld_marched, "rays", hh + ", receivers reused"});
+    figures.push_back({p + "handheld_reused", m.handheld_reused, "rays", hh + ", receivers reused"});
+    figures.push_back({p + "handheld_kappa_all_marched_ms", m.handheld_kappa_marched_all, "ms", hh + ", all marched"});
+    figures.push_back({p + "handheld_frame_all_marched_ms", m.handheld_frame_marched_all, "ms", hh + ", all marched"});
+    figures.push_back({p + "handheld_marched_all", m.handheld_marched_all, "rays", hh + ", all marched"});
+    figures.push_back({p + "handheld_kappa_error_mean", m.handheld_error_mean, "",
+                       hh + ", reused vs all marched: worst frame's sum |dκ| / sum (1 - κ)"});
+    figures.push_back(
+        {p + "handheld_kappa_error_max", m.handheld_error_max, "", hh + ", reused vs all marched: worst pixel |dκ|"});
+    figures.push_back({p + "handheld_kappa_noise_mean", m.handheld_noise_mean, "",
+                       hh + ", all marched vs all marched from 0.1 mm away: worst frame's sum |dκ| / sum (1 - κ)"});
+    figures.push_back({p + "handheld_kappa_noise_max", m.handheld_noise_max, "",
+                       hh + ", all marched vs all marched from 0.1 mm away: worst pixel |dκ|"});
   }
   return figures;
 }

@@ -429,32 +429,48 @@ int ReuseReceiver(const ReceiverFrame& r, const Vec3f& eye, const Vec3f& d, int 
     return Length(eye - old_eye) <= tolerance && Dot(d, old_d) >= std::cos(max_angle) ? 2 : 0;
   }
   if (surfaces < 4) return 0;
-  size_t guess = nearest(x, y, idx);
+  // The plane through a cell's four receivers (normal from its diagonals,
+  // facing the ray); false when a receiver lies farther than the tolerance
+  // from it. The receivers' own NeRF normals are not compared: they scatter
+  // by more than 10° between neighbours on a flat grid-NeRF table.
+  const auto cell_plane = [&](const size_t c[4], Vec3f& mean, Vec3f& n) -> bool {
+    mean = (r.point[c[0]] + r.point[c[1]] + r.point[c[2]] + r.point[c[3]]) * 0.25f;
+    n = Cross(r.point[c[3]] - r.point[c[0]], r.point[c[2]] - r.point[c[1]]);
+    if (!(Dot(n, n) > 1e-20f)) return false;
+    n = Normalized(n);
+    if (Dot(n, d) > 0) n = n * -1.0f;
+    for (int k = 0; k < 4; ++k)
+      if (!(std::abs(Dot(r.point[c[k]] - mean, n)) <= tolerance)) return false;
+    return true;
+  };
+  size_t at[4];
+  std::copy(idx, idx + 4, at);
   for (int iteration = 0; iteration < 2; ++iteration) {
-    const Vec3f& q = r.point[guess];
-    const Vec3f& n = r.normal[guess];
+    Vec3f mean, n;
+    if (!cell_plane(at, mean, n)) return 0;
     const float cosine = Dot(d, n);
-    if (!(cosine < -0.05f)) return 0;  // grazing or back-facing: march
-    const float t = Dot(q - eye, n) / cosine;
+    if (!(cosine < -0.05f)) return 0;  // grazing: march
+    const float t = Dot(mean - eye, n) / cosine;
     if (!(t > 0.0f)) return 0;
     const Vec3f p = eye + d * t;
     const Vec3 c = r.T_camera_world * Vec3(p);
     if (!(c.z > 1e-6)) return 0;
     const double u = r.camera.fx * c.x / c.z + r.camera.cx - 0.5, v = r.camera.fy * c.y / c.z + r.camera.cy - 0.5;
-    if (!cell(u, v, idx)) return 0;
-    bool ok = true;
-    for (size_t k : idx) {
-      ok = ok && r.state[k] == 1 && Dot(r.normal[k], n) > 0.985f &&
-           std::abs(Dot(p - r.point[k], r.normal[k])) <= tolerance;
-    }
-    const size_t best = nearest(u, v, idx);
-    if (ok) {
+    size_t landed[4];
+    if (!cell(u, v, landed)) return 0;
+    bool same = true;
+    for (int k = 0; k < 4; ++k) same = same && landed[k] == at[k];
+    bool surface = true;
+    for (size_t k : landed) surface = surface && r.state[k] == 1;
+    if (!surface) return 0;
+    if (same) {
+      // The point lies on its own cell's plane: taken, with the NeRF normal
+      // of the nearest receiver (its lattice normal cell is already filled).
       point = p;
-      normal = r.normal[best];
+      normal = r.normal[nearest(u, v, landed)];
       return 1;
     }
-    if (best == guess) return 0;
-    guess = best;  // once more with the plane of the receiver it landed by
+    std::copy(landed, landed + 4, at);  // once more with the cell it landed in
   }
   return 0;
 }

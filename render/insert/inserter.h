@@ -84,15 +84,17 @@ struct InsertOptions {
   double kappa_cache_spacing_radii = 0.1;
   // With the lattice (spacing > 0) and NeRF receivers: a grid node's receiver
   // is first sought among the last frame's receivers instead of marching its
-  // ray. The ray is met with the tangent plane of the last receiver at its
-  // pixel, the point is projected into the last view, and it is taken when it
-  // lies within kappa_reuse_tolerance_radii (× the smallest caster's bounding
-  // radius) of the tangent planes of all four receivers of the last grid cell
-  // it falls in, their normals within 10° (normal: the nearest of the four's,
-  // so the κ lattice's normal cell is kept); a cell of four "no surface"
-  // nodes is taken as no surface when the ray moved by less than a grid step.
-  // Anything else is marched. The receivers do not depend on objects or
-  // light and survive their changes. false: every receiver marched.
+  // ray. The last grid's cell at the node's pixel gives a plane (through its
+  // four receivers, normal from the diagonals; none of the four farther than
+  // kappa_reuse_tolerance_radii × the smallest caster's bounding radius from
+  // it); the ray meets it, and the point is taken when its projection into
+  // the last view falls in that same cell (else once more with the cell it
+  // fell in), with the NeRF normal of the nearest of the four (so the κ
+  // lattice's normal cell is kept). A cell of four "no surface" nodes stays
+  // no surface when the eye moved by less than the tolerance and the ray by
+  // less than a grid step. Anything else is marched. The receivers do not
+  // depend on objects or light and survive their changes. false: every
+  // receiver marched.
   bool kappa_receiver_reuse = true;
   double kappa_reuse_tolerance_radii = 0.02;
 
