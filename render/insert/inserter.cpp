@@ -238,6 +238,7 @@ InsertOptions InsertOptions::Preset(const std::string& name) {
     o.kappa_cache_spacing_radii = 0.0;
     o.kappa_plane_upsampling = false;
     o.kappa_receiver_reuse = false;
+    o.receiver_normal_per_cell = false;
     o.kappa_coarse_factor = 2;
     o.kappa_refine_delta = 0.01;
   } else {
@@ -295,6 +296,7 @@ std::string InsertOptions::ToJson() const {
   j["kappa_cache_spacing_radii"] = kappa_cache_spacing_radii;
   j["kappa_plane_upsampling"] = kappa_plane_upsampling;
   j["kappa_receiver_reuse"] = kappa_receiver_reuse;
+  j["receiver_normal_per_cell"] = receiver_normal_per_cell;
   j["kappa_reuse_tolerance_radii"] = kappa_reuse_tolerance_radii;
   j["kappa_step"] = kappa_step;
   j["kappa_coarse_factor"] = kappa_coarse_factor;
@@ -546,6 +548,12 @@ struct Inserter::KappaCache {
   // The last frame's NeRF receivers (kept across Clear: they depend on the
   // scene and the opacity threshold only).
   ReceiverFrame receivers;
+  // Receiver normals per world cell (InsertOptions::receiver_normal_per_cell):
+  // the NeRF normal at the first receiver found in a lattice cell, for every
+  // receiver in it from any view; kept across Clear while the spacing holds.
+  std::mutex normal_mutex;
+  double normal_spacing = 0;
+  std::unordered_map<uint64_t, Vec3f> cell_normals;
 };
 
 Inserter::~Inserter() = default;
@@ -1024,6 +1032,11 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
       const bool reuse_receivers = cache != nullptr && receivers.distance == nullptr && options_.kappa_receiver_reuse &&
                                    cache->receivers.valid &&
                                    cache->receivers.min_opacity == static_cast<float>(options_.receiver_min_opacity);
+      const bool cell_normals = cache != nullptr && receivers.distance == nullptr && options_.receiver_normal_per_cell;
+      if (cell_normals && (cache->normal_spacing != spacing || cache->cell_normals.size() > kKappaCacheMaxNodes)) {
+        cache->cell_normals.clear();
+        cache->normal_spacing = spacing;
+      }
       const float reuse_tolerance = static_cast<float>(options_.kappa_reuse_tolerance_radii * smallest);
       // κ at world point x with unit normal n (1 where no caster is within
       // reach or the bounding spheres cannot darken it below 1 − ε); with
@@ -1167,6 +1180,18 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
             }
             scene_.Normals(marched_points, marched_normals);
             for (size_t m = 0; m < march.size(); ++m) given_normal[march[m]] = marched_normals[m];
+          }
+          if (cell_normals) {
+            // One normal per world cell: the first found there stands for all.
+            std::lock_guard<std::mutex> lock(cache->normal_mutex);
+            for (size_t ix = 0; ix < nc; ++ix) {
+              if (given[ix] == 2 || !Finite(points[ix]) || !Finite(given_normal[ix])) continue;
+              const uint64_t key =
+                  LatticeKey(int64_t(std::floor(points[ix].x / spacing)), int64_t(std::floor(points[ix].y / spacing)),
+                             int64_t(std::floor(points[ix].z / spacing)), 0);
+              const auto [it, added] = cache->cell_normals.emplace(key, given_normal[ix]);
+              if (!added) given_normal[ix] = it->second;
+            }
           }
           normals = std::move(given_normal);
         }

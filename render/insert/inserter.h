@@ -96,6 +96,12 @@ struct InsertOptions {
   // depend on objects or light and survive their changes. false: every
   // receiver marched.
   bool kappa_receiver_reuse = true;
+  // With the lattice and NeRF receivers: one receiver normal per lattice
+  // cell, the NeRF normal at the first receiver found in the cell (any view),
+  // so that a receiver's normal, its κ lattice normal cell and κ do not change
+  // with the view (the NeRF's normals scatter with the point's exact
+  // position); false: the NeRF normal at every receiver.
+  bool receiver_normal_per_cell = true;
   double kappa_reuse_tolerance_radii = 0.02;
 
   // "fast", "balanced" (the defaults) or "accurate"; InputError otherwise.
