@@ -4,39 +4,25 @@
 #include <benchmark/benchmark.h>
 
 #include <cmath>
-#include <random>
 
 #include "render/sg/brdf.h"
 #include "render/sg/fit.h"
 #include "render/sg/sphere.h"
 #include "render/sg/visibility.h"
+#include "tests/bench/shade_inputs.h"
 
 namespace nerfar {
 namespace {
-
-SgMixture Light(int lobes) {
-  SgMixture light;
-  const std::vector<Vec3> axes = FibonacciSphere(lobes);
-  for (int k = 0; k < lobes; ++k)
-    light.push_back({axes[k], std::pow(10.0, 0.1 * (k % 25)), Vec3(1.0 + k % 3, 1.0, 0.5 + 0.1 * k)});
-  return light;
-}
 
 // Args: material (0 diffuse dielectric, 1 metal), lobe count. 256 pixels of
 // varied normals and views per iteration (reported per pixel), so the
 // per-pixel cost and the per-lobe slope can be read off 8/32/64 lobes.
 void BM_ShadePixel(benchmark::State& state) {
   const int lobes = static_cast<int>(state.range(1));
-  const SgShader shader(Light(lobes));
-  const SgMaterial material{Vec3(0.8, 0.35, 0.2), state.range(0) ? 0.25 : 0.7, state.range(0) ? 1.0 : 0.0};
+  const SgShader shader(BenchLight(lobes));
+  const SgMaterial material = BenchMaterial(state.range(0) != 0);
   std::vector<float> gamma(lobes, 0.8f);
-  std::vector<Vec3f> normals, views;
-  std::mt19937 rng(3);
-  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
-  for (int p = 0; p < 256; ++p) {
-    normals.push_back(Normalized(Vec3f(u(rng), u(rng), u(rng) + 0.01f)));
-    views.push_back(Normalized(normals.back() + Vec3f(u(rng), u(rng), u(rng)) * 0.5f));
-  }
+  const auto [normals, views] = RandomShadePixels(256);
   for (auto _ : state) {
     float sum = 0.0f;
     for (int p = 0; p < 256; ++p) sum += shader.Shade(material, normals[p], views[p], gamma.data()).x;
@@ -51,18 +37,13 @@ BENCHMARK(BM_ShadePixel)->ArgsProduct({{0, 1}, {8, 32, 64}});
 // The batch path (SgShader::Shade over many pixels), same pixels and args.
 void BM_ShadeBatch(benchmark::State& state) {
   const int lobes = static_cast<int>(state.range(1));
-  const SgShader shader(Light(lobes));
-  const SgMaterial material{Vec3(0.8, 0.35, 0.2), state.range(0) ? 0.25 : 0.7, state.range(0) ? 1.0 : 0.0};
+  const SgShader shader(BenchLight(lobes));
+  const SgMaterial material = BenchMaterial(state.range(0) != 0);
   const int pixels = 256;
   std::vector<float> gamma(static_cast<size_t>(lobes) * pixels, 0.8f);
-  std::vector<Vec3f> normals, views, out(pixels);
+  std::vector<Vec3f> out(pixels);
   const std::vector<SgMaterial> materials(pixels, material);
-  std::mt19937 rng(3);
-  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
-  for (int p = 0; p < pixels; ++p) {
-    normals.push_back(Normalized(Vec3f(u(rng), u(rng), u(rng) + 0.01f)));
-    views.push_back(Normalized(normals.back() + Vec3f(u(rng), u(rng), u(rng)) * 0.5f));
-  }
+  const auto [normals, views] = RandomShadePixels(pixels);
   for (auto _ : state) {
     shader.Shade(materials.data(), normals.data(), views.data(), gamma.data(), pixels, out.data());
     benchmark::DoNotOptimize(out.data());
@@ -90,11 +71,11 @@ SgMixture RoomLight() {
   return light;
 }
 
-// Args: material, light (0: Light(32), 1: RoomLight()).
+// Args: material, light (0: BenchLight(32), 1: RoomLight()).
 void BM_ShadeBatchSphere(benchmark::State& state) {
   const int lobes = 32;
-  const SgShader shader(state.range(1) ? RoomLight() : Light(lobes));
-  const SgMaterial material{Vec3(0.8, 0.35, 0.2), state.range(0) ? 0.25 : 0.7, state.range(0) ? 1.0 : 0.0};
+  const SgShader shader(state.range(1) ? RoomLight() : BenchLight(lobes));
+  const SgMaterial material = BenchMaterial(state.range(0) != 0);
   std::vector<Vec3f> normals, views;
   const Vec3f eye(0.0f, 0.0f, 3.0f);
   for (int y = 0; y < 64; ++y)
@@ -121,7 +102,7 @@ BENCHMARK(BM_ShadeBatchSphere)->ArgsProduct({{0, 1}, {0, 1}});
 
 void BM_Gamma32Lobes(benchmark::State& state) {
   std::vector<SgTableRow> rows;
-  for (const Sg& sg : Light(32)) rows.push_back(PrepareGamma(sg.sharpness));
+  for (const Sg& sg : BenchLight(32)) rows.push_back(PrepareGamma(sg.sharpness));
   float s = -0.3f;
   for (auto _ : state) {
     float sum = 0.0f;
@@ -143,7 +124,7 @@ void BM_InnerProduct(benchmark::State& state) {
 BENCHMARK(BM_InnerProduct);
 
 void BM_FitWarm2048(benchmark::State& state) {
-  const SgMixture truth = Light(40);
+  const SgMixture truth = BenchLight(40);
   RadianceSamples samples;
   for (const Vec3& d : FibonacciSphere(2048)) {
     samples.directions.push_back(d);
@@ -157,7 +138,7 @@ void BM_FitWarm2048(benchmark::State& state) {
 BENCHMARK(BM_FitWarm2048)->Unit(benchmark::kMillisecond);
 
 void BM_FitCold2048(benchmark::State& state) {
-  const SgMixture truth = Light(40);
+  const SgMixture truth = BenchLight(40);
   RadianceSamples samples;
   for (const Vec3& d : FibonacciSphere(2048)) {
     samples.directions.push_back(d);

@@ -5,15 +5,14 @@
 // MATERIAL: 0 dielectric (roughness 0.7), 1 metal (roughness 0.25).
 // Instructions per pixel = (Ir at R = 11 − Ir at R = 1) / (10 · 256), e.g.
 //   valgrind --tool=callgrind --callgrind-out-file=/dev/null sg_shade_driver batch 0 32 11
-#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
-#include <random>
 #include <vector>
 
 #include "render/sg/brdf.h"
 #include "render/sg/sphere.h"
+#include "tests/bench/shade_inputs.h"
 
 int main(int argc, char** argv) {
   using namespace nerfar;
@@ -27,22 +26,13 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "LOBES must be 1-64 and REPEATS >= 0\n");
     return 2;
   }
-  SgMixture light;
-  const std::vector<Vec3> axes = FibonacciSphere(lobes);
-  for (int k = 0; k < lobes; ++k)
-    light.push_back({axes[k], std::pow(10.0, 0.1 * (k % 25)), Vec3(1.0 + k % 3, 1.0, 0.5 + 0.1 * k)});
-  const SgShader shader(light);
-  const SgMaterial material{Vec3(0.8, 0.35, 0.2), metal ? 0.25 : 0.7, metal ? 1.0 : 0.0};
+  const SgShader shader(BenchLight(lobes));
+  const SgMaterial material = BenchMaterial(metal != 0);
   const int pixels = 256;
   std::vector<float> gamma(static_cast<size_t>(lobes) * pixels, 0.8f);
-  std::vector<Vec3f> normals, views, out(pixels);
+  std::vector<Vec3f> out(pixels);
   const std::vector<SgMaterial> materials(pixels, material);
-  std::mt19937 rng(3);
-  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
-  for (int p = 0; p < pixels; ++p) {
-    normals.push_back(Normalized(Vec3f(u(rng), u(rng), u(rng) + 0.01f)));
-    views.push_back(Normalized(normals.back() + Vec3f(u(rng), u(rng), u(rng)) * 0.5f));
-  }
+  const auto [normals, views] = RandomShadePixels(pixels);
   float sink = 0.0f;
   for (int r = 0; r < repeats; ++r) {
     if (batch) {
