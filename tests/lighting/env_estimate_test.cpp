@@ -225,10 +225,12 @@ TEST(EnvEstimate, ScalesWithRadianceFrom1em3To1e3) {
   }
 }
 
-// All light inside the NeRF: a floor lit by an emitting sphere, no environment.
-TEST(EnvEstimate, FlagsTheEnvironmentNegligibleWhenAllLightIsInside) {
+// All light inside the NeRF: a floor (albedo 0.5) lit by an emitting sphere
+// of radiance `lit_by`, while the grid's sphere itself shows radiance `le`
+// (equal for a faithful NeRF; lower for a lamp the cameras saw dimmer).
+NerfField LampOverFloor(double le, double lit_by) {
   const Vec3 lamp{0.4, 0.3, 0.35};
-  const double rho = 0.15, le = 30;
+  const double rho = 0.15;
   Shape s;
   s.sd = [&](const Vec3& p) { return std::min(p.z, Length(p - lamp) - rho); };
   s.project = [&](const Vec3& p, Vec3* x, Vec3* n) {
@@ -240,15 +242,20 @@ TEST(EnvEstimate, FlagsTheEnvironmentNegligibleWhenAllLightIsInside) {
       *x = lamp + *n * rho;
     }
   };
-  const NerfField field = MakeField(kBox, 0.04, s, [&](const Vec3& x, const Vec3&) {
+  return MakeField(kBox, 0.04, s, [&](const Vec3& x, const Vec3&) {
     if (x.z > 1e-6) return Vec3{le, le, le};  // the lamp's surface
     // A uniform sphere of radiance L seen whole above the horizon gives
-    // E = π L (ρ/D)² cos θ; floor albedo 0.5.
+    // E = π L (ρ/D)² cos θ.
     const Vec3 to = lamp - x;
     const double dist = Length(to);
-    const double e = kPi * le * (rho / dist) * (rho / dist) * std::max(0.0, to.z / dist);
+    const double e = kPi * lit_by * (rho / dist) * (rho / dist) * std::max(0.0, to.z / dist);
     return Vec3{e, e, e} * (0.5 / kPi);
   });
+}
+
+// All light inside the NeRF: a floor lit by an emitting sphere, no environment.
+TEST(EnvEstimate, FlagsTheEnvironmentNegligibleWhenAllLightIsInside) {
+  const NerfField field = LampOverFloor(30, 30);
   // A small bright source needs enough rays per point: with 128 rays about
   // 2 hit the lamp and E_nerf is quantised noise that the fit then fills with
   // environment light (docs/BENCHMARKS.md "env" measures this trade).
@@ -281,26 +288,7 @@ TEST(EnvEstimate, FlagsTheEnvironmentNegligibleWhenAllLightIsInside) {
 // le): without the near-field gain the fit must make the rest up as
 // environment light; with it the estimate is negligible again.
 TEST(EnvEstimate, NearFieldGainAbsorbsADimNerfLamp) {
-  const Vec3 lamp{0.4, 0.3, 0.35};
-  const double rho = 0.15, le = 30, dim = 3;
-  Shape s;
-  s.sd = [&](const Vec3& p) { return std::min(p.z, Length(p - lamp) - rho); };
-  s.project = [&](const Vec3& p, Vec3* x, Vec3* n) {
-    if (p.z < Length(p - lamp) - rho) {
-      *x = {p.x, p.y, 0};
-      *n = {0, 0, 1};
-    } else {
-      *n = Normalized(p - lamp);
-      *x = lamp + *n * rho;
-    }
-  };
-  const NerfField field = MakeField(kBox, 0.04, s, [&](const Vec3& x, const Vec3&) {
-    if (x.z > 1e-6) return Vec3{le, le, le};
-    const Vec3 to = lamp - x;
-    const double dist = Length(to);
-    const double e = kPi * dim * le * (rho / dist) * (rho / dist) * std::max(0.0, to.z / dist);
-    return Vec3{e, e, e} * (0.5 / kPi);
-  });
+  const NerfField field = LampOverFloor(30, 3 * 30);
   EnvEstimateOptions o = TestOptions();  // as in the test above
   o.rays_per_point = 512;
   o.near_field_pool_m = 0.15;
