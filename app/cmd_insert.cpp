@@ -117,7 +117,8 @@ int RunInsert(const CommandArgs& args) {
   std::string preset = "balanced", light_source, truth_dir, light_probe;
   std::vector<std::string> object_paths, pose_paths, mesh_paths, material_paths;
   int light_directions = -1, sg_lobes = -1, kappa_step = -1, occlusion_step = -1;
-  double kappa_cache = -1;
+  double kappa_cache = -1, receiver_reuse = -1;
+  bool no_cell_normals = false;
   bool gamma_per_pixel = false;
   double shadow_reach = -1, self_shadow_offset = -1, receiver_min_opacity = -1;
   bool no_self_shadow = false, no_shadows = false, paper_gamma = false, truth_geometry = false;
@@ -152,6 +153,11 @@ int RunInsert(const CommandArgs& args) {
   parser.Option(
       "--kappa-cache", &kappa_cache, "H",
       "κ kept on a world lattice of H bounding radii while nothing moves (balanced: 0.1; 0: exact per pixel)");
+  parser.Option("--receiver-reuse", &receiver_reuse, "T",
+                "κ receivers taken from the last frame's within T bounding radii of their planes (fast/balanced: "
+                "0.02; 0: every receiver marched)");
+  parser.Flag("--no-cell-normals", &no_cell_normals,
+              "a NeRF normal per κ receiver, not one per κ lattice cell shared by all views");
   parser.Flag("--gamma-per-pixel", &gamma_per_pixel, "self-shadow γ by an SSDF query per pixel, not per mesh vertex");
   parser.Flag("--no-self-shadow", &no_self_shadow, "objects do not shadow themselves or each other");
   parser.Flag("--no-shadows", &no_shadows, "no shadows on the scene (κ = 1)");
@@ -196,6 +202,9 @@ int RunInsert(const CommandArgs& args) {
   if (kappa_step != -1) options.kappa_step = kappa_step;
   if (occlusion_step != -1) options.occlusion_step = occlusion_step;
   if (kappa_cache >= 0) options.kappa_cache_spacing_radii = kappa_cache;
+  if (receiver_reuse == 0) options.kappa_receiver_reuse = false;
+  if (receiver_reuse != -1 && receiver_reuse != 0) options.kappa_reuse_tolerance_radii = receiver_reuse;  // validated
+  if (no_cell_normals) options.receiver_normal_per_cell = false;
   if (gamma_per_pixel) options.self_shadow_per_vertex = false;
   if (shadow_reach != -1) options.shadow_reach_radii = shadow_reach;
   if (self_shadow_offset != -1) options.self_shadow_offset_radii = self_shadow_offset;
