@@ -18,6 +18,7 @@
 #include "render/mesh/mesh.h"
 #include "render/ssdf/ssdf.h"
 #include "render/synth/camera_stream.h"
+#include "tests/app/live_scene.h"
 
 namespace nerfar {
 namespace {
@@ -40,18 +41,8 @@ struct LiveRun {
   std::unique_ptr<LivePipeline> pipeline;
 
   LiveRun(const SgMaterial& material, const std::string& preset, const SsdfField* field = nullptr) {
-    synth::CameraStreamOptions stream;
-    stream.scene = "lamps";
-    stream.width = 640;  // tracked at this size, composited at half
-    stream.height = 480;
-    stream.samples_per_pixel = 1;
-    stream.speed = 1e-4;  // nearly still: the object covers the same pixels in every frame
-    source = std::make_unique<synth::SyntheticCameraSource>(stream);
-    AnalyticSceneParams table;
-    table.has_sphere = false;
-    table.has_medium = false;
-    table.checker_size_m = 0;
-    scene = std::make_unique<AnalyticScene>(table);
+    source = std::make_unique<synth::SyntheticCameraSource>(NearlyStillLampsStream());
+    scene = std::make_unique<AnalyticScene>(PlainTable());
     ball = MakeUvSphere(kRadius, 32, 16);
     LiveAsset asset;
     asset.name = "ball";

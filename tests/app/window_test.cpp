@@ -21,6 +21,7 @@
 #include "render/insert/scene_field.h"
 #include "render/mesh/mesh.h"
 #include "render/synth/camera_stream.h"
+#include "tests/app/live_scene.h"
 #include "tests/support/support.h"
 #include "tracking/frame_sources.h"
 
@@ -133,18 +134,8 @@ class LiveAppTest : public WindowTest {
     WindowTest::SetUp();
     if (IsSkipped()) return;
     if (std::system("command -v xdotool >/dev/null 2>&1") != 0) GTEST_SKIP() << "xdotool not installed";
-    synth::CameraStreamOptions stream;
-    stream.scene = "lamps";
-    stream.width = 640;  // tracked at this size (small tags need the pixels), composited at half
-    stream.height = 480;
-    stream.samples_per_pixel = 1;
-    stream.speed = 1e-4;  // the camera barely moves: screenshots a second apart compare pixel for pixel
-    source_ = std::make_unique<synth::SyntheticCameraSource>(stream);
-    AnalyticSceneParams table;
-    table.has_sphere = false;
-    table.has_medium = false;
-    table.checker_size_m = 0;
-    scene_ = std::make_unique<AnalyticScene>(table);
+    source_ = std::make_unique<synth::SyntheticCameraSource>(NearlyStillLampsStream());
+    scene_ = std::make_unique<AnalyticScene>(PlainTable());
     ball_ = MakeUvSphere(kRadius, 32, 16);
     LiveAsset asset;
     asset.name = "ball";
