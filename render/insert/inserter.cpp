@@ -482,12 +482,17 @@ int ReuseReceiver(const ReceiverFrame& r, const Vec3f& eye, const Vec3f& d, int 
 // ------------------------------------------------------------------ inserter
 
 // κ at world lattice nodes per receiver-normal cell, shared by the threads of
-// a frame (sharded locks); `key` says which objects and lights it holds.
+// a frame; `key` says which objects and lights it holds. Each shard holds a
+// read-only snapshot (`frozen`, the nodes of earlier frames: read without a
+// lock, nothing writes it during a frame) and the nodes computed this frame
+// (`fresh`, under the shard's mutex); Publish() (single-threaded, at the
+// start of a frame) moves the fresh nodes into the snapshot.
 struct Inserter::KappaCache {
   static constexpr size_t kShards = 64;
   struct Shard {
+    std::unordered_map<uint64_t, float> frozen;
     std::mutex mutex;
-    std::unordered_map<uint64_t, float> values;
+    std::unordered_map<uint64_t, float> fresh;
   };
   std::vector<double> key;
   std::array<Shard, kShards> shards;
@@ -495,29 +500,43 @@ struct Inserter::KappaCache {
   static size_t ShardOf(uint64_t key) { return (key * 0x9E3779B97F4A7C15ull) >> 58; }
   bool Find(uint64_t node, float* value) {
     Shard& s = shards[ShardOf(node)];
+    const auto it = s.frozen.find(node);  // read-only during the frame: no lock
+    if (it != s.frozen.end()) {
+      *value = it->second;
+      return true;
+    }
     std::lock_guard<std::mutex> lock(s.mutex);
-    const auto it = s.values.find(node);
-    if (it == s.values.end()) return false;
-    *value = it->second;
+    const auto jt = s.fresh.find(node);
+    if (jt == s.fresh.end()) return false;
+    *value = jt->second;
     return true;
   }
   void Insert(uint64_t node, float value) {
     Shard& s = shards[ShardOf(node)];
     std::lock_guard<std::mutex> lock(s.mutex);
-    s.values.emplace(node, value);
+    s.fresh.emplace(node, value);
+  }
+  // Single-threaded, between frames: this frame's nodes join the snapshot.
+  void Publish() {
+    for (Shard& s : shards) {
+      if (s.fresh.empty()) continue;
+      s.frozen.insert(s.fresh.begin(), s.fresh.end());
+      s.fresh.clear();
+    }
   }
   size_t Size() {
     size_t n = 0;
     for (Shard& s : shards) {
       std::lock_guard<std::mutex> lock(s.mutex);
-      n += s.values.size();
+      n += s.frozen.size() + s.fresh.size();
     }
     return n;
   }
   void Clear() {
     for (Shard& s : shards) {
       std::lock_guard<std::mutex> lock(s.mutex);
-      s.values.clear();
+      s.frozen.clear();
+      s.fresh.clear();
     }
     std::lock_guard<std::mutex> lock(box_mutex);
     shadow_min = Vec3f{std::numeric_limits<float>::infinity(), std::numeric_limits<float>::infinity(),
@@ -946,6 +965,7 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
         kappa_cache_->Clear();
         kappa_cache_->key = std::move(key);
       }
+      kappa_cache_->Publish();  // the last frame's nodes: read without locks this frame
       cache = kappa_cache_.get();
     }
     // A view already passed whole under this cache (receivers marched by
