@@ -142,6 +142,15 @@ void KappaDifference(const InsertLayers& la, const InsertLayers& lb, const Camer
   if (shadow > 0) mean = std::max(mean, diff / shadow);
 }
 
+// One hand-held frame after the first (a function of its own so that
+// `valgrind --tool=callgrind --toggle-collect='*RenderHandHeldFrame*'` counts
+// exactly these frames' instructions).
+__attribute__((noinline)) InsertTimings RenderHandHeldFrame(Inserter& inserter, const CameraIntrinsics& camera,
+                                                            const Pose& cam, const InsertObject& object, ImageF& frame,
+                                                            InsertLayers& layers) {
+  return inserter.Render(camera, cam, {object}, frame, &layers);
+}
+
 // Object still, the camera translated by 3 mm (and 1 mm sideways) per frame
 // from T_world_camera: `frames` frames with the options given and the same
 // ones with the exact receivers (kappa_receiver_reuse and
@@ -156,13 +165,23 @@ void TimeHandHeld(const NerfScene& scene, const SgMixture& environment, const In
       jitter(scene, environment, marched_options), truth(scene, environment, marched_options);
   const ImageF background(camera.width, camera.height, 3, 0.3f);
   std::vector<double> kappa, frame_ms, n_marched, n_reused, kappa_all, frame_all, n_marched_all;
+  // NERFAR_BENCH_INSERT_HANDHELD_ONLY=1 (for profiling): the preset's
+  // hand-held frames alone, no reference renders (error rows stay 0).
+  const char* only_env = std::getenv("NERFAR_BENCH_INSERT_HANDHELD_ONLY");
+  const bool handheld_only = only_env != nullptr && std::string(only_env) == "1";
   for (int f = 0; f < frames; ++f) {
     Pose cam = T_world_camera;
     cam.translation.x += 3e-3 * f;
     cam.translation.y += 1e-3 * f;
     ImageF fa = background, fb = background;
     InsertLayers la, lb;
-    const InsertTimings ta = reuse.Render(camera, cam, {object}, fa, &la);
+    const InsertTimings ta =
+        f == 0 ? reuse.Render(camera, cam, {object}, fa, &la) : RenderHandHeldFrame(reuse, camera, cam, object, fa, la);
+    if (handheld_only) {
+      if (f > 0) kappa.push_back(ta.kappa_ms), frame_ms.push_back(ta.total_ms);
+      if (f > 0) n_marched.push_back(double(ta.kappa_marched)), n_reused.push_back(double(ta.kappa_reused));
+      continue;
+    }
     const InsertTimings tb = marched.Render(camera, cam, {object}, fb, &lb);
     if (f == 0) continue;  // the first frame builds the caches
     kappa.push_back(ta.kappa_ms);
@@ -215,6 +234,8 @@ StageMedians TimePreset(const NerfScene& scene, const SgMixture& environment, co
   }
   StageMedians m;
   m.coverage = double(layers.gbuffer.covered) / (double(camera.width) * camera.height);
+  const char* only_env = std::getenv("NERFAR_BENCH_INSERT_HANDHELD_ONLY");
+  if (only_env != nullptr && std::string(only_env) == "1") repeats = 0;  // profiling the hand-held frames
   for (int r = 0; r < repeats; ++r) {
     // The object still: the incident light is reused.
     ImageF frame = background;

@@ -153,6 +153,19 @@ struct CellPlane {
 struct KappaScratch {
   std::vector<double> s_bound, s_exact, cap;
   std::vector<float> ssd;
+  // The lattice nodes this thread looked up last (direct-mapped by key; value
+  // -1: empty): neighbouring receivers of a row share most of their 8 nodes,
+  // and the shared lattice's hash look-up (a cache miss or two) is what
+  // dominates κ on a hand-held frame. Holds exactly the lattice's values.
+  static constexpr size_t kMemo = 256;
+  std::array<uint64_t, kMemo> memo_key{};
+  std::array<float, kMemo> memo_value = MemoEmpty();
+  static std::array<float, kMemo> MemoEmpty() {
+    std::array<float, kMemo> v;
+    v.fill(-1.0f);
+    return v;
+  }
+  static size_t MemoSlot(uint64_t key) { return (key * 0x9E3779B97F4A7C15ull) >> 56; }
 };
 
 // Receiver normals in 32×32 octahedral cells (the κ lattice is kept per cell).
@@ -1133,8 +1146,11 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
           total += weight;
           const int64_t i = int64_t(bx) + dx, j = int64_t(by) + dy, k = int64_t(bz) + dz;
           const uint64_t key = LatticeKey(i, j, k, cell);
+          const size_t slot = KappaScratch::MemoSlot(key);
           float value;
-          if (!cache->Find(key, &value)) {
+          if (sc.memo_key[slot] == key && sc.memo_value[slot] >= 0.0f) {
+            value = sc.memo_value[slot];
+          } else if (!cache->Find(key, &value)) {
             bool queried = false;
             const Vec3f node(Vec3(double(i), double(j), double(k)) * spacing);
             value = kappa_at(node, n_cell, sc, &queried);
@@ -1143,6 +1159,8 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
             ++evaluated_per_row[row];
             if (queried) ++queries_per_row[row];
           }
+          sc.memo_key[slot] = key;
+          sc.memo_value[slot] = value;
           sum += weight * value;
         }
         return total > 0.0 ? static_cast<float>(std::clamp(sum / total, 0.0, 1.0)) : 1.0f;
@@ -1365,7 +1383,10 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
         kept.normal = std::move(node_normal);
       }
       // Bilinear from the sample grid to every pixel; multiply the background
-      // where no object covers it.
+      // where no object covers it. Cell by cell of the grid: a cell whose
+      // four nodes hold κ = 1 is skipped whole (the layer is 1 already; the
+      // per-pixel sum of its weights could round 1 ulp under 1, the only
+      // difference from doing every pixel).
       ParallelFor(
           static_cast<size_t>(rect.height()),
           [&](size_t r) {
@@ -1373,17 +1394,26 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
             const size_t iy = std::min<size_t>((y - rect.y0) / step, ny >= 2 ? ny - 2 : 0);
             const float wy = ny >= 2 ? float(y - ys[iy]) / float(ys[iy + 1] - ys[iy]) : 0.0f;
             const size_t iy1 = ny >= 2 ? iy + 1 : iy;
-            for (int x = rect.x0; x < rect.x1; ++x) {
-              const size_t ix = std::min<size_t>((x - rect.x0) / step, nx >= 2 ? nx - 2 : 0);
-              const float wx = nx >= 2 ? float(x - xs[ix]) / float(xs[ix + 1] - xs[ix]) : 0.0f;
+            const float* g0 = &kappa_grid[iy * nx];
+            const float* g1 = &kappa_grid[iy1 * nx];
+            float* out = &layers.kappa.at(0, y - rect.y0);
+            const bool object_row = y >= g.rect.y0 && y < g.rect.y1;
+            const size_t cells = nx >= 2 ? nx - 1 : 1;
+            for (size_t ix = 0; ix < cells; ++ix) {
               const size_t ix1 = nx >= 2 ? ix + 1 : ix;
-              const float k = (1 - wx) * (1 - wy) * kappa_grid[iy * nx + ix] +
-                              wx * (1 - wy) * kappa_grid[iy * nx + ix1] + (1 - wx) * wy * kappa_grid[iy1 * nx + ix] +
-                              wx * wy * kappa_grid[iy1 * nx + ix1];
-              layers.kappa.at(x - rect.x0, y - rect.y0) = k;
-              if (k >= 1.0f) continue;
-              if (g.rect.Contains(x, y) && g.object[g.Index(x, y)] >= 0) continue;
-              for (int ch = 0; ch < 3; ++ch) frame.at(x, y, ch) *= k;
+              const float a = g0[ix], b = g0[ix1], c = g1[ix], d = g1[ix1];
+              if (a >= 1.0f && b >= 1.0f && c >= 1.0f && d >= 1.0f) continue;
+              const int x_begin = nx >= 2 ? xs[ix] : rect.x0;
+              const int x_end = nx >= 2 && ix + 2 < nx ? xs[ix1] : rect.x1;
+              const float span = nx >= 2 ? float(xs[ix1] - xs[ix]) : 1.0f;
+              for (int x = x_begin; x < x_end; ++x) {
+                const float wx = nx >= 2 ? float(x - xs[ix]) / span : 0.0f;
+                const float k = (1 - wx) * (1 - wy) * a + wx * (1 - wy) * b + (1 - wx) * wy * c + wx * wy * d;
+                out[x - rect.x0] = k;
+                if (k >= 1.0f) continue;
+                if (object_row && g.rect.Contains(x, y) && g.object[g.Index(x, y)] >= 0) continue;
+                for (int ch = 0; ch < 3; ++ch) frame.at(x, y, ch) *= k;
+              }
             }
           },
           4);
