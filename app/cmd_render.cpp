@@ -4,9 +4,11 @@
 // metres), OUT/r_003_opacity.exr (Y), and OUT/report.json with psnr_tm per
 // view and mean (against the split's images, and against insert/bg_XXX.exr
 // where the scene has them) and the depth error on surfaces.
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <nlohmann/json.hpp>
+#include <vector>
 
 #include "app/cli.h"
 #include "app/commands.h"
@@ -22,6 +24,7 @@ int RunRender(const CommandArgs& args) {
   std::string model, dataset, output;
   NerfEvalOptions options;
   double step_voxels = options.render.step_voxels;
+  double occupancy_sigma = 0;
   ArgParser parser("render", "Render a NeRF at a dataset's cameras and score it (psnr_tm, depth).");
   parser.Positional("MODEL", &model, "trained model (.nerf)");
   parser.Option("--dataset", &dataset, "DIR", "dataset folder whose cameras to render (required)");
@@ -29,6 +32,9 @@ int RunRender(const CommandArgs& args) {
   parser.Option("-o", &output, "OUT", "output folder (required)");
   parser.Flag("--png", &options.write_png, "also write OUT/<name>.png: render beside reference, tone-mapped");
   parser.Option("--step-voxels", &step_voxels, "S", "sample spacing in voxels (default 0.5)");
+  parser.Option("--occupancy-sigma", &occupancy_sigma, "S",
+                "re-threshold the model's occupancy at S (1/m) before rendering: cells whose corners all lie "
+                "below S are skipped (what train's save_occupancy_sigma does to the saved model; default: as saved)");
   parser.Epilog(
       "Writes OUT/<name>.exr, OUT/<name>_depth.exr, OUT/<name>_surface_depth.exr, OUT/<name>_opacity.exr and "
       "OUT/report.json.");
@@ -38,7 +44,14 @@ int RunRender(const CommandArgs& args) {
   if (!(step_voxels > 0.05 && step_voxels <= 2)) throw InputError("nerfar render: --step-voxels (expected 0.05..2)");
   options.render.step_voxels = float(step_voxels);
   options.output_dir = output;
-  const NerfField field = LoadNerf(model);
+  if (!(occupancy_sigma >= 0 && occupancy_sigma < 1e3))
+    throw InputError("nerfar render: --occupancy-sigma (expected 0..1000 per metre)");
+  NerfField field = LoadNerf(model);
+  if (occupancy_sigma > 0) field.UpdateOccupancy(float(occupancy_sigma));
+  // What the model would take as a file (as saved, or after re-thresholding).
+  const double model_mb = double(SerializeNerf(field).size()) / 1e6;
+  std::printf("model: %.1f MB as a file, %.1f %% of cells occupied (threshold %g/m)\n", model_mb,
+              100.0 * field.OccupiedFraction(), double(field.occupancy_sigma));
   const NerfEvaluation eval = EvaluateNerf(field, dataset, options);
 
   const bool reference = eval.mean_psnr_reference >= 0;
@@ -60,13 +73,25 @@ int RunRender(const CommandArgs& args) {
               eval.depth_median_m >= 0 ? std::to_string(eval.depth_median_m * 1e3).substr(0, 6).c_str() : "-");
   if (reference)
     std::printf("reference: %s/bg_XXX.exr (low-noise renders of the same cameras)\n", eval.reference_folder.c_str());
-  Json report = {
-      {"model", model},         {"dataset", dataset},
-      {"split", options.split}, {"metric", "psnr_tm (DESIGN.md): tm(k x), k = 1 / p99 luminance of the truth"},
-      {"views", views},         {"mean_psnr_tm_dataset_db", eval.mean_psnr_dataset}};
+  Json report = {{"model", model},
+                 {"dataset", dataset},
+                 {"split", options.split},
+                 {"metric", "psnr_tm (DESIGN.md): tm(k x), k = 1 / p99 luminance of the truth"},
+                 {"views", views},
+                 {"mean_psnr_tm_dataset_db", eval.mean_psnr_dataset},
+                 {"model_file_mb", model_mb},
+                 {"occupied_fraction", field.OccupiedFraction()},
+                 {"occupancy_sigma", field.occupancy_sigma}};
   if (reference) {
     report["mean_psnr_tm_reference_db"] = eval.mean_psnr_reference;
     report["reference"] = eval.reference_folder + "/bg_XXX.exr";
+  }
+  if (!eval.views.empty()) {
+    std::vector<double> ms;
+    for (const NerfViewScore& v : eval.views) ms.push_back(v.render_ms);
+    std::nth_element(ms.begin(), ms.begin() + ms.size() / 2, ms.end());
+    report["median_render_ms"] = ms[ms.size() / 2];
+    std::printf("render time per view (median): %.1f ms\n", ms[ms.size() / 2]);
   }
   if (eval.depth_median_m >= 0) report["depth_median_error_m"] = eval.depth_median_m;
   if (eval.surface_depth_median_m >= 0) {

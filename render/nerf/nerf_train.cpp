@@ -72,6 +72,10 @@ NerfTrainOptions NerfTrainOptions::Preset(const std::string& name) {
     o.coarse_voxel_m = 0.01;
     o.levels = 2;
     o.last_level_start = 0.35;
+    // Saved at 5/m (measured, full schedule): lamps +0.14 dB, window -0.31 dB;
+    // surface depth 22.9 -> 21.2 mm / 8.4 -> 7.1 mm; files 35 -> 21 MB / 34 -> 22 MB.
+    // At 2.5 mm (balanced) it costs 0.3 dB for 24 % of the file: not set there.
+    o.save_occupancy_sigma = 5.0;
   } else if (name == "balanced") {
     o.steps = 2500;
     o.rays_per_step = 8192;
@@ -114,9 +118,11 @@ std::vector<std::string> NerfTrainOptions::Validate() const {
   check(loss_epsilon > 0, "loss_epsilon: (expected > 0)");
   check(occupancy_every >= 1, "occupancy_every: (expected >= 1)");
   check(occupancy_sigma >= 0 && occupancy_sigma < 1e3, "occupancy_sigma: (expected 0..1000 per metre)");
+  check(save_occupancy_sigma >= 0 && save_occupancy_sigma < 1e3, "save_occupancy_sigma: (expected 0..1000 per metre)");
   check(prune_delay >= 0, "prune_delay: (expected >= 0)");
   check(prune_weight >= 0 && prune_weight < 1, "prune_weight: (expected 0 <= x < 1)");
   check(prune_every >= 1, "prune_every: (expected >= 1)");
+  check(prune_relative >= 0 && prune_relative < 1, "prune_relative: (expected 0 <= x < 1)");
   check(initial_sigma > 0 && initial_sigma < 1e4, "initial_sigma: (expected 0..1e4 per metre)");
   check(max_seconds >= 0, "max_seconds: (expected >= 0)");
   check(eval_views >= 0, "eval_views: (expected >= 0)");
@@ -145,9 +151,11 @@ void VisitFields(NerfTrainOptions& o, Visit&& visit) {
   visit("loss_epsilon", o.loss_epsilon);
   visit("occupancy_every", o.occupancy_every);
   visit("occupancy_sigma", o.occupancy_sigma);
+  visit("save_occupancy_sigma", o.save_occupancy_sigma);
   visit("prune_delay", o.prune_delay);
   visit("prune_weight", o.prune_weight);
   visit("prune_every", o.prune_every);
+  visit("prune_relative", o.prune_relative);
   visit("initial_sigma", o.initial_sigma);
   visit("seed", o.seed);
   visit("max_seconds", o.max_seconds);
@@ -342,6 +350,7 @@ double NerfTrainer::State::DoStep() {
   const float dist_w = float(options.distortion_weight);
   const float sparse_w = float(options.sparsity_weight);
   const float sparse_g = sparse_w * inv_batch;
+  const float relative = level == options.levels - 1 ? float(options.prune_relative) : 0.0f;
   const uint64_t step_key = Mix64(options.seed * 0x9e37ull + uint64_t(step));
 
   ParallelForChunks(chunks, 1, [&](size_t chunk_begin, size_t chunk_end) {
@@ -456,6 +465,16 @@ double NerfTrainer::State::DoStep() {
           for (const Sample& s : samples) alpha_sum += s.alpha;
           loss_sum += double(sparse_w) * alpha_sum;
         }
+        // Samples below this weight do not count as seen for pruning (prune_relative).
+        float seen_min = 0.0f;
+        if (relative > 0.0f) {
+          float tw = 1.0f, peak = 0.0f;
+          for (const Sample& s : samples) {
+            peak = std::max(peak, tw * s.alpha);
+            tw *= 1.0f - s.alpha;
+          }
+          seen_min = relative * peak;
+        }
         // Backward (front to back with the suffix colour S_i = C - prefix).
         float t_i = 1.0f;
         Vec3f prefix;
@@ -475,7 +494,7 @@ double NerfTrainer::State::DoStep() {
           g_raw += t_next * s.g_w - suffix_w;
           g_raw += sparse_g * (1.0f - s.alpha);  // d(λ α)/d(σ δ)
           rec.g_density = g_raw * s.dt * s.sigma;
-          rec.w = w;
+          rec.w = w >= seen_min ? w : 0.0f;
           std::memcpy(rec.slot, s.corners.slot, sizeof rec.slot);
           std::memcpy(rec.weight, s.corners.weight, sizeof rec.weight);
           rec.dir = ray.dir;
@@ -693,7 +712,8 @@ double NerfTrainer::HeldOutPsnr(int max_views) const {
 
 NerfField NerfTrainer::FinalField() const {
   NerfField f = state_->field;
-  f.UpdateOccupancy(state_->OccupancySigma());
+  const double save_sigma = state_->options.save_occupancy_sigma;
+  f.UpdateOccupancy(save_sigma > 0 ? float(save_sigma) : state_->OccupancySigma());
   return f;
 }
 
@@ -769,7 +789,8 @@ void NerfTrainer::SaveCheckpoint(const std::string& path) const {
   const State& s = *state_;
   std::string out(kCheckpointMagic, 8);
   NerfTrainOptions identity = s.options;
-  identity.max_seconds = 0;  // a resumed run may have another time budget
+  identity.max_seconds = 0;           // a resumed run may have another time budget
+  identity.save_occupancy_sigma = 0;  // applies to the saved model only
   PutString(out, identity.ToJson());
   PutString(out, s.data.source + " " + std::to_string(s.data.train.size()));
   Put(out, int32_t(s.step));
@@ -805,6 +826,7 @@ void NerfTrainer::LoadCheckpoint(const std::string& path) {
   r.Get<uint64_t>();
   NerfTrainOptions identity = s.options;
   identity.max_seconds = 0;
+  identity.save_occupancy_sigma = 0;
   if (r.GetString() != identity.ToJson())
     ThrowInputError(path,
                     "checkpoint was made with other training options (use the same preset and --set, or delete it)");

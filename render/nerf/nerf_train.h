@@ -96,6 +96,12 @@ struct NerfTrainOptions {
   // every level (not scaled with 1/voxel), so surfaces blurred by upsampling are
   // never pruned; 1/m stops under 1 % of the light over 1 cm.
   double occupancy_sigma = 1.0;
+  // Occupancy threshold (1/m) of the saved model (FinalField); 0: occupancy_sigma.
+  // Cells whose corners all stay below it are empty in the file: the renderer
+  // skips them and the file stores none of their vertices. A higher value than
+  // the training threshold drops the faint fog training leaves around surfaces
+  // (σ of a few per metre), which is most of the finest level's cells.
+  double save_occupancy_sigma = 0.0;
   // Steps after each upsampling before the occupancy is refreshed (the new level keeps
   // every cell it was given); the first level prunes from the start.
   int prune_delay = 64;
@@ -108,6 +114,11 @@ struct NerfTrainOptions {
   // long enough for every surface cell to be hit: prune_every x rays_per_step
   // rays ~ 5e5 hit a 5 mm cell of these scenes ~17 times on average.
   double prune_weight = 1e-3;
+  // At the finest level only (surfaces are opaque by then), a sample counts for
+  // pruning only if its weight is at least this fraction of the largest weight
+  // on its ray: faint fog in front of or behind a surface is then emptied even
+  // where its absolute weight exceeds prune_weight. 0 switches it off.
+  double prune_relative = 0.0;
   int prune_every = 128;
   // Initial density (1/m) of the coarse level: a light fog that lets every voxel receive gradients.
   double initial_sigma = 4.0;

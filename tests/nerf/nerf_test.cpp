@@ -4,6 +4,7 @@
 // independence and checkpoint resume.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -495,6 +496,53 @@ TEST(NerfTrain, PruningEmptiesUnseenSpaceAndKeepsSurfaces) {
     ray.origin = Vec3f(p.x, p.y, p.z_top) - ray.dir * 0.3f;
     ASSERT_TRUE(IntersectAabb(pruned.aabb, ray.origin, ray.dir, ray.t_near, ray.t_far));
     EXPECT_GT(pruned.RenderRay(ray).opacity, 0.9f) << "face at (" << p.x << ", " << p.y << ", " << p.z_top << ")";
+  }
+}
+
+TEST(NerfTrain, RelativePruningAndSaveThresholdKeepSurfacesAndDropFaintCells) {
+  // The tiny scene trained with the finest level's relative pruning and a save
+  // threshold 10x the training one, against plain training: the saved model
+  // must occupy fewer cells and be a smaller file, every cell it keeps must
+  // have a corner above the save threshold (brute force over the grid), and
+  // the faces must stay opaque (the thresholds drop faint cells, not surfaces).
+  const NerfTrainData data = TinyScene();
+  auto train = [&](double relative, double save_sigma) {
+    NerfTrainOptions o = TinyOptions();
+    o.prune_every = 40;  // as in the pruning test above
+    o.prune_relative = relative;
+    o.save_occupancy_sigma = save_sigma;
+    NerfTrainer t(data, o);
+    while (!t.Done()) t.Step();
+    return t.FinalField();
+  };
+  const NerfField plain = train(0.0, 0.0), lean = train(0.03, 10.0);
+  EXPECT_FLOAT_EQ(lean.occupancy_sigma, 10.0f);
+  EXPECT_LT(lean.OccupiedFraction(), plain.OccupiedFraction());
+  EXPECT_LT(SerializeNerf(lean).size(), SerializeNerf(plain).size());
+  const float raw_threshold = std::log(10.0f);
+  size_t checked = 0;
+  for (size_t b = 0; b < lean.BrickCount(); ++b)
+    for (int cell = 0; cell < 64; ++cell) {
+      if (!((lean.occupancy[b] >> cell) & 1u)) continue;
+      const int i = lean.brick_coords[3 * b] * 4 + (cell & 3), j = lean.brick_coords[3 * b + 1] * 4 + ((cell >> 2) & 3),
+                k = lean.brick_coords[3 * b + 2] * 4 + (cell >> 4);
+      float max_raw = -1e30f;
+      for (int n = 0; n < 8; ++n) {
+        const int32_t s = lean.Slot(i + (n & 1), j + ((n >> 1) & 1), k + (n >> 2));
+        if (s >= 0) max_raw = std::max(max_raw, lean.density[s]);
+      }
+      EXPECT_GT(max_raw, raw_threshold) << "occupied cell " << i << " " << j << " " << k;
+      ++checked;
+    }
+  EXPECT_GT(checked, 0u);
+  // Visible top faces at a training elevation (0.6 rad), as in the pruning test.
+  const float faces[][3] = {{-0.3f, -0.2f, 0.0f}, {0.3f, 0.2f, 0.0f}, {-0.15f, 0.0f, 0.2f}, {0.15f, -0.1f, 0.1f}};
+  for (const auto& p : faces) {
+    NerfRay ray;
+    ray.dir = Normalized(Vec3f(-std::cos(0.6f), 0.0f, -std::sin(0.6f)));
+    ray.origin = Vec3f(p[0], p[1], p[2]) - ray.dir * 0.3f;
+    ASSERT_TRUE(IntersectAabb(lean.aabb, ray.origin, ray.dir, ray.t_near, ray.t_far));
+    EXPECT_GT(lean.RenderRay(ray).opacity, 0.9f) << "face at (" << p[0] << ", " << p[1] << ", " << p[2] << ")";
   }
 }
 
