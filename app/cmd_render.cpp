@@ -25,6 +25,7 @@ int RunRender(const CommandArgs& args) {
   NerfEvalOptions options;
   double step_voxels = options.render.step_voxels;
   double occupancy_sigma = 0;
+  std::string save_model;
   ArgParser parser("render", "Render a NeRF at a dataset's cameras and score it (psnr_tm, depth).");
   parser.Positional("MODEL", &model, "trained model (.nerf)");
   parser.Option("--dataset", &dataset, "DIR", "dataset folder whose cameras to render (required)");
@@ -35,6 +36,8 @@ int RunRender(const CommandArgs& args) {
   parser.Option("--occupancy-sigma", &occupancy_sigma, "S",
                 "re-threshold the model's occupancy at S (1/m) before rendering: cells whose corners all lie "
                 "below S are skipped (what train's save_occupancy_sigma does to the saved model; default: as saved)");
+  parser.Option("--save-model", &save_model, "FILE",
+                "also write the model as rendered (after --occupancy-sigma: a smaller file) to FILE");
   parser.Epilog(
       "Writes OUT/<name>.exr, OUT/<name>_depth.exr, OUT/<name>_surface_depth.exr, OUT/<name>_opacity.exr and "
       "OUT/report.json.");
@@ -48,6 +51,7 @@ int RunRender(const CommandArgs& args) {
     throw InputError("nerfar render: --occupancy-sigma (expected 0..1000 per metre)");
   NerfField field = LoadNerf(model);
   if (occupancy_sigma > 0) field.UpdateOccupancy(float(occupancy_sigma));
+  if (!save_model.empty()) SaveNerf(save_model, field);
   // What the model would take as a file (as saved, or after re-thresholding).
   const double model_mb = double(SerializeNerf(field).size()) / 1e6;
   std::printf("model: %.1f MB as a file, %.1f %% of cells occupied (threshold %g/m)\n", model_mb,
