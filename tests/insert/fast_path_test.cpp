@@ -9,6 +9,7 @@
 
 #include "render/insert/inserter.h"
 #include "render/sg/sphere.h"
+#include "tests/insert/kappa_compare.h"
 #include "tests/insert/test_camera.h"
 
 namespace nerfar {
@@ -148,11 +149,8 @@ TEST(FastPath, KappaLatticeMatchesExactKappaAndIsKeptWhileStill) {
   Inserter(scene, {}, exact).Render(camera, cam, {object.Object(&light)}, fa, &la);
   Inserter inserter(scene, {}, cached);
   const InsertTimings first = inserter.Render(camera, cam, {object.Object(&light)}, fb, &lb);
-  double diff = 0, shadow = 0;
-  for (size_t i = 0; i < la.kappa.pixels.size(); ++i) {
-    diff += std::abs(la.kappa.pixels[i] - lb.kappa.pixels[i]);
-    shadow += 1 - la.kappa.pixels[i];
-  }
+  const testing::KappaDifference d = testing::CompareKappa(lb.kappa, la.kappa);
+  const double diff = d.sum, shadow = d.shadow;
   ASSERT_GT(shadow, 10.0);
   // Trilinear κ at 0.1-radius lattice nodes (5 mm) with the normal in a
   // ~4° cell: the shadow's edge (penumbra ~1 cm wide under this λ = 40 lobe
@@ -177,12 +175,7 @@ TEST(FastPath, KappaLatticeMatchesExactKappaAndIsKeptWhileStill) {
   ImageF f4 = frame;
   InsertLayers l4;
   Inserter(scene, {}, exact).Render(camera, cam, {object.Object(&light)}, f4, &l4);
-  double diff_moved = 0, shadow_moved = 0;
-  for (size_t i = 0; i < l3.kappa.pixels.size(); ++i) {
-    diff_moved += std::abs(l3.kappa.pixels[i] - l4.kappa.pixels[i]);
-    shadow_moved += 1 - l4.kappa.pixels[i];
-  }
-  EXPECT_LT(diff_moved / shadow_moved, 0.05);
+  EXPECT_LT(testing::CompareKappa(l3.kappa, l4.kappa).Relative(), 0.05);
 }
 
 // A view already passed whole: κ is passed only over the projection of the
@@ -273,12 +266,8 @@ TEST(FastPath, HandHeldFramesReuseReceivers) {
     }
     const ImageF ka = ExpandLayer(la.kappa, la.kappa_rect, camera.width, camera.height, 1.0f);
     const ImageF kb = ExpandLayer(lb.kappa, lb.kappa_rect, camera.width, camera.height, 1.0f);
-    double diff = 0, shadow = 0, max_diff = 0;
-    for (size_t i = 0; i < ka.pixels.size(); ++i) {
-      diff += std::abs(ka.pixels[i] - kb.pixels[i]);
-      max_diff = std::max<double>(max_diff, std::abs(ka.pixels[i] - kb.pixels[i]));
-      shadow += 1 - kb.pixels[i];
-    }
+    const testing::KappaDifference d = testing::CompareKappa(ka, kb);
+    const double diff = d.sum, shadow = d.shadow, max_diff = d.max;
     ASSERT_GT(shadow, 50.0) << "frame " << f;
     worst_mean = std::max(worst_mean, diff / shadow);
     worst_max = std::max(worst_max, max_diff);

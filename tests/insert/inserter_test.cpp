@@ -15,6 +15,7 @@
 #include "calib/core/error.h"
 #include "calib/core/parallel.h"
 #include "render/sg/sphere.h"
+#include "tests/insert/kappa_compare.h"
 #include "tests/insert/test_camera.h"
 #include "tests/support/support.h"
 
@@ -265,11 +266,8 @@ TEST(Shadow, KappaStepInterpolatesNearTheExactField) {
   Inserter(scene, {}, a).Render(camera, cam, {object.Object(&light)}, fa, &la);
   Inserter(scene, {}, b).Render(camera, cam, {object.Object(&light)}, fb, &lb);
   ASSERT_EQ(la.kappa.pixels.size(), lb.kappa.pixels.size());
-  double sum = 0, shadow = 0;
-  for (size_t i = 0; i < la.kappa.pixels.size(); ++i) {
-    sum += std::abs(la.kappa.pixels[i] - lb.kappa.pixels[i]);
-    shadow += 1 - la.kappa.pixels[i];
-  }
+  const testing::KappaDifference d = testing::CompareKappa(lb.kappa, la.kappa);
+  const double sum = d.sum, shadow = d.shadow;
   // A soft shadow (λ = 10) interpolated every 2 pixels on a 96x72 view, where
   // the penumbra is only a few pixels wide and the sphere's silhouette cuts
   // through the grid cells: within 20% of the shadow's total (measured 0.1-0.2).
@@ -292,13 +290,8 @@ TEST(Shadow, CoarseToFineMatchesEveryNode) {
   Inserter(scene, {}, every).Render(camera, cam, {object.Object(&light)}, fa, &la);
   Inserter(scene, {}, coarse).Render(camera, cam, {object.Object(&light)}, fb, &lb);
   ASSERT_EQ(la.kappa.pixels.size(), lb.kappa.pixels.size());
-  double sum = 0, shadow = 0, worst = 0;
-  for (size_t i = 0; i < la.kappa.pixels.size(); ++i) {
-    const double d = std::abs(la.kappa.pixels[i] - lb.kappa.pixels[i]);
-    sum += d;
-    worst = std::max(worst, d);
-    shadow += 1 - la.kappa.pixels[i];
-  }
+  const testing::KappaDifference d = testing::CompareKappa(lb.kappa, la.kappa);
+  const double sum = d.sum, shadow = d.shadow, worst = d.max;
   ASSERT_GT(shadow, 10.0);
   // Cells are refined wherever their corners differ by more than 0.02, so
   // the interpolated cells are off by about that at most; summed, a few
