@@ -9,56 +9,26 @@
 
 #include "render/insert/inserter.h"
 #include "render/sg/sphere.h"
+#include "tests/insert/insert_fixtures.h"
 #include "tests/insert/kappa_compare.h"
 #include "tests/insert/test_camera.h"
 
 namespace nerfar {
 namespace {
 
-SgMixture Lobe(const Vec3& axis, double sharpness, double amplitude) {
-  Sg sg;
-  sg.axis = Normalized(axis);
-  sg.sharpness = sharpness;
-  sg.amplitude = {amplitude, amplitude, amplitude};
-  return {sg};
-}
-
-struct Ball {
-  TriangleMesh mesh = MakeUvSphere(1.0, 48, 24);
-  Vec3 center;
-  double radius;
-  SphereVisibility visibility;
-  Ball(const Vec3& c, double r) : center(c), radius(r), visibility(c, r) {}
-  InsertObject Object(const SgMixture* light) const {
-    InsertObject o;
-    o.mesh = &mesh;
-    o.T_world_object = {Mat3::Identity(), center};
-    o.scale = radius;
-    o.material.base_color = {0.8, 0.5, 0.3};
-    o.material.roughness = 0.6;
-    o.visibility = &visibility;
-    o.light_override = light;
-    return o;
-  }
-};
-
-AnalyticSceneParams PlainTable() {
-  AnalyticSceneParams p;
-  p.has_sphere = false;
-  p.has_medium = false;
-  p.checker_size_m = 0;
-  return p;
-}
+using testing::OneLobe;
+using testing::PlainTable;
+using testing::SphereObject;
 
 TEST(FastPath, VertexGammaMatchesPerPixelGamma) {
   // The upper ball half-shadows the lower one under a tilted lobe and a sky:
   // γ varies over the lower ball's surface from 0 to 1.
   const AnalyticScene scene(PlainTable());
-  const Ball lower({0.0, 0.0, 0.05}, 0.05), upper({0.04, 0.0, 0.19}, 0.05);
+  const SphereObject lower({0.0, 0.0, 0.05}, 0.05), upper({0.04, 0.0, 0.19}, 0.05);
   const CameraIntrinsics camera = testing::TestCamera(160, 120);
   const Pose cam = LookAt({0.35, -0.15, 0.15}, lower.center);
-  SgMixture light = Lobe({0.3, 0.0, 1.0}, 30.0, 8.0);
-  light.push_back(Lobe({0, 0, 1}, 1.0, 0.5)[0]);
+  SgMixture light = OneLobe({0.3, 0.0, 1.0}, 30.0, 8.0);
+  light.push_back(OneLobe({0, 0, 1}, 1.0, 0.5)[0]);
   InsertOptions exact, fast;
   exact.shadows = fast.shadows = false;
   exact.self_shadow_per_vertex = false;
@@ -100,10 +70,10 @@ TEST(FastPath, CoarseOcclusionMatchesARayPerPixel) {
   AnalyticSceneParams params;
   params.sphere_center = {0.1, 0.06, 0.12};
   const AnalyticScene scene(params);
-  const Ball object({0.0, -0.02, 0.1}, 0.05);
+  const SphereObject object({0.0, -0.02, 0.1}, 0.05);
   const Pose cam = LookAt({0.6, -0.02, 0.1}, object.center);
   const CameraIntrinsics camera = testing::TestCamera(160, 120);
-  const SgMixture light = Lobe({0, 0, 1}, 2.0, 1.0);
+  const SgMixture light = OneLobe({0, 0, 1}, 2.0, 1.0);
   InsertOptions exact, fast;
   exact.shadows = fast.shadows = false;
   exact.occlusion_step = 1;
@@ -131,13 +101,13 @@ TEST(FastPath, CoarseOcclusionMatchesARayPerPixel) {
 
 TEST(FastPath, KappaLatticeMatchesExactKappaAndIsKeptWhileStill) {
   const AnalyticScene scene(PlainTable());
-  Ball object({0.0, 0.0, 0.06}, 0.05);
+  SphereObject object({0.0, 0.0, 0.06}, 0.05);
   // κ at every pixel: receivers ~1.5 mm apart, denser than the 5 mm lattice
   // (as at 1280x720), so that views share lattice nodes.
   const CameraIntrinsics camera = testing::TestCamera(240, 180);
   const Pose cam = LookAt({0.25, -0.3, 0.35}, {0.02, 0.0, 0.0});
-  SgMixture light = Lobe({0.4, 0.1, 1.0}, 40.0, 5.0);
-  light.push_back(Lobe({0, 0, 1}, 0.5, 0.3)[0]);
+  SgMixture light = OneLobe({0.4, 0.1, 1.0}, 40.0, 5.0);
+  light.push_back(OneLobe({0, 0, 1}, 0.5, 0.3)[0]);
   InsertOptions exact, cached;
   exact.kappa_step = cached.kappa_step = 1;
   exact.kappa_coarse_factor = cached.kappa_coarse_factor = 1;
@@ -167,7 +137,7 @@ TEST(FastPath, KappaLatticeMatchesExactKappaAndIsKeptWhileStill) {
       inserter.Render(camera, LookAt({0.26, -0.3, 0.35}, {0.02, 0.0, 0.0}), {object.Object(&light)}, f2);
   EXPECT_LE(near.kappa_evaluated, first.kappa_evaluated / 4);
   // The object moved: the lattice is rebuilt and the shadow follows.
-  object = Ball({0.03, 0.0, 0.06}, 0.05);
+  object = SphereObject({0.03, 0.0, 0.06}, 0.05);
   ImageF f3 = frame;
   InsertLayers l3;
   const InsertTimings moved = inserter.Render(camera, cam, {object.Object(&light)}, f3, &l3);
@@ -184,10 +154,10 @@ TEST(FastPath, KappaLatticeMatchesExactKappaAndIsKeptWhileStill) {
 // grid, and outside it κ was ≥ 1 − ε).
 TEST(FastPath, RepeatedViewPassesOnlyTheShadowedArea) {
   const AnalyticScene scene(PlainTable());
-  const Ball object({0.0, 0.0, 0.06}, 0.05);
+  const SphereObject object({0.0, 0.0, 0.06}, 0.05);
   const CameraIntrinsics camera = testing::TestCamera(240, 180);
   const Pose cam = LookAt({0.25, -0.3, 0.35}, {0.02, 0.0, 0.0});
-  const SgMixture light = Lobe({0.4, 0.1, 1.0}, 40.0, 5.0);  // one sharp lobe: a local shadow
+  const SgMixture light = OneLobe({0.4, 0.1, 1.0}, 40.0, 5.0);  // one sharp lobe: a local shadow
   InsertOptions options;
   options.kappa_cache_spacing_radii = 0.1;
   Inserter inserter(scene, {}, options);
@@ -238,10 +208,10 @@ TEST(FastPath, HandHeldFramesReuseReceivers) {
   AnalyticSceneParams params = PlainTable();
   params.has_sphere = true;
   const AnalyticScene scene(params);
-  const Ball object({-0.04, 0.1, 0.05}, 0.04);
+  const SphereObject object({-0.04, 0.1, 0.05}, 0.04);
   const CameraIntrinsics camera = testing::TestCamera(240, 180);
-  SgMixture light = Lobe({0.8, -0.1, 1.0}, 40.0, 5.0);
-  light.push_back(Lobe({0, 0, 1}, 1.0, 0.3)[0]);
+  SgMixture light = OneLobe({0.8, -0.1, 1.0}, 40.0, 5.0);
+  light.push_back(OneLobe({0, 0, 1}, 1.0, 0.3)[0]);
   InsertOptions reuse;  // balanced: κ step 2, coarse factor 4, plane upsampling, lattice 0.1 radii
   InsertOptions marched = reuse;
   marched.kappa_receiver_reuse = false;
@@ -292,10 +262,10 @@ TEST(FastPath, HandHeldFramesReuseReceivers) {
 
 TEST(FastPath, VertexGammaIsKeptWhileStillAndRebuiltWhenTheLightChanges) {
   const AnalyticScene scene(PlainTable());
-  const Ball object({0.0, 0.0, 0.05}, 0.05);
+  const SphereObject object({0.0, 0.0, 0.05}, 0.05);
   const CameraIntrinsics camera = testing::TestCamera(96, 72);
   const Pose cam = LookAt({0.3, -0.2, 0.25}, object.center);
-  const SgMixture light = Lobe({0.2, 0.1, 1.0}, 10.0, 3.0), other = Lobe({-0.5, 0.1, 1.0}, 10.0, 3.0);
+  const SgMixture light = OneLobe({0.2, 0.1, 1.0}, 10.0, 3.0), other = OneLobe({-0.5, 0.1, 1.0}, 10.0, 3.0);
   InsertOptions options;
   options.shadows = false;
   Inserter inserter(scene, {}, options);

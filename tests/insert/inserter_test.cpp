@@ -15,6 +15,7 @@
 #include "calib/core/error.h"
 #include "calib/core/parallel.h"
 #include "render/sg/sphere.h"
+#include "tests/insert/insert_fixtures.h"
 #include "tests/insert/kappa_compare.h"
 #include "tests/insert/test_camera.h"
 #include "tests/support/support.h"
@@ -22,50 +23,15 @@
 namespace nerfar {
 namespace {
 
-// A table alone (no sphere, no medium), plain radiance.
-AnalyticSceneParams TableOnly() {
-  AnalyticSceneParams p;
-  p.has_sphere = false;
-  p.has_medium = false;
-  p.checker_size_m = 0;
-  return p;
-}
-
-SgMixture OneLobe(const Vec3& axis, double sharpness, double amplitude) {
-  Sg sg;
-  sg.axis = Normalized(axis);
-  sg.sharpness = sharpness;
-  sg.amplitude = {amplitude, amplitude, amplitude};
-  return {sg};
-}
+using testing::OneLobe;
+using testing::PlainTable;
+using testing::SphereObject;
 
 bool AllFinite(const ImageF& image) {
   for (float v : image.pixels)
     if (!std::isfinite(v)) return false;
   return true;
 }
-
-struct SphereObject {
-  TriangleMesh mesh = MakeUvSphere(1.0, 48, 24);
-  double radius = 0.05;
-  Vec3 center{0, 0, 0.05};
-  std::unique_ptr<SphereVisibility> visibility;
-
-  SphereObject(const Vec3& c, double r) : radius(r), center(c) {
-    visibility = std::make_unique<SphereVisibility>(center, radius);
-  }
-  InsertObject Object(const SgMixture* light = nullptr) const {
-    InsertObject o;
-    o.mesh = &mesh;
-    o.T_world_object = {Mat3::Identity(), center};
-    o.scale = radius;
-    o.material.base_color = {0.8, 0.5, 0.3};
-    o.material.roughness = 0.6;
-    o.visibility = visibility.get();
-    o.light_override = light;
-    return o;
-  }
-};
 
 // ----------------------------------------------------------- compositing
 
@@ -124,7 +90,7 @@ TEST(Composite, ClippedRangeAndTranslucentOccluder) {
 }
 
 TEST(Composite, OpaqueSceneInFrontHidesTheObject) {
-  AnalyticSceneParams params = TableOnly();
+  AnalyticSceneParams params = PlainTable();
   params.has_sphere = true;
   params.sphere_center = {0.2, 0.0, 0.1};
   params.sphere_radius = 0.06;
@@ -173,7 +139,7 @@ struct KappaReference {
 };
 
 TEST(Shadow, KappaMatchesQuadratureUnderASphere) {
-  const AnalyticScene scene(TableOnly());
+  const AnalyticScene scene(PlainTable());
   const SphereObject object({0.0, 0.0, 0.06}, 0.05);
   const CameraIntrinsics camera = testing::TestCamera(96, 72);
   const Pose cam = LookAt({0.25, -0.3, 0.35}, {0.02, 0.0, 0.0});
@@ -226,7 +192,7 @@ TEST(Shadow, KappaMatchesQuadratureUnderASphere) {
 }
 
 TEST(Shadow, FarFromTheObjectKappaIsOne) {
-  const AnalyticScene scene(TableOnly());
+  const AnalyticScene scene(PlainTable());
   const SphereObject object({0.3, 0.2, 0.05}, 0.05);
   const CameraIntrinsics camera = testing::TestCamera(128, 96);
   const Pose cam = LookAt({0.8, 0.6, 0.5}, {0.3, 0.2, 0.0});
@@ -253,7 +219,7 @@ TEST(Shadow, FarFromTheObjectKappaIsOne) {
 }
 
 TEST(Shadow, KappaStepInterpolatesNearTheExactField) {
-  const AnalyticScene scene(TableOnly());
+  const AnalyticScene scene(PlainTable());
   const SphereObject object({0.0, 0.0, 0.06}, 0.05);
   const CameraIntrinsics camera = testing::TestCamera(96, 72);
   const Pose cam = LookAt({0.25, -0.3, 0.35}, {0.02, 0.0, 0.0});
@@ -275,7 +241,7 @@ TEST(Shadow, KappaStepInterpolatesNearTheExactField) {
 }
 
 TEST(Shadow, CoarseToFineMatchesEveryNode) {
-  const AnalyticScene scene(TableOnly());
+  const AnalyticScene scene(PlainTable());
   const SphereObject object({0.0, 0.0, 0.06}, 0.05);
   const CameraIntrinsics camera = testing::TestCamera(160, 120);
   const Pose cam = LookAt({0.25, -0.3, 0.35}, {0.02, 0.0, 0.0});
@@ -304,7 +270,7 @@ TEST(Shadow, CoarseToFineMatchesEveryNode) {
 // ----------------------------------------------------- shading, self-shadow
 
 TEST(Shading, ConvexObjectIsNotDarkenedByItsOwnField) {
-  const AnalyticScene scene(TableOnly());
+  const AnalyticScene scene(PlainTable());
   const SphereObject object({0.0, 0.0, 0.2}, 0.05);
   const CameraIntrinsics camera = testing::TestCamera(128, 96);
   const Pose cam = LookAt({0.3, -0.2, 0.35}, object.center);
@@ -335,7 +301,7 @@ TEST(Shading, ConvexObjectIsNotDarkenedByItsOwnField) {
 }
 
 TEST(Shading, AnObjectShadowsAnotherThroughItsField) {
-  const AnalyticScene scene(TableOnly());
+  const AnalyticScene scene(PlainTable());
   const SphereObject lower({0.0, 0.0, 0.05}, 0.05);
   const SphereObject upper({0.0, 0.0, 0.2}, 0.06);  // right above it
   const CameraIntrinsics camera = testing::TestCamera(128, 96);
@@ -370,7 +336,7 @@ TEST(Shading, AnObjectShadowsAnotherThroughItsField) {
 // ----------------------------------------------------------- incident light
 
 TEST(IncidentLight, SamplesFollowPaperEquationOne) {
-  const AnalyticScene scene(TableOnly());
+  const AnalyticScene scene(PlainTable());
   const SgMixture env = OneLobe({0, 0, 1}, 1.0, 2.0);
   const Vec3 center{0.1, 0.05, 0.1};
   const std::vector<Vec3> dirs = {{0, 0, -1}, {0, 0, 1}, Normalized(Vec3{1, 0, 0.2})};
@@ -536,7 +502,7 @@ TEST(Stability, ExtremesGiveFiniteBoundedOutput) {
 }
 
 TEST(Stability, SunLitSphereIsBrighterThanSkyLitAndRoughnessChangesTheHighlight) {
-  const AnalyticScene scene(TableOnly());
+  const AnalyticScene scene(PlainTable());
   const SphereObject object({0.0, 0.0, 0.1}, 0.05);
   const CameraIntrinsics camera = testing::TestCamera(64, 48);
   const Pose cam = LookAt({0.4, -0.3, 0.3}, object.center);

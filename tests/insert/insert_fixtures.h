@@ -1,0 +1,55 @@
+// Scene pieces the insertion tests share: a plain table as the scene, one SG
+// lobe as the light, and a sphere object with its exact visibility.
+#pragma once
+
+#include <memory>
+
+#include "render/insert/inserter.h"
+#include "render/insert/object_visibility.h"
+#include "render/insert/scene_field.h"
+#include "render/mesh/mesh.h"
+
+namespace nerfar::testing {
+
+// A table alone (no sphere, no medium, no checker), plain radiance.
+inline AnalyticSceneParams PlainTable() {
+  AnalyticSceneParams p;
+  p.has_sphere = false;
+  p.has_medium = false;
+  p.checker_size_m = 0;
+  return p;
+}
+
+inline SgMixture OneLobe(const Vec3& axis, double sharpness, double amplitude) {
+  Sg sg;
+  sg.axis = Normalized(axis);
+  sg.sharpness = sharpness;
+  sg.amplitude = {amplitude, amplitude, amplitude};
+  return {sg};
+}
+
+// A sphere of radius r at c, drawn as a UV mesh, shadowing with the exact
+// sphere visibility (render/insert's SphereVisibility).
+struct SphereObject {
+  TriangleMesh mesh = MakeUvSphere(1.0, 48, 24);
+  double radius = 0.05;
+  Vec3 center{0, 0, 0.05};
+  std::unique_ptr<SphereVisibility> visibility;
+
+  SphereObject(const Vec3& c, double r) : radius(r), center(c) {
+    visibility = std::make_unique<SphereVisibility>(center, radius);
+  }
+  InsertObject Object(const SgMixture* light = nullptr) const {
+    InsertObject o;
+    o.mesh = &mesh;
+    o.T_world_object = {Mat3::Identity(), center};
+    o.scale = radius;
+    o.material.base_color = {0.8, 0.5, 0.3};
+    o.material.roughness = 0.6;
+    o.visibility = visibility.get();
+    o.light_override = light;
+    return o;
+  }
+};
+
+}  // namespace nerfar::testing
