@@ -34,16 +34,14 @@ void BM_ShadePixel(benchmark::State& state) {
 }
 BENCHMARK(BM_ShadePixel)->ArgsProduct({{0, 1}, {8, 32, 64}});
 
-// The batch path (SgShader::Shade over many pixels), same pixels and args.
-void BM_ShadeBatch(benchmark::State& state) {
-  const int lobes = static_cast<int>(state.range(1));
-  const SgShader shader(BenchLight(lobes));
-  const SgMaterial material = BenchMaterial(state.range(0) != 0);
-  const int pixels = 256;
+// Times the many-pixel call on the given pixels (γ 0.8 for every lobe),
+// reported per pixel.
+void RunShadeBatch(benchmark::State& state, const SgShader& shader, const SgMaterial& material, int lobes,
+                   const std::vector<Vec3f>& normals, const std::vector<Vec3f>& views) {
+  const int pixels = static_cast<int>(normals.size());
   std::vector<float> gamma(static_cast<size_t>(lobes) * pixels, 0.8f);
   std::vector<Vec3f> out(pixels);
   const std::vector<SgMaterial> materials(pixels, material);
-  const auto [normals, views] = RandomShadePixels(pixels);
   for (auto _ : state) {
     shader.Shade(materials.data(), normals.data(), views.data(), gamma.data(), pixels, out.data());
     benchmark::DoNotOptimize(out.data());
@@ -51,6 +49,15 @@ void BM_ShadeBatch(benchmark::State& state) {
   state.SetItemsProcessed(state.iterations() * pixels);
   state.counters["ns_per_pixel"] = benchmark::Counter(static_cast<double>(state.iterations()) * pixels,
                                                       benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
+}
+
+// The batch path (SgShader::Shade over many pixels), same pixels and args.
+void BM_ShadeBatch(benchmark::State& state) {
+  const int lobes = static_cast<int>(state.range(1));
+  const SgShader shader(BenchLight(lobes));
+  const SgMaterial material = BenchMaterial(state.range(0) != 0);
+  const auto [normals, views] = RandomShadePixels(256);
+  RunShadeBatch(state, shader, material, lobes, normals, views);
 }
 BENCHMARK(BM_ShadeBatch)->ArgsProduct({{0, 1}, {8, 32, 64}});
 
@@ -86,17 +93,7 @@ void BM_ShadeBatchSphere(benchmark::State& state) {
       normals.push_back(n);
       views.push_back(Normalized(eye - n));
     }
-  const int pixels = static_cast<int>(normals.size());
-  std::vector<float> gamma(static_cast<size_t>(lobes) * pixels, 0.8f);
-  std::vector<Vec3f> out(pixels);
-  const std::vector<SgMaterial> materials(pixels, material);
-  for (auto _ : state) {
-    shader.Shade(materials.data(), normals.data(), views.data(), gamma.data(), pixels, out.data());
-    benchmark::DoNotOptimize(out.data());
-  }
-  state.SetItemsProcessed(state.iterations() * pixels);
-  state.counters["ns_per_pixel"] = benchmark::Counter(static_cast<double>(state.iterations()) * pixels,
-                                                      benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
+  RunShadeBatch(state, shader, material, lobes, normals, views);
 }
 BENCHMARK(BM_ShadeBatchSphere)->ArgsProduct({{0, 1}, {0, 1}});
 
