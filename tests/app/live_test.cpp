@@ -42,7 +42,7 @@ struct LiveRun {
 
   LiveRun(const SgMaterial& material, const std::string& preset, const SsdfField* field = nullptr) {
     source = std::make_unique<synth::SyntheticCameraSource>(NearlyStillLampsStream());
-    scene = std::make_unique<AnalyticScene>(PlainTable());
+    scene = std::make_unique<AnalyticScene>(testing::PlainTable());
     ball = MakeUvSphere(kRadius, 32, 16);
     LiveAsset asset;
     asset.name = "ball";

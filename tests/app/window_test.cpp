@@ -135,7 +135,7 @@ class LiveAppTest : public WindowTest {
     if (IsSkipped()) return;
     if (std::system("command -v xdotool >/dev/null 2>&1") != 0) GTEST_SKIP() << "xdotool not installed";
     source_ = std::make_unique<synth::SyntheticCameraSource>(NearlyStillLampsStream());
-    scene_ = std::make_unique<AnalyticScene>(PlainTable());
+    scene_ = std::make_unique<AnalyticScene>(testing::PlainTable());
     ball_ = MakeUvSphere(kRadius, 32, 16);
     LiveAsset asset;
     asset.name = "ball";
