@@ -1,0 +1,24 @@
+// Internal to render/insert: small helpers every stage of a frame uses.
+#pragma once
+
+#include <chrono>
+#include <cmath>
+
+#include "calib/core/math.h"
+
+namespace nerfar {
+
+using InsertClock = std::chrono::steady_clock;
+inline double MsSince(InsertClock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(InsertClock::now() - t0).count();
+}
+
+inline bool Finite(const Vec3f& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
+
+// An object's bounding sphere in the world.
+struct WorldSphere {
+  Vec3f center;
+  float radius = 0;
+};
+
+}  // namespace nerfar

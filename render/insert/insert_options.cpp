@@ -1,0 +1,99 @@
+#include "render/insert/insert_options.h"
+
+#include <cmath>
+#include <nlohmann/json.hpp>
+
+#include "calib/core/error.h"
+
+namespace nerfar {
+
+InsertOptions InsertOptions::Preset(const std::string& name) {
+  InsertOptions o;
+  o.light.fit = SgFitOptions::Preset(name);
+  if (name == "fast") {
+    o.light.directions = 512;
+    o.shadow_reach_radii = 8.0;
+    o.shadow_epsilon = 5e-3;
+    o.kappa_step = 4;
+    o.occlusion_step = 4;
+    o.kappa_cache_spacing_radii = 0.15;
+    o.antialias_edges = false;  // the coverage sub-samples double the raster time
+  } else if (name == "balanced") {
+  } else if (name == "accurate") {
+    o.light.directions = 2048;
+    o.shadow_reach_radii = 20.0;
+    o.shadow_epsilon = 5e-4;
+    o.kappa_step = 1;
+    o.self_shadow_per_vertex = false;
+    o.occlusion_step = 1;
+    o.kappa_cache_spacing_radii = 0.0;
+    o.kappa_plane_upsampling = false;
+    o.kappa_receiver_reuse = false;
+    o.receiver_normal_per_cell = false;
+    o.kappa_coarse_factor = 2;
+    o.kappa_refine_delta = 0.01;
+  } else {
+    ThrowInputError("preset", "unknown preset '" + name + "' (expected fast, balanced or accurate)");
+  }
+  return o;
+}
+
+std::vector<std::string> InsertOptions::Validate() const {
+  std::vector<std::string> problems = light.Validate();
+  const auto check = [&problems](bool ok, const std::string& what) {
+    if (!ok) problems.push_back(what);
+  };
+  check(std::isfinite(self_shadow_offset_radii) && self_shadow_offset_radii >= 0 && self_shadow_offset_radii <= 1,
+        "self_shadow_offset_radii: out of range (expected 0 to 1)");
+  check(std::isfinite(shadow_reach_radii) && shadow_reach_radii >= 1 && shadow_reach_radii <= 1000,
+        "shadow_reach_radii: out of range (expected 1 to 1000)");
+  check(std::isfinite(shadow_epsilon) && shadow_epsilon >= 0 && shadow_epsilon < 1,
+        "shadow_epsilon: out of range (expected 0 <= value < 1)");
+  check(occlusion_step >= 1 && occlusion_step <= 64, "occlusion_step: out of range (expected 1 to 64)");
+  check(std::isfinite(occlusion_clear_opacity) && occlusion_clear_opacity >= 0 && occlusion_clear_opacity < 1,
+        "occlusion_clear_opacity: out of range (expected 0 <= value < 1)");
+  check(std::isfinite(kappa_cache_spacing_radii) && kappa_cache_spacing_radii >= 0 && kappa_cache_spacing_radii <= 10,
+        "kappa_cache_spacing_radii: out of range (expected 0 to 10)");
+  check(std::isfinite(kappa_reuse_tolerance_radii) && kappa_reuse_tolerance_radii >= 0 &&
+            kappa_reuse_tolerance_radii <= 1,
+        "kappa_reuse_tolerance_radii: out of range (expected 0 to 1)");
+  check(kappa_step >= 1 && kappa_step <= 64, "kappa_step: out of range (expected 1 to 64)");
+  check(kappa_coarse_factor >= 1 && kappa_coarse_factor <= 64, "kappa_coarse_factor: out of range (expected 1 to 64)");
+  check(std::isfinite(kappa_refine_delta) && kappa_refine_delta >= 0 && kappa_refine_delta <= 1,
+        "kappa_refine_delta: out of range (expected 0 to 1)");
+  check(std::isfinite(receiver_min_opacity) && receiver_min_opacity >= 0 && receiver_min_opacity <= 1,
+        "receiver_min_opacity: out of range (expected 0 to 1)");
+  return problems;
+}
+
+std::string InsertOptions::ToJson() const {
+  nlohmann::json j;
+  j["light_directions"] = light.directions;
+  j["light_move_threshold_m"] = light.move_threshold_m;
+  j["light_source"] = LightSourceName(light.source);
+  j["sg_lobes"] = light.fit.lobes;
+  j["sg_cold_iterations"] = light.fit.cold_iterations;
+  j["sg_warm_iterations"] = light.fit.warm_iterations;
+  j["self_shadow"] = self_shadow;
+  j["self_shadow_horizon"] = self_shadow_horizon;
+  j["self_shadow_offset_radii"] = self_shadow_offset_radii;
+  j["shadows"] = shadows;
+  j["shadow_reach_radii"] = shadow_reach_radii;
+  j["shadow_epsilon"] = shadow_epsilon;
+  j["self_shadow_per_vertex"] = self_shadow_per_vertex;
+  j["antialias_edges"] = antialias_edges;
+  j["occlusion_step"] = occlusion_step;
+  j["occlusion_clear_opacity"] = occlusion_clear_opacity;
+  j["kappa_cache_spacing_radii"] = kappa_cache_spacing_radii;
+  j["kappa_plane_upsampling"] = kappa_plane_upsampling;
+  j["kappa_receiver_reuse"] = kappa_receiver_reuse;
+  j["receiver_normal_per_cell"] = receiver_normal_per_cell;
+  j["kappa_reuse_tolerance_radii"] = kappa_reuse_tolerance_radii;
+  j["kappa_step"] = kappa_step;
+  j["kappa_coarse_factor"] = kappa_coarse_factor;
+  j["kappa_refine_delta"] = kappa_refine_delta;
+  j["receiver_min_opacity"] = receiver_min_opacity;
+  return j.dump();
+}
+
+}  // namespace nerfar

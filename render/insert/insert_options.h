@@ -1,0 +1,98 @@
+// Options of the per-frame insertion (render/insert/inserter.h): plain
+// struct, a comment per field, presets fast / balanced / accurate.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "render/insert/incident_light.h"
+
+namespace nerfar {
+
+struct InsertOptions {
+  IncidentLightOptions light;  // rays from the centre, SG fit, light source (ours or an ablation)
+
+  bool self_shadow = true;  // γ_k from the SSDF fields (paper eq. 10); off: objects never shadow themselves
+  // γ_k relative to the part of lobe k above the surface's horizon,
+  // f_h(min(S, e))/f_h(e) with e = asin(p_k·n), so that a convex object does
+  // not darken the light its cosine already removes; off: the paper's
+  // f_h(S)/f_h(π/2).
+  bool self_shadow_horizon = true;
+  // SSDF queried this far (× bounding radius) off the surface, along n. The
+  // 16³ grid's cell is 0.2 radii and trilinear interpolation mixes in grid
+  // points inside the mesh (SSD ≈ −π) closer than about a cell, darkening
+  // the surface: monkey_diffuse under its true probe measured 23.3 dB at
+  // 0.01, 28.7 at 0.1, 29.2 at 0.15 (32² direction maps; 28.3 without γ).
+  double self_shadow_offset_radii = 0.15;
+
+  // γ at the mesh vertices (view-independent: cached while the objects and
+  // the light stand still), interpolated over each triangle with the
+  // rasteriser's barycentrics; false: one SSDF query per pixel.
+  bool self_shadow_per_vertex = true;
+
+  // Object edges blended with the background by the fraction of each pixel
+  // the objects cover (4×4 sub-samples of the rasteriser), as a camera's
+  // pixel integrates its square; false: a pixel is the object or not.
+  bool antialias_edges = true;
+
+  // Occlusion first along every occlusion_step-th pixel ray of the object's
+  // screen box (each clipped at the farthest object depth around it); blocks
+  // whose four corner rays all see opacity below occlusion_clear_opacity take
+  // the object unoccluded, the others march every pixel (1: every pixel).
+  int occlusion_step = 2;
+  double occlusion_clear_opacity = 1e-3;
+
+  bool shadows = true;               // κ on the scene (paper eq. 8)
+  double shadow_reach_radii = 12.0;  // κ only within this distance (× bounding radius) of an object's centre
+  // Receivers whose κ, bounded from below through each object's bounding
+  // sphere, cannot fall under 1 − shadow_epsilon keep κ = 1 (no SSDF query).
+  double shadow_epsilon = 2e-3;
+  int kappa_step = 2;  // κ at every kappa_step-th pixel, bilinear in between (1: every pixel)
+  // κ first at every kappa_coarse_factor-th node of that grid; a coarse cell
+  // whose corners differ by more than kappa_refine_delta gets all its nodes,
+  // the others are interpolated (1: every node of the grid).
+  int kappa_coarse_factor = 4;
+  double kappa_refine_delta = 0.02;
+  // Refined nodes inside a coarse cell whose four receivers lie on one plane
+  // take their receiver where their ray meets that plane (no NeRF march, no
+  // normal query); false: every refined node is marched.
+  bool kappa_plane_upsampling = true;
+  double receiver_min_opacity = 0.5;  // pixels whose scene opacity is below this have no surface: κ = 1
+  // κ depends on the receiver point, its normal, the objects and the light,
+  // not on the view: it is kept at the nodes of a world lattice of this
+  // spacing (× the smallest caster's bounding radius), one value per node and
+  // receiver-normal cell (32×32 octahedral cells), computed when a receiver
+  // first needs it and reused, trilinearly, until an object or a light
+  // changes. 0: κ evaluated exactly at every receiver, every frame.
+  double kappa_cache_spacing_radii = 0.1;
+  // With the lattice (spacing > 0) and NeRF receivers: a grid node's receiver
+  // is first sought among the last frame's receivers instead of marching its
+  // ray. The last grid's cell at the node's pixel gives a plane (through its
+  // four receivers, normal from the diagonals; none of the four farther than
+  // kappa_reuse_tolerance_radii × the smallest caster's bounding radius from
+  // it); the ray meets it, and the point is taken when its projection into
+  // the last view falls in that same cell (else once more with the cell it
+  // fell in), with the NeRF normal of the nearest of the four (so the κ
+  // lattice's normal cell is kept). A cell of four "no surface" nodes stays
+  // no surface when the eye moved by less than the tolerance and the ray by
+  // less than a grid step. Anything else is marched. The receivers do not
+  // depend on objects or light and survive their changes. false: every
+  // receiver marched.
+  bool kappa_receiver_reuse = true;
+  // With the lattice and NeRF receivers: one receiver normal per lattice
+  // cell, the NeRF normal at the first receiver found in the cell (any view),
+  // so that a receiver's normal, its κ lattice normal cell and κ do not change
+  // with the view (the NeRF's normals scatter with the point's exact
+  // position); false: the NeRF normal at every receiver.
+  bool receiver_normal_per_cell = true;
+  double kappa_reuse_tolerance_radii = 0.02;
+
+  // "fast", "balanced" (the defaults) or "accurate"; InputError otherwise.
+  static InsertOptions Preset(const std::string& name);
+  // Every problem as "field: what is wrong (what was expected)".
+  std::vector<std::string> Validate() const;
+  // The effective options as JSON text (logged by every job).
+  std::string ToJson() const;
+};
+
+}  // namespace nerfar

@@ -1,0 +1,73 @@
+// Internal to render/insert: κ kept at the nodes of a world lattice, one
+// value per node and receiver-normal cell (32×32 octahedral cells), shared
+// by the threads of a frame (InsertOptions::kappa_cache_spacing_radii).
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <mutex>
+#include <unordered_map>
+
+#include "calib/core/math.h"
+
+namespace nerfar {
+
+// Receiver normals in kNormalCells² octahedral cells.
+constexpr int kNormalCells = 32;
+uint32_t NormalCell(const Vec3f& n);
+Vec3f CellNormal(uint32_t cell);  // the cell's central unit normal
+
+// Lattice node (i, j, k) (18 bits each, offset) and normal cell (10 bits).
+uint64_t LatticeKey(int64_t i, int64_t j, int64_t k, uint32_t cell);
+constexpr size_t kKappaCacheMaxNodes = size_t(1) << 22;  // ~4 M nodes (~100 MB): cleared beyond
+
+// The lattice nodes one thread looked up last (direct-mapped by key; value
+// -1: empty): neighbouring receivers of a row share most of their 8 nodes,
+// and the shared lattice's hash look-up (a cache miss or two) is what
+// dominates κ on a hand-held frame. Holds exactly the lattice's values.
+struct LatticeMemo {
+  static constexpr size_t kMemo = 256;
+  std::array<uint64_t, kMemo> key{};
+  std::array<float, kMemo> value = Empty();
+  static std::array<float, kMemo> Empty() {
+    std::array<float, kMemo> v;
+    v.fill(-1.0f);
+    return v;
+  }
+  static size_t Slot(uint64_t key) { return (key * 0x9E3779B97F4A7C15ull) >> 56; }
+};
+
+// The shared lattice. Each shard holds a read-only snapshot (`frozen`, the
+// nodes of earlier frames: read without a lock, nothing writes it during a
+// frame) and the nodes computed this frame (`fresh`, under the shard's
+// mutex); Publish() (single-threaded, at the start of a frame) moves the
+// fresh nodes into the snapshot. Also the world box of the nodes computed
+// with κ < 1 − ε (all others hold κ ≥ 1 − ε).
+class KappaLattice {
+ public:
+  KappaLattice() { ResetBox(); }
+  bool Find(uint64_t node, float* value);
+  void Insert(uint64_t node, float value);
+  void Publish();  // single-threaded, between frames
+  size_t Size();
+  void Clear();
+  void GrowShadow(const Vec3f& node);
+  Vec3f shadow_min() const { return shadow_min_; }
+  Vec3f shadow_max() const { return shadow_max_; }
+
+ private:
+  static constexpr size_t kShards = 64;
+  struct Shard {
+    std::unordered_map<uint64_t, float> frozen;
+    std::mutex mutex;
+    std::unordered_map<uint64_t, float> fresh;
+  };
+  static size_t ShardOf(uint64_t key) { return (key * 0x9E3779B97F4A7C15ull) >> 58; }
+  std::array<Shard, kShards> shards_;
+  std::mutex box_mutex_;
+  Vec3f shadow_min_, shadow_max_;
+  void ResetBox();
+};
+
+}  // namespace nerfar

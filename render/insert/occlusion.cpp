@@ -1,0 +1,167 @@
+#include "render/insert/occlusion.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <utility>
+
+#include "calib/core/parallel.h"
+#include "render/insert/insert_common.h"
+
+namespace nerfar {
+
+void OccludeAndComposite(const SceneField& scene, const InsertOptions& options, const CameraIntrinsics& camera,
+                         const Pose& T_world_camera, const std::vector<uint32_t>& covered,
+                         const ReceiverOverride& receivers, ImageF& frame, InsertLayers& layers) {
+  const ObjectGBuffer& g = layers.gbuffer;
+  const Vec3f eye(T_world_camera.translation);
+  constexpr size_t kChunk = 256;
+  const size_t chunks = (covered.size() + kChunk - 1) / kChunk;
+  const Aabb box = scene.Box();
+  // The ray of pixel (x, y) over the scene up to `depth` (the object).
+  const auto add_ray = [&](SceneRays& rays, int x, int y, float depth) {
+    const Vec3f d = CameraRayDirection(camera, T_world_camera, x, y);
+    const auto range = IntersectBox(box, Vec3(eye), Vec3(d));
+    float t_near = 0.0f, t_far = 0.0f;
+    if (range) {
+      t_near = std::min(depth, static_cast<float>(range->first));
+      t_far = std::min(depth, static_cast<float>(range->second));
+    }
+    rays.Add(eye, d, t_near, t_far);
+  };
+  // Coarse pass: rays at the corners of occlusion_step-sized blocks, each up
+  // to the farthest object depth of the blocks it touches; blocks whose
+  // corners all see (almost) nothing need no ray per pixel.
+  std::vector<uint8_t> clear(g.object.size(), 0);
+  if (options.occlusion_step > 1 && !covered.empty()) {
+    const int s = options.occlusion_step, w = g.rect.width(), h = g.rect.height();
+    const int bx = (w + s - 1) / s, by = (h + s - 1) / s;
+    std::vector<float> block_far(static_cast<size_t>(bx) * by, 0.0f);
+    for (uint32_t i : covered) {
+      float& f = block_far[static_cast<size_t>(i / w / s) * bx + (i % w) / s];
+      f = std::max(f, g.t[i]);
+    }
+    const int nx = bx + 1, ny = by + 1;
+    std::vector<float> node_opacity(static_cast<size_t>(nx) * ny, 0.0f);
+    ParallelFor(
+        static_cast<size_t>(ny),
+        [&](size_t row) {
+          const int v = static_cast<int>(row);
+          SceneRays rays;
+          SceneSamples out;
+          std::vector<int> cols;
+          for (int u = 0; u < nx; ++u) {
+            float far = 0.0f;
+            for (int b = v - 1; b <= v; ++b)
+              for (int a = u - 1; a <= u; ++a)
+                if (a >= 0 && b >= 0 && a < bx && b < by) far = std::max(far, block_far[size_t(b) * bx + a]);
+            if (!(far > 0.0f)) continue;
+            add_ray(rays, g.rect.x0 + std::min(u * s, w - 1), g.rect.y0 + std::min(v * s, h - 1), far);
+            cols.push_back(u);
+          }
+          if (cols.empty()) return;
+          scene.RenderRays(rays, out);
+          for (size_t k = 0; k < cols.size(); ++k)
+            node_opacity[row * nx + cols[k]] = std::isfinite(out.opacity[k]) ? out.opacity[k] : 1.0f;
+        },
+        1);
+    const float limit = static_cast<float>(options.occlusion_clear_opacity);
+    for (uint32_t i : covered) {
+      const size_t u = (i % w) / s, v = i / w / s;
+      clear[i] = node_opacity[v * nx + u] < limit && node_opacity[v * nx + u + 1] < limit &&
+                 node_opacity[(v + 1) * nx + u] < limit && node_opacity[(v + 1) * nx + u + 1] < limit;
+    }
+  }
+  std::vector<size_t> fixed_per_chunk(chunks, 0);
+  ParallelFor(
+      chunks,
+      [&](size_t c) {
+        const size_t begin = c * kChunk, end = std::min(covered.size(), begin + kChunk);
+        SceneRays rays;
+        SceneSamples out;
+        rays.Reserve(end - begin);
+        std::vector<int> ray_of(end - begin, -1);
+        for (size_t k = begin; k < end; ++k) {
+          const uint32_t i = covered[k];
+          if (clear[i]) continue;
+          ray_of[k - begin] = static_cast<int>(rays.size());
+          add_ray(rays, g.rect.x0 + static_cast<int>(i % g.rect.width()),
+                  g.rect.y0 + static_cast<int>(i / g.rect.width()), g.t[i]);
+        }
+        if (rays.size() > 0) scene.RenderRays(rays, out);
+        for (size_t k = begin; k < end; ++k) {
+          const uint32_t i = covered[k];
+          const int x = g.rect.x0 + static_cast<int>(i % g.rect.width());
+          const int y = g.rect.y0 + static_cast<int>(i / g.rect.width());
+          const int r = ray_of[k - begin];
+          float opacity = r >= 0 ? out.opacity[r] : 0.0f;
+          Vec3f front = r >= 0 ? out.colour[r] : Vec3f{};
+          if (!std::isfinite(opacity) || !Finite(front)) {
+            opacity = 0.0f;
+            front = {};
+            ++fixed_per_chunk[c];
+          }
+          opacity = std::clamp(opacity, 0.0f, 1.0f);
+          if (receivers.occlude_with_distance && receivers.distance) {
+            const float scene_t = receivers.distance->at(x, y);
+            if (scene_t > 0.0f && scene_t < 0.99f * g.t[i]) {  // the scene is in front: keep the frame
+              layers.alpha.pixels[i] = 0.0f;
+              continue;
+            }
+          }
+          const float w = 1.0f - opacity;
+          layers.alpha.pixels[i] = w;
+          // Ĉ = I_α·I_c (opacity-weighted), so this is I_α·I_c + (1 − I_α)·I_v.
+          // Edge pixels: the object over the part of the pixel it covers.
+          const float cover = g.coverage.empty() ? 1.0f : g.coverage[i];
+          for (int ch = 0; ch < 3; ++ch) {
+            const float composite = front[ch] + w * layers.object.pixels[static_cast<size_t>(i) * 3 + ch];
+            frame.at(x, y, ch) = cover * composite + (1.0f - cover) * frame.at(x, y, ch);
+          }
+        }
+      },
+      1);
+  for (size_t f : fixed_per_chunk) layers.nonfinite_fixed += f;
+}
+
+void CompositeEdges(const ReceiverOverride& receivers, ImageF& frame, const InsertLayers& layers) {
+  const ObjectGBuffer& g = layers.gbuffer;
+  if (!g.coverage.empty() && g.covered > 0) {
+    std::vector<std::array<float, 3>> partial;
+    std::vector<std::pair<int, int>> where;
+    for (int y = g.rect.y0; y < g.rect.y1; ++y)
+      for (int x = g.rect.x0; x < g.rect.x1; ++x) {
+        const size_t i = g.Index(x, y);
+        if (g.object[i] >= 0 || !(g.coverage[i] > 0.0f)) continue;
+        int best = -1;
+        float best_d = 3.0f;
+        for (int dy = -1; dy <= 1; ++dy)
+          for (int dx = -1; dx <= 1; ++dx) {
+            const int xx = x + dx, yy = y + dy;
+            if (!g.rect.Contains(xx, yy)) continue;
+            const size_t j = g.Index(xx, yy);
+            const float d = float(dx * dx + dy * dy);
+            if (g.object[j] >= 0 && layers.alpha.pixels[j] > 0.0f && d < best_d) {
+              best_d = d;
+              best = static_cast<int>(j);
+            }
+          }
+        if (best < 0) continue;
+        if (receivers.occlude_with_distance && receivers.distance) {
+          const float scene_t = receivers.distance->at(x, y);
+          if (scene_t > 0.0f && scene_t < 0.99f * g.t[best]) continue;  // the scene is in front here
+        }
+        // The neighbour's object radiance weighted by its visibility.
+        const float a = layers.alpha.pixels[best], c = g.coverage[i] * a;
+        std::array<float, 3> v;
+        for (int ch = 0; ch < 3; ++ch)
+          v[ch] = c * layers.object.pixels[static_cast<size_t>(best) * 3 + ch] + (1.0f - c) * frame.at(x, y, ch);
+        partial.push_back(v);
+        where.push_back({x, y});
+      }
+    for (size_t k = 0; k < partial.size(); ++k)
+      for (int ch = 0; ch < 3; ++ch) frame.at(where[k].first, where[k].second, ch) = partial[k][ch];
+  }
+}
+
+}  // namespace nerfar

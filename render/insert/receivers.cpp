@@ -1,0 +1,197 @@
+#include "render/insert/receivers.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <optional>
+
+#include "render/insert/insert_common.h"
+#include "render/insert/inserter.h"
+#include "render/insert/kappa_lattice.h"
+
+namespace nerfar {
+
+void ReceiversFromDepth(const ImageF& depth_z, const CameraIntrinsics& camera, const Pose& T_world_camera,
+                        ImageF& distance, ImageF& normal) {
+  const int w = depth_z.width, h = depth_z.height;
+  distance = ImageF(w, h, 1, 0.0f);
+  normal = ImageF(w, h, 3, 0.0f);
+  std::vector<Vec3> p(static_cast<size_t>(w) * h);
+  std::vector<uint8_t> valid(p.size(), 0);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const float z = depth_z.at(x, y, 0);
+      if (!(z > 0.0f) || !std::isfinite(z)) continue;
+      const Vec3 ray_camera{(x + 0.5 - camera.cx) / camera.fx, (y + 0.5 - camera.cy) / camera.fy, 1.0};
+      const size_t i = static_cast<size_t>(y) * w + x;
+      p[i] = T_world_camera * (ray_camera * static_cast<double>(z));
+      valid[i] = 1;
+      distance.at(x, y) = static_cast<float>(z * Length(ray_camera));
+    }
+  const Vec3 eye = T_world_camera.translation;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const size_t i = static_cast<size_t>(y) * w + x;
+      if (!valid[i]) continue;
+      // One-sided differences; per axis the neighbour nearer in depth.
+      const auto pick = [&](int dx, int dy) -> std::optional<Vec3> {
+        std::optional<Vec3> best;
+        double best_jump = std::numeric_limits<double>::infinity();
+        for (int s : {-1, 1}) {
+          const int xx = x + s * dx, yy = y + s * dy;
+          if (xx < 0 || yy < 0 || xx >= w || yy >= h) continue;
+          const size_t j = static_cast<size_t>(yy) * w + xx;
+          if (!valid[j]) continue;
+          const double jump = std::abs(depth_z.pixels[j] - depth_z.pixels[i]);
+          if (jump < best_jump) {
+            best_jump = jump;
+            best = (p[j] - p[i]) * static_cast<double>(s);
+          }
+        }
+        return best;
+      };
+      const auto du = pick(1, 0), dv = pick(0, 1);
+      if (!du || !dv) continue;
+      Vec3 n = Normalized(Cross(*du, *dv));
+      if (Dot(n, eye - p[i]) < 0) n = -n;
+      for (int c = 0; c < 3; ++c) normal.at(x, y, c) = static_cast<float>(n[c]);
+    }
+}
+
+int ReuseReceiver(const ReceiverFrame& r, const Vec3f& eye, const Vec3f& d, int x, int y, float tolerance, Vec3f& point,
+                  Vec3f& normal) {
+  const size_t nx = r.xs.size(), ny = r.ys.size();
+  if (!r.valid || nx < 2 || ny < 2) return 0;
+  // The four receivers of the last grid's cell holding pixel (u, v): the fine
+  // cell when all four are known, else its coarse cell (always known).
+  const auto cell = [&](double u, double v, size_t idx[4]) -> bool {
+    if (!(u >= r.xs.front() && u <= r.xs.back() && v >= r.ys.front() && v <= r.ys.back())) return false;
+    const size_t ix = std::min<size_t>(static_cast<size_t>((u - r.xs.front()) / r.step), nx - 2);
+    const size_t iy = std::min<size_t>(static_cast<size_t>((v - r.ys.front()) / r.step), ny - 2);
+    const size_t fine[4] = {iy * nx + ix, iy * nx + ix + 1, (iy + 1) * nx + ix, (iy + 1) * nx + ix + 1};
+    if (r.state[fine[0]] && r.state[fine[1]] && r.state[fine[2]] && r.state[fine[3]]) {
+      std::copy(fine, fine + 4, idx);
+      return true;
+    }
+    const size_t i = std::min<size_t>(ix / r.factor, r.cx.size() - 2),
+                 j = std::min<size_t>(iy / r.factor, r.cy.size() - 2);
+    const size_t coarse[4] = {r.cy[j] * nx + r.cx[i], r.cy[j] * nx + r.cx[i + 1], r.cy[j + 1] * nx + r.cx[i],
+                              r.cy[j + 1] * nx + r.cx[i + 1]};
+    for (size_t c : coarse)
+      if (!r.state[c]) return false;
+    std::copy(coarse, coarse + 4, idx);
+    return true;
+  };
+  // The corner nearest (u, v) in pixels.
+  const auto nearest = [&](double u, double v, const size_t idx[4]) {
+    size_t best = idx[0];
+    double best_d = std::numeric_limits<double>::infinity();
+    for (int c = 0; c < 4; ++c) {
+      const double du = r.xs[idx[c] % nx] - u, dv = r.ys[idx[c] / nx] - v;
+      if (du * du + dv * dv < best_d) {
+        best_d = du * du + dv * dv;
+        best = idx[c];
+      }
+    }
+    return best;
+  };
+  size_t idx[4];
+  if (!cell(x, y, idx)) return 0;
+  int surfaces = 0;
+  for (size_t c : idx) surfaces += r.state[c] == 1;
+  if (surfaces == 0) {
+    // No surface around the same pixel of the last view: kept while this
+    // pixel's ray moved by less than a grid step (its eye by the tolerance).
+    const Vec3f old_eye(r.T_world_camera.translation);
+    const Vec3f old_d = CameraRayDirection(r.camera, r.T_world_camera, x, y);
+    const float max_angle = static_cast<float>(r.step / std::max(r.camera.fx, r.camera.fy));
+    return Length(eye - old_eye) <= tolerance && Dot(d, old_d) >= std::cos(max_angle) ? 2 : 0;
+  }
+  if (surfaces < 4) return 0;
+  // The plane through a cell's four receivers (normal from its diagonals,
+  // facing the ray); false when a receiver lies farther than the tolerance
+  // from it. The receivers' own NeRF normals are not compared: they scatter
+  // by more than 10° between neighbours on a flat grid-NeRF table.
+  const auto cell_plane = [&](const size_t c[4], Vec3f& mean, Vec3f& n) -> bool {
+    mean = (r.point[c[0]] + r.point[c[1]] + r.point[c[2]] + r.point[c[3]]) * 0.25f;
+    n = Cross(r.point[c[3]] - r.point[c[0]], r.point[c[2]] - r.point[c[1]]);
+    if (!(Dot(n, n) > 1e-20f)) return false;
+    n = Normalized(n);
+    if (Dot(n, d) > 0) n = n * -1.0f;
+    for (int k = 0; k < 4; ++k)
+      if (!(std::abs(Dot(r.point[c[k]] - mean, n)) <= tolerance)) return false;
+    return true;
+  };
+  size_t at[4];
+  std::copy(idx, idx + 4, at);
+  for (int iteration = 0; iteration < 2; ++iteration) {
+    Vec3f mean, n;
+    if (!cell_plane(at, mean, n)) return 0;
+    const float cosine = Dot(d, n);
+    if (!(cosine < -0.05f)) return 0;  // grazing: march
+    const float t = Dot(mean - eye, n) / cosine;
+    if (!(t > 0.0f)) return 0;
+    const Vec3f p = eye + d * t;
+    const Vec3 c = r.T_camera_world * Vec3(p);
+    if (!(c.z > 1e-6)) return 0;
+    const double u = r.camera.fx * c.x / c.z + r.camera.cx - 0.5, v = r.camera.fy * c.y / c.z + r.camera.cy - 0.5;
+    size_t landed[4];
+    if (!cell(u, v, landed)) return 0;
+    bool same = true;
+    for (int k = 0; k < 4; ++k) same = same && landed[k] == at[k];
+    bool surface = true;
+    for (size_t k : landed) surface = surface && r.state[k] == 1;
+    if (!surface) return 0;
+    if (same) {
+      // The point lies on its own cell's plane: taken, with the NeRF normal
+      // of the nearest receiver (its lattice normal cell is already filled).
+      point = p;
+      normal = r.normal[nearest(u, v, landed)];
+      return 1;
+    }
+    std::copy(landed, landed + 4, at);  // once more with the cell it landed in
+  }
+  return 0;
+}
+
+void CellNormals::Resolve(double spacing, std::vector<CellCandidate>& candidates) {
+  if (spacing != spacing_ || normals_.size() > kKappaCacheMaxNodes) {
+    normals_.clear();
+    spacing_ = spacing;
+  }
+  if (!(spacing > 0)) return;
+  const auto index = [spacing](float v) { return int64_t(std::floor(v / spacing)); };
+  std::vector<uint64_t> keys(candidates.size());
+  // This pass's pick per new cell: a strict total order on the candidates'
+  // values, so the pick is the same in any order.
+  struct Pick {
+    size_t candidate;
+    float d2;
+  };
+  std::unordered_map<uint64_t, Pick> picks;
+  const auto before = [](const CellCandidate& a, float da, const CellCandidate& b, float db) {
+    const float ka[7] = {da, a.point.x, a.point.y, a.point.z, a.normal.x, a.normal.y, a.normal.z};
+    const float kb[7] = {db, b.point.x, b.point.y, b.point.z, b.normal.x, b.normal.y, b.normal.z};
+    return std::lexicographical_compare(ka, ka + 7, kb, kb + 7);
+  };
+  for (size_t c = 0; c < candidates.size(); ++c) {
+    const CellCandidate& cand = candidates[c];
+    const int64_t i = index(cand.point.x), j = index(cand.point.y), k = index(cand.point.z);
+    keys[c] = LatticeKey(i, j, k, 0);
+    if (normals_.count(keys[c])) continue;
+    const Vec3f n = cand.normal;
+    if (!Finite(n) || !(Dot(n, n) >= 0.25f)) continue;
+    const Vec3f centre = Vec3f(Vec3(double(i) + 0.5, double(j) + 0.5, double(k) + 0.5) * spacing);
+    const Vec3f off = cand.point - centre;
+    const float d2 = Dot(off, off);
+    const auto [it, added] = picks.emplace(keys[c], Pick{c, d2});
+    if (!added && before(cand, d2, candidates[it->second.candidate], it->second.d2)) it->second = {c, d2};
+  }
+  for (const auto& [key, pick] : picks) normals_.emplace(key, candidates[pick.candidate].normal);
+  for (size_t c = 0; c < candidates.size(); ++c) {
+    const auto it = normals_.find(keys[c]);
+    if (it != normals_.end()) candidates[c].normal = it->second;
+  }
+}
+
+}  // namespace nerfar

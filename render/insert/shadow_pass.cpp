@@ -1,0 +1,503 @@
+#include "render/insert/shadow_pass.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "calib/core/parallel.h"
+#include "render/insert/cache_keys.h"
+#include "render/insert/shadow_terms.h"
+
+namespace nerfar {
+
+namespace {
+
+// A coarse κ cell whose receivers lie on one plane.
+struct CellPlane {
+  bool valid = false;
+  Vec3f point, normal;         // a point of the plane and its unit normal (facing the camera)
+  float t_min = 0, t_max = 0;  // range of the corners' ray distances
+};
+
+// Per-thread scratch of the κ pass.
+struct ThreadScratch {
+  KappaScratch kappa;
+  LatticeMemo memo;
+};
+
+}  // namespace
+
+void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, std::unique_ptr<KappaCache>& cache_owner,
+                   ImageF& frame, InsertLayers& layers, InsertTimings& times) {
+  const SceneField& scene = in.scene;
+  const InsertOptions& options = in.options;
+  const CameraIntrinsics& camera = in.camera;
+  const Pose& T_world_camera = in.T_world_camera;
+  const std::vector<InsertObject>& objects = in.objects;
+  const std::vector<WorldSphere>& spheres = in.spheres;
+  const std::vector<SgMixture>& lights = in.lights;
+  const ObjectGBuffer& g = in.gbuffer;
+  const ReceiverOverride& receivers = in.receivers;
+  const size_t n_objects = objects.size();
+  const Vec3f eye(T_world_camera.translation);
+  const Aabb box = scene.Box();
+  std::vector<size_t> casters;
+  for (size_t j = 0; j < n_objects; ++j)
+    if (objects[j].visibility && spheres[j].radius > 0) casters.push_back(j);
+  if (options.shadows && !casters.empty()) {
+    PixelRect rect;
+    for (size_t j : casters)
+      rect = Union(rect, ProjectBall(camera, T_world_camera, Vec3(spheres[j].center),
+                                     options.shadow_reach_radii * spheres[j].radius));
+    rect = ClipToImage(rect, camera.width, camera.height);
+    // The world lattice of κ, dropped when a caster or a light changed.
+    KappaCache* cache = nullptr;
+    double spacing = 0.0;
+    float smallest = std::numeric_limits<float>::infinity();
+    for (size_t j : casters) smallest = std::min(smallest, spheres[j].radius);
+    if (options.kappa_cache_spacing_radii > 0) {
+      spacing = options.kappa_cache_spacing_radii * smallest;
+      // Also what shapes the κ layer kept for an unchanged camera.
+      std::vector<double> key = {spacing,
+                                 options.shadow_reach_radii,
+                                 options.shadow_epsilon,
+                                 double(options.kappa_step),
+                                 double(options.kappa_coarse_factor),
+                                 options.kappa_refine_delta,
+                                 options.kappa_plane_upsampling ? 1.0 : 0.0,
+                                 options.receiver_min_opacity};
+      for (size_t j : casters) AppendObjectKey(objects[j], key);
+      for (const SgMixture& light : lights) AppendLightKey(light, key);
+      if (!cache_owner) cache_owner = std::make_unique<KappaCache>();
+      if (key != cache_owner->key || cache_owner->lattice.Size() > kKappaCacheMaxNodes) {
+        cache_owner->Clear();
+        cache_owner->key = std::move(key);
+      }
+      cache_owner->lattice.Publish();  // the last frame's nodes: read without locks this frame
+      cache = cache_owner.get();
+    }
+    // A view already passed whole under this cache (receivers marched by
+    // the NeRF, the same camera within a lattice spacing and 0.1 mrad): its
+    // receivers' κ < 1 − ε lie within one spacing of the shadowed nodes'
+    // box, so only that box's projection needs a pass (aligned to the
+    // coarse grid of the whole rectangle, so its values are unchanged).
+    std::vector<double> view = {
+        camera.fx, camera.fy, camera.cx, camera.cy, double(camera.width), double(camera.height)};
+    AppendPoseKey(T_world_camera, 1.0, view);
+    if (cache != nullptr && receivers.distance == nullptr && !rect.empty()) {
+      bool seen = false;
+      for (const std::vector<double>& e : cache->explored) {
+        bool same = e.size() == view.size();
+        for (size_t i = 0; same && i < 6; ++i) same = e[i] == view[i];
+        for (size_t i = 6; same && i < 15; ++i) same = std::abs(e[i] - view[i]) <= 1e-4;            // rotation entries
+        for (size_t i = 15; same && i < 18; ++i) same = std::abs(e[i] - view[i]) <= 0.5 * spacing;  // translation
+        seen = seen || same;
+      }
+      if (!seen) {
+        if (cache->explored.size() >= 16) cache->explored.erase(cache->explored.begin());  // a moving camera
+        cache->explored.push_back(view);
+      } else {
+        PixelRect shadow;
+        const Vec3f lo = cache->lattice.shadow_min(), hi = cache->lattice.shadow_max();
+        if (lo.x <= hi.x) {
+          const Vec3 centre = Vec3((lo + hi) * 0.5f);
+          const double radius = 0.5 * Length(Vec3(hi - lo)) + 1.75 * spacing;  // + the nodes' trilinear support
+          shadow = ClipToImage(ProjectBall(camera, T_world_camera, centre, radius), camera.width, camera.height);
+        }
+        if (shadow.empty()) {
+          rect = {};
+        } else {
+          const int unit = options.kappa_step * std::max(1, options.kappa_coarse_factor);
+          const auto down = [&](int v, int origin) { return origin + (std::max(v, origin) - origin) / unit * unit; };
+          PixelRect r{down(shadow.x0 - unit, rect.x0), down(shadow.y0 - unit, rect.y0),
+                      down(shadow.x1 + 2 * unit, rect.x0) + 1, down(shadow.y1 + 2 * unit, rect.y0) + 1};
+          r = {std::max(r.x0, rect.x0), std::max(r.y0, rect.y0), std::min(r.x1, rect.x1), std::min(r.y1, rect.y1)};
+          rect = r.empty() ? PixelRect{} : r;
+        }
+      }
+    }
+    layers.kappa_rect = rect;
+    layers.kappa = ImageF(rect.width(), rect.height(), 1, 1.0f);
+    // The same camera exactly, the same rectangle, nothing moved: the last
+    // frame's κ layer holds (NeRF receivers only).
+    const bool reuse = cache != nullptr && receivers.distance == nullptr && !rect.empty() && view == cache->last_view &&
+                       rect.x0 == cache->last_rect.x0 && rect.y0 == cache->last_rect.y0 &&
+                       rect.x1 == cache->last_rect.x1 && rect.y1 == cache->last_rect.y1;
+    if (reuse) {
+      layers.kappa = cache->last_kappa;
+      ParallelFor(
+          static_cast<size_t>(rect.height()),
+          [&](size_t r) {
+            const int y = rect.y0 + static_cast<int>(r);
+            for (int x = rect.x0; x < rect.x1; ++x) {
+              const float k = layers.kappa.at(x - rect.x0, y - rect.y0);
+              if (k >= 1.0f) continue;
+              if (g.rect.Contains(x, y) && g.object[g.Index(x, y)] >= 0) continue;
+              for (int ch = 0; ch < 3; ++ch) frame.at(x, y, ch) *= k;
+            }
+          },
+          4);
+    } else if (!rect.empty()) {
+      // Light owners: each receiver takes the light of its nearest object
+      // (relative to size); queries of every caster at each owner's lobe axes.
+      for (size_t o = 0; o < n_objects; ++o) PrepareLight(lights[o], objects, preps[o]);
+      const int step = options.kappa_step;
+      const auto grid_axis = [step](int lo, int hi) {
+        std::vector<int> s;
+        for (int v = lo; v < hi; v += step) s.push_back(v);
+        if (s.back() != hi - 1) s.push_back(hi - 1);
+        return s;
+      };
+      const std::vector<int> xs = grid_axis(rect.x0, rect.x1), ys = grid_axis(rect.y0, rect.y1);
+      const size_t nx = xs.size(), ny = ys.size();
+      std::vector<float> kappa_grid(nx * ny, 1.0f);
+      std::vector<size_t> queries_per_row(ny, 0);
+      const float reach = static_cast<float>(options.shadow_reach_radii);
+      const float min_opacity = static_cast<float>(options.receiver_min_opacity);
+      const double one_minus_eps = 1.0 - options.shadow_epsilon;
+      std::vector<size_t> evaluated_per_row(ny, 0), marched_per_row(ny, 0), reused_per_row(ny, 0);
+      // The last frame's receivers, when they can stand for marching.
+      const bool reuse_receivers = cache != nullptr && receivers.distance == nullptr && options.kappa_receiver_reuse &&
+                                   cache->receivers.valid &&
+                                   cache->receivers.min_opacity == static_cast<float>(options.receiver_min_opacity);
+      const bool cell_normals = cache != nullptr && receivers.distance == nullptr && options.receiver_normal_per_cell;
+      const float reuse_tolerance = static_cast<float>(options.kappa_reuse_tolerance_radii * smallest);
+      const KappaContext context{&casters, &spheres, &preps, &lights, reach, one_minus_eps};
+      // κ at receiver x (normal n): exact, or trilinear in the world lattice.
+      const auto receiver_kappa = [&](const Vec3f& x, const Vec3f& n, ThreadScratch& sc, size_t row) -> float {
+        if (cache == nullptr) {
+          bool queried = false;
+          const float k = KappaAt(context, x, n, sc.kappa, &queried);
+          ++evaluated_per_row[row];
+          if (queried) ++queries_per_row[row];
+          return k;
+        }
+        // No bound test here: nodes that the bound clears hold κ = 1.
+        // Trilinear over the lattice nodes around x, for x's normal cell.
+        const uint32_t cell = NormalCell(n);
+        const Vec3f n_cell = CellNormal(cell);
+        const double fx = x.x / spacing, fy = x.y / spacing, fz = x.z / spacing;
+        const double bx = std::floor(fx), by = std::floor(fy), bz = std::floor(fz);
+        const double wx = fx - bx, wy = fy - by, wz = fz - bz;
+        double sum = 0.0, total = 0.0;
+        for (int corner = 0; corner < 8; ++corner) {
+          const int dx = corner & 1, dy = (corner >> 1) & 1, dz = corner >> 2;
+          const double weight = (dx ? wx : 1 - wx) * (dy ? wy : 1 - wy) * (dz ? wz : 1 - wz);
+          // Nodes that hardly count are not computed (a receiver plane on a
+          // lattice plane would otherwise pull in the layer beyond it).
+          if (weight < 1e-3) continue;
+          total += weight;
+          const int64_t i = int64_t(bx) + dx, j = int64_t(by) + dy, k = int64_t(bz) + dz;
+          const uint64_t key = LatticeKey(i, j, k, cell);
+          const size_t slot = LatticeMemo::Slot(key);
+          float value;
+          if (sc.memo.key[slot] == key && sc.memo.value[slot] >= 0.0f) {
+            value = sc.memo.value[slot];
+          } else if (!cache->lattice.Find(key, &value)) {
+            bool queried = false;
+            const Vec3f node(Vec3(double(i), double(j), double(k)) * spacing);
+            value = KappaAt(context, node, n_cell, sc.kappa, &queried);
+            cache->lattice.Insert(key, value);
+            if (value < one_minus_eps) cache->lattice.GrowShadow(node);
+            ++evaluated_per_row[row];
+            if (queried) ++queries_per_row[row];
+          }
+          sc.memo.key[slot] = key;
+          sc.memo.value[slot] = value;
+          sum += weight * value;
+        }
+        return total > 0.0 ? static_cast<float>(std::clamp(sum / total, 0.0, 1.0)) : 1.0f;
+      };
+      // What the receiver pass found at each grid node (for the upsampling).
+      std::vector<Vec3f> node_point(nx * ny), node_normal(nx * ny);
+      std::vector<uint8_t> node_valid(nx * ny, 0);
+      std::vector<uint8_t> node_state(nx * ny, 0);  // 0 not found, 1 surface, 2 no surface (as ReceiverFrame)
+      // Receivers of one pass's nodes found, per row: the surface nodes
+      // (opacity above the threshold, finite point) and their own normals.
+      std::vector<std::vector<CellCandidate>> found(ny);
+      // The receivers at the grid nodes (row, cols[j]) of one row:
+      // node_state 2 (no surface) or 1 with node_point and the receiver's own
+      // normal in node_normal (not yet unit; replaced by its cell's normal
+      // with receiver_normal_per_cell), the surface nodes listed in found[row].
+      const auto find_row = [&](size_t row, const std::vector<size_t>& cols) {
+        found[row].clear();
+        if (cols.empty()) return;
+        const int y = ys[row];
+        const size_t nc = cols.size();
+        SceneRays rays;
+        SceneSamples out;
+        std::vector<Vec3f> points(nc), normals;
+        std::vector<float> opacity(nc, 0.0f);
+        std::vector<Vec3f> dirs(nc);
+        for (size_t ix = 0; ix < nc; ++ix) dirs[ix] = CameraRayDirection(camera, T_world_camera, xs[cols[ix]], y);
+        if (receivers.distance) {
+          for (size_t ix = 0; ix < nc; ++ix) {
+            const float t = receivers.distance->at(xs[cols[ix]], y);
+            opacity[ix] = t > 0.0f && std::isfinite(t) ? 1.0f : 0.0f;
+            points[ix] = eye + dirs[ix] * (opacity[ix] > 0 ? t : 0.0f);
+          }
+        } else {
+          // Receivers the last frame gives (state 1 or 2); the rest marched.
+          std::vector<uint8_t> given(nc, 0);
+          normals.resize(nc);
+          std::vector<size_t> march;
+          march.reserve(nc);
+          for (size_t ix = 0; ix < nc; ++ix) {
+            if (reuse_receivers)
+              given[ix] = static_cast<uint8_t>(ReuseReceiver(cache->receivers, eye, dirs[ix], xs[cols[ix]], y,
+                                                             reuse_tolerance, points[ix], normals[ix]));
+            if (given[ix] == 1) opacity[ix] = 1.0f;
+            if (given[ix] == 0) march.push_back(ix);
+          }
+          reused_per_row[row] += nc - march.size();
+          if (!march.empty()) {
+            rays.Reserve(march.size());
+            for (size_t ix : march) {
+              const auto range = IntersectBox(box, Vec3(eye), Vec3(dirs[ix]));
+              rays.Add(eye, dirs[ix], range ? static_cast<float>(range->first) : 0.0f,
+                       range ? static_cast<float>(range->second) : 0.0f);
+            }
+            scene.RenderRays(rays, out);
+            marched_per_row[row] += march.size();
+            std::vector<Vec3f> marched_points(march.size()), marched_normals;
+            for (size_t m = 0; m < march.size(); ++m) {
+              const size_t ix = march[m];
+              opacity[ix] = std::isfinite(out.opacity[m]) ? out.opacity[m] : 0.0f;
+              const float t = std::isfinite(out.depth[m]) ? out.depth[m] : 0.0f;
+              points[ix] = marched_points[m] = eye + dirs[ix] * t;
+            }
+            scene.Normals(marched_points, marched_normals);
+            for (size_t m = 0; m < march.size(); ++m) normals[march[m]] = marched_normals[m];
+          }
+        }
+        if (receivers.normal) {
+          normals.resize(nc);
+          for (size_t ix = 0; ix < nc; ++ix)
+            normals[ix] = {receivers.normal->at(xs[cols[ix]], y, 0), receivers.normal->at(xs[cols[ix]], y, 1),
+                           receivers.normal->at(xs[cols[ix]], y, 2)};
+        } else if (receivers.distance) {
+          scene.Normals(points, normals);
+        }
+        for (size_t ix = 0; ix < nc; ++ix) {
+          const size_t node = row * nx + cols[ix];
+          node_state[node] = 2;
+          if (opacity[ix] < min_opacity || !Finite(points[ix])) continue;
+          node_state[node] = 1;
+          node_point[node] = points[ix];
+          node_normal[node] = normals[ix];
+          found[row].push_back({node, points[ix], normals[ix]});
+        }
+      };
+      // With receiver_normal_per_cell, between finding one pass's receivers
+      // and their κ: every receiver in a world cell takes that cell's normal
+      // (CellNormals: kept from earlier passes, else the deterministic pick
+      // among this pass's receivers in it), whatever the threads' order.
+      const auto resolve_cell_normals = [&]() {
+        if (!cell_normals) return;
+        std::vector<CellCandidate> all;
+        for (const std::vector<CellCandidate>& row : found) all.insert(all.end(), row.begin(), row.end());
+        cache->cell_normals.Resolve(spacing, all);
+        for (const CellCandidate& c : all) node_normal[c.node] = c.normal;
+      };
+      // κ at the receivers find_row found in this row (cols as there).
+      const auto kappa_row = [&](size_t row, const std::vector<size_t>& cols) {
+        ThreadScratch scratch;
+        for (size_t q : cols) {
+          const size_t node = row * nx + q;
+          if (node_state[node] != 1) continue;
+          Vec3f n = node_normal[node];
+          if (!Finite(n) || Dot(n, n) < 0.25f) {
+            node_state[node] = 2;
+            continue;
+          }
+          n = Normalized(n);
+          node_normal[node] = n;
+          node_valid[node] = 1;
+          kappa_grid[node] = receiver_kappa(node_point[node], n, scratch, row);
+        }
+      };
+      // Coarse to fine: κ at every coarse_factor-th node; cells whose corners
+      // differ by more than kappa_refine_delta get all their nodes, the
+      // others are interpolated (κ varies slowly away from edges).
+      size_t factor = static_cast<size_t>(std::max(1, options.kappa_coarse_factor));
+      if (nx < 2 * factor || ny < 2 * factor) factor = 1;  // too small a grid to coarsen
+      const auto coarse_axis = [factor](size_t n) {
+        std::vector<size_t> c;
+        for (size_t i = 0; i < n; i += factor) c.push_back(i);
+        if (c.back() != n - 1) c.push_back(n - 1);
+        return c;
+      };
+      const std::vector<size_t> cx = coarse_axis(nx), cy = coarse_axis(ny);
+      std::vector<uint8_t> is_coarse_row(ny, 0);
+      for (size_t r : cy) is_coarse_row[r] = 1;
+      ParallelFor(
+          cy.size(), [&](size_t i) { find_row(cy[i], cx); }, 1);
+      resolve_cell_normals();
+      ParallelFor(
+          cy.size(), [&](size_t i) { kappa_row(cy[i], cx); }, 1);
+      if (factor > 1) {
+        // Nodes that need their own κ: those of cells with differing corners.
+        std::vector<uint8_t> need(nx * ny, 0);
+        const float delta = static_cast<float>(options.kappa_refine_delta);
+        for (size_t j = 0; j + 1 < cy.size(); ++j)
+          for (size_t i = 0; i + 1 < cx.size(); ++i) {
+            const float a = kappa_grid[cy[j] * nx + cx[i]], b = kappa_grid[cy[j] * nx + cx[i + 1]];
+            const float c = kappa_grid[cy[j + 1] * nx + cx[i]], d = kappa_grid[cy[j + 1] * nx + cx[i + 1]];
+            if (std::max({a, b, c, d}) - std::min({a, b, c, d}) <= delta) continue;
+            for (size_t r = cy[j]; r <= cy[j + 1]; ++r)
+              for (size_t q = cx[i]; q <= cx[i + 1]; ++q) need[r * nx + q] = 1;
+          }
+        std::vector<uint8_t> is_coarse_col(nx, 0);
+        for (size_t q : cx) is_coarse_col[q] = 1;
+        // Coarse cells whose four receivers lie on one plane (normals within
+        // 10° of their mean, points within 5% of the cell's size of the
+        // plane through their mean); only where the receivers were marched.
+        std::vector<CellPlane> planes((cy.size() - 1) * (cx.size() - 1));
+        if (options.kappa_plane_upsampling && receivers.distance == nullptr) {
+          for (size_t j = 0; j + 1 < cy.size(); ++j)
+            for (size_t i = 0; i + 1 < cx.size(); ++i) {
+              const size_t corner[4] = {cy[j] * nx + cx[i], cy[j] * nx + cx[i + 1], cy[j + 1] * nx + cx[i],
+                                        cy[j + 1] * nx + cx[i + 1]};
+              CellPlane& plane = planes[j * (cx.size() - 1) + i];
+              Vec3f mean_p{}, mean_n{};
+              bool ok = true;
+              for (size_t c : corner) {
+                ok = ok && node_valid[c];
+                mean_p = mean_p + node_point[c] * 0.25f;
+                mean_n = mean_n + node_normal[c];
+              }
+              if (!ok || !(Dot(mean_n, mean_n) > 1e-6f)) continue;
+              mean_n = Normalized(mean_n);
+              float size = 0.0f, off = 0.0f;
+              plane.t_min = std::numeric_limits<float>::infinity();
+              plane.t_max = 0.0f;
+              for (size_t c : corner) {
+                ok = ok && Dot(node_normal[c], mean_n) > 0.985f;
+                size = std::max(size, Length(node_point[c] - mean_p));
+                off = std::max(off, std::abs(Dot(node_point[c] - mean_p, mean_n)));
+                const float t = Length(node_point[c] - eye);
+                plane.t_min = std::min(plane.t_min, t);
+                plane.t_max = std::max(plane.t_max, t);
+              }
+              if (!ok || off > 0.05f * size) continue;
+              plane.valid = true;
+              plane.point = mean_p;
+              plane.normal = mean_n;
+            }
+        }
+        // Per row: nodes inside a planar coarse cell take their receiver
+        // on the plane, the others needing κ are found, ...
+        std::vector<std::vector<size_t>> refine_cols(ny);
+        ParallelFor(
+            ny,
+            [&](size_t r) {
+              std::vector<size_t>& cols = refine_cols[r];
+              const size_t j = std::min<size_t>(r / factor, cy.size() - 2);
+              ThreadScratch scratch;
+              for (size_t q = 0; q < nx; ++q) {
+                if (!need[r * nx + q] || (is_coarse_row[r] && is_coarse_col[q])) continue;
+                // Depth-aware upsampling: inside a planar coarse cell the
+                // receiver is where this node's ray meets the plane.
+                const CellPlane& plane = planes[j * (cx.size() - 1) + std::min<size_t>(q / factor, cx.size() - 2)];
+                if (plane.valid) {
+                  const Vec3f d = CameraRayDirection(camera, T_world_camera, xs[q], ys[r]);
+                  const float cosine = Dot(d, plane.normal);
+                  const float t = cosine < -0.05f ? Dot(plane.point - eye, plane.normal) / cosine : -1.0f;
+                  if (t >= 0.9f * plane.t_min && t <= 1.1f * plane.t_max) {
+                    kappa_grid[r * nx + q] = receiver_kappa(eye + d * t, plane.normal, scratch, r);
+                    continue;
+                  }
+                }
+                cols.push_back(q);
+              }
+              find_row(r, cols);
+            },
+            1);
+        resolve_cell_normals();
+        // ... then their κ, and the rest bilinear in their coarse cell.
+        ParallelFor(
+            ny,
+            [&](size_t r) {
+              kappa_row(r, refine_cols[r]);
+              const size_t j = std::min<size_t>(r / factor, cy.size() - 2);
+              const float wy = float(r - cy[j]) / float(cy[j + 1] - cy[j]);
+              for (size_t q = 0; q < nx; ++q) {
+                if (need[r * nx + q] || (is_coarse_row[r] && is_coarse_col[q])) continue;
+                const size_t i = std::min<size_t>(q / factor, cx.size() - 2);
+                const float wx = float(q - cx[i]) / float(cx[i + 1] - cx[i]);
+                kappa_grid[r * nx + q] = (1 - wx) * (1 - wy) * kappa_grid[cy[j] * nx + cx[i]] +
+                                         wx * (1 - wy) * kappa_grid[cy[j] * nx + cx[i + 1]] +
+                                         (1 - wx) * wy * kappa_grid[cy[j + 1] * nx + cx[i]] +
+                                         wx * wy * kappa_grid[cy[j + 1] * nx + cx[i + 1]];
+              }
+            },
+            1);
+      }
+      for (size_t q : queries_per_row) layers.kappa_queries += q;
+      for (size_t q : evaluated_per_row) times.kappa_evaluated += q;
+      for (size_t q : marched_per_row) times.kappa_marched += q;
+      for (size_t q : reused_per_row) times.kappa_reused += q;
+      if (cache != nullptr && receivers.distance == nullptr && options.kappa_receiver_reuse) {
+        // Kept for the next frame (nodes only interpolated or plane-placed
+        // stay unknown).
+        ReceiverFrame& kept = cache->receivers;
+        kept.valid = true;
+        kept.min_opacity = static_cast<float>(options.receiver_min_opacity);
+        kept.camera = camera;
+        kept.T_world_camera = T_world_camera;
+        kept.T_camera_world = T_world_camera.Inverse();
+        kept.xs = xs;
+        kept.ys = ys;
+        kept.cx = cx;
+        kept.cy = cy;
+        kept.factor = factor;
+        kept.step = step;
+        kept.state = std::move(node_state);
+        kept.point = std::move(node_point);
+        kept.normal = std::move(node_normal);
+      }
+      // Bilinear from the sample grid to every pixel; multiply the background
+      // where no object covers it. Cell by cell of the grid: a cell whose
+      // four nodes hold κ = 1 is skipped whole (the layer is 1 already; the
+      // per-pixel sum of its weights could round 1 ulp under 1, the only
+      // difference from doing every pixel).
+      ParallelFor(
+          static_cast<size_t>(rect.height()),
+          [&](size_t r) {
+            const int y = rect.y0 + static_cast<int>(r);
+            const size_t iy = std::min<size_t>((y - rect.y0) / step, ny >= 2 ? ny - 2 : 0);
+            const float wy = ny >= 2 ? float(y - ys[iy]) / float(ys[iy + 1] - ys[iy]) : 0.0f;
+            const size_t iy1 = ny >= 2 ? iy + 1 : iy;
+            const float* g0 = &kappa_grid[iy * nx];
+            const float* g1 = &kappa_grid[iy1 * nx];
+            float* out = &layers.kappa.at(0, y - rect.y0);
+            const bool object_row = y >= g.rect.y0 && y < g.rect.y1;
+            const size_t cells = nx >= 2 ? nx - 1 : 1;
+            for (size_t ix = 0; ix < cells; ++ix) {
+              const size_t ix1 = nx >= 2 ? ix + 1 : ix;
+              const float a = g0[ix], b = g0[ix1], c = g1[ix], d = g1[ix1];
+              if (a >= 1.0f && b >= 1.0f && c >= 1.0f && d >= 1.0f) continue;
+              const int x_begin = nx >= 2 ? xs[ix] : rect.x0;
+              const int x_end = nx >= 2 && ix + 2 < nx ? xs[ix1] : rect.x1;
+              const float span = nx >= 2 ? float(xs[ix1] - xs[ix]) : 1.0f;
+              for (int x = x_begin; x < x_end; ++x) {
+                const float wx = nx >= 2 ? float(x - xs[ix]) / span : 0.0f;
+                const float k = (1 - wx) * (1 - wy) * a + wx * (1 - wy) * b + (1 - wx) * wy * c + wx * wy * d;
+                out[x - rect.x0] = k;
+                if (k >= 1.0f) continue;
+                if (object_row && g.rect.Contains(x, y) && g.object[g.Index(x, y)] >= 0) continue;
+                for (int ch = 0; ch < 3; ++ch) frame.at(x, y, ch) *= k;
+              }
+            }
+          },
+          4);
+      if (cache != nullptr && receivers.distance == nullptr) {
+        cache->last_view = view;
+        cache->last_rect = rect;
+        cache->last_kappa = layers.kappa;
+      }
+    }
+  }
+}
+
+}  // namespace nerfar

@@ -1,0 +1,66 @@
+// Internal to render/insert: the shadow pass of a frame — κ (paper eqs. 8-9)
+// on the scene's receivers within reach of the casters, multiplied into the
+// background where no object covers it — and what it keeps between frames.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include "render/insert/insert_common.h"
+#include "render/insert/inserter.h"
+#include "render/insert/kappa_lattice.h"
+#include "render/insert/light_prep.h"
+#include "render/insert/receivers.h"
+
+namespace nerfar {
+
+// What the shadow pass keeps between frames; `key` says which objects,
+// lights and options the lattice and the last layer hold.
+struct KappaCache {
+  std::vector<double> key;
+  KappaLattice lattice;
+  // Views (camera pose, intrinsics) whose whole reach rectangle was passed
+  // under the current key: each visible receiver there has its nodes here.
+  std::vector<std::vector<double>> explored;
+  // The last frame's κ layer, its rectangle and its exact view.
+  std::vector<double> last_view;
+  PixelRect last_rect;
+  ImageF last_kappa;
+  // The last frame's NeRF receivers (kept across Clear: they depend on the
+  // scene and the opacity threshold only).
+  ReceiverFrame receivers;
+  // Receiver normals per world cell (InsertOptions::receiver_normal_per_cell),
+  // kept across Clear while the spacing holds.
+  CellNormals cell_normals;
+
+  // Drops the lattice, the explored views and the last layer.
+  void Clear() {
+    lattice.Clear();
+    explored.clear();
+    last_view.clear();
+    last_kappa = ImageF();
+  }
+};
+
+// The frame's inputs to the shadow pass (loans for the call).
+struct ShadowPassInputs {
+  const SceneField& scene;
+  const InsertOptions& options;
+  const CameraIntrinsics& camera;
+  const Pose& T_world_camera;
+  const std::vector<InsertObject>& objects;
+  const std::vector<WorldSphere>& spheres;
+  const std::vector<SgMixture>& lights;  // each object's light this frame
+  const ObjectGBuffer& gbuffer;          // object pixels keep their composite
+  const ReceiverOverride& receivers;
+};
+
+// κ over the casters' reach rectangle into layers.kappa / kappa_rect /
+// kappa_queries and the background `frame` multiplied by it; `preps` (one per
+// object) are prepared on demand; `cache` created on demand when the lattice
+// is on (kappa_cache_spacing_radii > 0). Counters into `times`.
+void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, std::unique_ptr<KappaCache>& cache,
+                   ImageF& frame, InsertLayers& layers, InsertTimings& times);
+
+}  // namespace nerfar
