@@ -3,13 +3,17 @@
 // and reports training time, psnr_tm of the test views against the low-noise
 // insert/bg_XXX.exr, depth error on surfaces, model size, and the query
 // throughput (density and radiance samples/s, 1280x720 and 320x180 colour+depth
-// frames) on 1 thread and on all threads. --quick: a 20-step run on one scene.
+// frames, with the mean samples per ray of the 720p frame) on 1 thread and on
+// all threads. --quick: a 20-step run on one scene.
+// $NERFAR_BENCH_NERF_MODELS="lamps=A.nerf,window=B.nerf": no training; the
+// given saved models are scored and timed instead.
 #include <cstdlib>
 #include <filesystem>
 #include <random>
 #include <sstream>
 
 #include "app/bench.h"
+#include "calib/core/error.h"
 #include "calib/core/log.h"
 #include "calib/core/parallel.h"
 #include "calib/dataset.h"
@@ -61,6 +65,16 @@ void Throughput(const NerfField& field, const std::string& dataset, const std::s
           {"frame_" + std::to_string(w) + "x" + std::to_string(h) + "_ms", ms, "ms", cond + ", colour+depth+opacity"});
     }
   }
+  {
+    // What a 720p frame's rays cost: density samples and colour evaluations per ray (all rays, misses included).
+    const std::vector<NerfRay> hd = CameraRays(test.camera.Scaled(1280, 720), pose, field.aabb);
+    std::vector<NerfRayResult> out(hd.size());
+    field.RenderRays(hd.data(), hd.size(), out.data());
+    double samples = 0, colour = 0;
+    for (const NerfRayResult& r : out) samples += r.samples, colour += r.color_samples;
+    figures.push_back({"samples_per_ray", samples / double(hd.size()), "", tag + ", 1280x720 frame, all rays"});
+    figures.push_back({"colour_samples_per_ray", colour / double(hd.size()), "", tag + ", 1280x720 frame"});
+  }
   SetThreadCount(all);
 }
 
@@ -78,6 +92,22 @@ std::vector<BenchFigure> BenchNerf(const BenchOptions& options) {
   if (options.quick) scenes.resize(1);
   const std::string tmp = std::filesystem::temp_directory_path() / "nerfar_bench_nerf";
   std::filesystem::create_directories(tmp);
+  if (const char* models = std::getenv("NERFAR_BENCH_NERF_MODELS")) {
+    for (const std::string& item : Split(models)) {
+      const size_t eq = item.find('=');
+      if (eq == std::string::npos) throw InputError("NERFAR_BENCH_NERF_MODELS: '" + item + "' (expected SCENE=FILE)");
+      const std::string scene = item.substr(0, eq), path = item.substr(eq + 1), dir = options.scenes_dir + "/" + scene;
+      const NerfField field = LoadNerf(path);
+      const std::string tag = scene + " " + std::filesystem::path(path).filename().string();
+      const NerfEvaluation eval = EvaluateNerf(field, dir, NerfEvalOptions{});
+      figures.push_back({"psnr_tm_reference_db", eval.mean_psnr_reference, "dB", tag + ", 8 test views vs insert/bg"});
+      figures.push_back({"surface_depth_median_error_mm", eval.surface_depth_median_m * 1e3, "mm",
+                         tag + ", surfaces, object masked"});
+      figures.push_back({"model_mb", double(std::filesystem::file_size(path)) / 1e6, "MB", tag});
+      Throughput(field, dir, tag, figures);
+    }
+    return figures;
+  }
   for (const std::string& scene : scenes) {
     const std::string dir = options.scenes_dir + "/" + scene;
     const NerfTrainData data = ReadNerfTrainData(dir);

@@ -12,6 +12,7 @@
 
 #include "app/cli.h"
 #include "app/commands.h"
+#include "calib/core/atomic_file.h"
 #include "calib/core/error.h"
 #include "calib/core/json.h"
 #include "calib/core/log.h"
@@ -26,6 +27,8 @@ int RunRender(const CommandArgs& args) {
   double step_voxels = options.render.step_voxels;
   double occupancy_sigma = 0;
   std::string save_model;
+  NerfFileOptions file_options;
+  bool no_compress = false;
   ArgParser parser("render", "Render a NeRF at a dataset's cameras and score it (psnr_tm, depth).");
   parser.Positional("MODEL", &model, "trained model (.nerf)");
   parser.Option("--dataset", &dataset, "DIR", "dataset folder whose cameras to render (required)");
@@ -37,7 +40,15 @@ int RunRender(const CommandArgs& args) {
                 "re-threshold the model's occupancy at S (1/m) before rendering: cells whose corners all lie "
                 "below S are skipped (what train's save_occupancy_sigma does to the saved model; default: as saved)");
   parser.Option("--save-model", &save_model, "FILE",
-                "also write the model as rendered (after --occupancy-sigma: a smaller file) to FILE");
+                "also write the model (after --occupancy-sigma: a smaller file) to FILE in the current format, "
+                "and render what that file holds (quantised as --save-*-bits say)");
+  parser.Option("--save-density-bits", &file_options.density_bits, "B",
+                "bits per stored log-density in files written by --save-model (8..16, default 12)");
+  parser.Option("--save-color-bits", &file_options.color_base_bits, "B",
+                "bits per stored colour base (log radiance) in --save-model files (4..16, default 8)");
+  parser.Option("--save-slope-bits", &file_options.color_slope_bits, "B",
+                "bits per stored colour slope (view dependence) in --save-model files (4..16, default 4)");
+  parser.Flag("--save-no-compress", &no_compress, "do not deflate --save-model files (lossless either way)");
   parser.Epilog(
       "Writes OUT/<name>.exr, OUT/<name>_depth.exr, OUT/<name>_surface_depth.exr, OUT/<name>_opacity.exr and "
       "OUT/report.json.");
@@ -49,11 +60,18 @@ int RunRender(const CommandArgs& args) {
   options.output_dir = output;
   if (!(occupancy_sigma >= 0 && occupancy_sigma < 1e3))
     throw InputError("nerfar render: --occupancy-sigma (expected 0..1000 per metre)");
+  file_options.compress = !no_compress;
+  if (const std::vector<std::string> problems = file_options.Validate(); !problems.empty())
+    throw InputError("nerfar render: " + problems.front());
   NerfField field = LoadNerf(model);
   if (occupancy_sigma > 0) field.UpdateOccupancy(float(occupancy_sigma));
-  if (!save_model.empty()) SaveNerf(save_model, field);
-  // What the model would take as a file (as saved, or after re-thresholding).
-  const double model_mb = double(SerializeNerf(field).size()) / 1e6;
+  // What the model takes as a file (as written by --save-model, or with the default file options).
+  const std::string bytes = SerializeNerf(field, file_options);
+  if (!save_model.empty()) {
+    WriteFileAtomic(save_model, bytes);
+    field = ParseNerf(bytes, save_model);  // render (and score) what the file holds
+  }
+  const double model_mb = double(bytes.size()) / 1e6;
   std::printf("model: %.1f MB as a file, %.1f %% of cells occupied (threshold %g/m)\n", model_mb,
               100.0 * field.OccupiedFraction(), double(field.occupancy_sigma));
   const NerfEvaluation eval = EvaluateNerf(field, dataset, options);

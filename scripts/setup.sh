@@ -10,7 +10,7 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev
   libopencv-dev libopencv-contrib-dev opencv-data
   libopenexr-dev libapriltag-dev libembree-dev libeigen3-dev libtbb-dev
-  nlohmann-json3-dev libassimp-dev
+  nlohmann-json3-dev libassimp-dev zlib1g-dev
   libv4l-dev libcamera-dev
   libglfw3-dev libgl-dev libimgui-dev
   xvfb xauth xdotool libgl1-mesa-dri ffmpeg

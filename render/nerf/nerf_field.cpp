@@ -192,19 +192,109 @@ void NerfField::QueryDensityGradient(const Vec3f* points, size_t count, Vec3f* g
       count, [&](size_t n) { gradient[n] = DensityGradient(points[n]); }, 2048);
 }
 
+namespace {
+
+// The render marcher's view of the cell it is in: corner raw log-densities and,
+// once a sample there needs colour, the corners' log radiance in the ray's
+// direction (a + b·d per channel; linear in the coefficients, so interpolating
+// it equals interpolating the coefficients first).
+struct RenderCell {
+  int i = -1, j = -1, k = -1;
+  int32_t slot[8];
+  float s[8];
+  bool has_color = false;
+  float log_color[3][8];
+
+  void Load(const NerfField& f, int ci, int cj, int ck) {
+    i = ci, j = cj, k = ck;
+    nerf_detail::CellSlots(f, ci, cj, ck, slot);
+    for (int n = 0; n < 8; ++n) s[n] = slot[n] >= 0 ? f.density[slot[n]] : kNerfEmptyDensityRaw;
+    has_color = false;
+  }
+  void LoadColor(const NerfField& f, const Vec3f& d) {
+    for (int n = 0; n < 8; ++n) {
+      if (slot[n] < 0) {
+        log_color[0][n] = log_color[1][n] = log_color[2][n] = 0.0f;
+        continue;
+      }
+      const float* q = &f.color[size_t(slot[n]) * kNerfColorCoeffs];
+      for (int ch = 0; ch < 3; ++ch)
+        log_color[ch][n] = q[4 * ch] + q[4 * ch + 1] * d.x + q[4 * ch + 2] * d.y + q[4 * ch + 3] * d.z;
+    }
+    has_color = true;
+  }
+};
+
+// Trilinear interpolation of corner values v (corner n at offsets n&1, n>>1&1, n>>2).
+inline float Trilinear(const float v[8], float fx, float fy, float fz) {
+  const float x00 = v[0] + fx * (v[1] - v[0]), x10 = v[2] + fx * (v[3] - v[2]);
+  const float x01 = v[4] + fx * (v[5] - v[4]), x11 = v[6] + fx * (v[7] - v[6]);
+  const float y0 = x00 + fy * (x10 - x00), y1 = x01 + fy * (x11 - x01);
+  return y0 + fz * (y1 - y0);
+}
+
+}  // namespace
+
+// The samples are those of nerf_detail::MarchRay (interval n's at t_near + (n + 0.5)·step, empty
+// bricks and cells jumped over), evaluated with the cell's corners loaded once per cell.
 NerfRayResult NerfField::RenderRay(const NerfRay& ray, const NerfRenderOptions& options) const {
   NerfRayResult result;
-  float transmittance = 1.0f;
-  float depth_sum = 0.0f;
+  const float t0 = ray.t_near, t1 = ray.t_far;
+  if (!(t1 > t0) || empty()) return result;
   const float step = options.step_voxels * voxel_m;
-  nerf_detail::MarchRay(*this, ray, step, 0.5f, [&](float t, float dt, const Corners& c) {
-    const float sigma = std::exp(nerf_detail::RawDensity(*this, c));
+  constexpr float kOffset = 0.5f;
+  const float inv_h = 1.0f / voxel_m;
+  const Vec3f o = (ray.origin - origin) * inv_h;  // grid coordinates
+  const Vec3f d = ray.dir * inv_h;                // grid units per metre
+  const float inv_d[3] = {d.x != 0.0f ? 1.0f / d.x : 1e30f, d.y != 0.0f ? 1.0f / d.y : 1e30f,
+                          d.z != 0.0f ? 1.0f / d.z : 1e30f};
+  const int64_t count = int64_t(std::ceil((t1 - t0) / step));
+  const float max_g[3] = {float(res[0] - 1), float(res[1] - 1), float(res[2] - 1)};
+  float transmittance = 1.0f, depth_sum = 0.0f;
+  RenderCell cell;
+  for (int64_t n = 0; n < count;) {
+    const float a = t0 + float(n) * step;
+    const float dt = std::min(step, t1 - a);
+    if (!(dt > 0.0f)) break;
+    const float t = a + kOffset * dt;
+    Vec3f g = o + d * t;
+    g.x = std::clamp(g.x, 0.0f, max_g[0]);
+    g.y = std::clamp(g.y, 0.0f, max_g[1]);
+    g.z = std::clamp(g.z, 0.0f, max_g[2]);
+    const int i = std::min(int(g.x), res[0] - 2), j = std::min(int(g.y), res[1] - 2),
+              k = std::min(int(g.z), res[2] - 2);
+    if (i != cell.i || j != cell.j || k != cell.k) {
+      const int state = nerf_detail::CellState(*this, i, j, k);
+      if (state != 2) {
+        // Jump to the first sample beyond this empty brick (state 0) or empty cell (state 1).
+        const int shift = state == 0 ? 2 : 0;
+        const int b[3] = {i >> shift, j >> shift, k >> shift};
+        float t_exit = 1e30f;
+        for (int axis = 0; axis < 3; ++axis) {
+          const float dir = d[axis];
+          if (dir == 0.0f) continue;
+          const float plane = float((dir > 0.0f ? b[axis] + 1 : b[axis]) << shift);
+          t_exit = std::min(t_exit, (plane - o[axis]) * inv_d[axis]);
+        }
+        // 1e-3 of a step of slack: a sample that rounding puts on the exit plane is visited, never skipped.
+        const float next = std::ceil((t_exit - t0) / step - kOffset - 1e-3f);
+        n = next > float(n + 1) ? (next < float(count) ? int64_t(next) : count) : n + 1;
+        continue;
+      }
+      cell.Load(*this, i, j, k);
+    }
+    ++n;
+    ++result.samples;
+    const float fx = g.x - float(i), fy = g.y - float(j), fz = g.z - float(k);
+    const float sigma = std::exp(Trilinear(cell.s, fx, fy, fz));
     const float alpha = -std::expm1(-sigma * dt);
-    if (alpha < options.min_alpha) return true;
+    if (alpha < options.min_alpha) continue;
+    ++result.color_samples;
+    if (!cell.has_color) cell.LoadColor(*this, ray.dir);
     const float w = transmittance * alpha;
-    float q[kNerfColorCoeffs];
-    nerf_detail::ColorCoeffs(*this, c, q);
-    result.color += nerf_detail::ColorFromCoeffs(q, ray.dir) * w;
+    for (int ch = 0; ch < 3; ++ch)
+      result.color[ch] +=
+          w * std::exp(std::clamp(Trilinear(cell.log_color[ch], fx, fy, fz), kNerfLogColorMin, kNerfLogColorMax));
     depth_sum += w * t;
     const float next = transmittance * (1.0f - alpha);
     if (transmittance > 0.5f && next <= 0.5f) {
@@ -213,8 +303,8 @@ NerfRayResult NerfField::RenderRay(const NerfRay& ray, const NerfRenderOptions& 
       result.surface_depth = t - 0.5f * dt + x;
     }
     transmittance = next;
-    return transmittance >= options.min_transmittance;
-  });
+    if (transmittance < options.min_transmittance) break;
+  }
   result.opacity = 1.0f - transmittance;
   result.depth = result.opacity > 0.0f ? depth_sum / result.opacity : 0.0f;
   if (!(result.opacity >= 0.5f) || result.surface_depth == 0.0f) result.surface_depth = result.depth;

@@ -52,6 +52,8 @@ struct NerfRayResult {
   float opacity = 0;
   float depth = 0;
   float surface_depth = 0;
+  // Cost: density samples taken along the ray, and how many of them also evaluated colour.
+  uint32_t samples = 0, color_samples = 0;
 };
 
 struct NerfRenderOptions {

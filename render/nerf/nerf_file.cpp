@@ -1,7 +1,11 @@
 #include "render/nerf/nerf_file.h"
 
+#include <zlib.h>
+
+#include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <limits>
 
 #include "calib/core/atomic_file.h"
 #include "calib/core/error.h"
@@ -10,8 +14,11 @@ namespace nerfar {
 namespace {
 
 constexpr char kMagic[8] = {'N', 'E', 'R', 'F', 'A', 'R', 'F', '1'};
-constexpr uint32_t kColorModelLogLinear = 1;  // log L = a + b·d per channel
-constexpr int kValuesPerVertex = 1 + kNerfColorCoeffs;
+constexpr uint32_t kColorModelLogLinear = 1;            // log L = a + b·d per channel
+constexpr int kValuesPerVertex = 1 + kNerfColorCoeffs;  // channels: density, colour 0..11
+constexpr uint8_t kCompressionNone = 0, kCompressionZlib = 1;
+// Largest payload the reader inflates (a corrupt size field fails fast).
+constexpr uint64_t kMaxPayloadBytes = uint64_t{1} << 33;
 
 uint64_t Fnv1a(const char* data, size_t size) {
   uint64_t h = 1469598103934665603ull;
@@ -22,12 +29,6 @@ uint64_t Fnv1a(const char* data, size_t size) {
   return h;
 }
 
-uint16_t ToHalfBits(float v) {
-  const _Float16 h = static_cast<_Float16>(v);
-  uint16_t bits;
-  std::memcpy(&bits, &h, 2);
-  return bits;
-}
 float FromHalfBits(uint16_t bits) {
   _Float16 h;
   std::memcpy(&h, &bits, 2);
@@ -59,6 +60,16 @@ class Reader {
     pos_ += sizeof(T);
     return v;
   }
+  // The next n bytes (throws when fewer remain).
+  const char* Take(size_t n, const char* what) {
+    if (bytes_.size() - pos_ < n)
+      ThrowInputError(source_, std::string("file is truncated while reading ") + what + " at byte " +
+                                   std::to_string(pos_) + " (expected " + std::to_string(n) + " more bytes, " +
+                                   std::to_string(bytes_.size() - pos_) + " left)");
+    const char* p = bytes_.data() + pos_;
+    pos_ += n;
+    return p;
+  }
   size_t pos() const { return pos_; }
   size_t remaining() const { return bytes_.size() - pos_; }
 
@@ -87,22 +98,75 @@ std::vector<uint64_t> NeededMasks(const NerfField& f) {
   return masks;
 }
 
-}  // namespace
+// Per brick and channel: values are (base + q)·2^exponent, q in [0, 2^bits - 1].
+struct Quantiser {
+  int exponent = 0;
+  int32_t base = 0;
+};
 
-std::string SerializeNerf(const NerfField& f) {
-  const std::vector<std::string> problems = f.Validate();
-  NERFAR_CHECK(problems.empty());
-  const std::vector<uint64_t> masks = NeededMasks(f);
-  // Bricks in table order (canonical), only those with stored vertices.
-  std::vector<int32_t> order;
-  uint64_t stored = 0;
-  for (int32_t b : f.brick_table)
-    if (b >= 0 && masks[b] != 0) {
-      order.push_back(b);
-      stored += uint64_t(__builtin_popcountll(masks[b]));
+// The smallest exponent e whose 2^bits - 1 levels span [lo, hi] and keeps
+// |value| / 2^e <= 2^23 (so (base + q)·2^e is exact in float).
+Quantiser ChooseQuantiser(float lo, float hi, int bits) {
+  const double levels = double((int64_t{1} << bits) - 1);
+  const double magnitude = std::max(std::fabs(double(lo)), std::fabs(double(hi)));
+  int e = magnitude > 0 ? std::ilogb(magnitude) - 24 : -60;
+  e = std::max(e, -60);
+  while (std::ldexp(magnitude, -e) > 8388608.0 ||
+         std::ceil(std::ldexp(double(hi), -e)) - std::floor(std::ldexp(double(lo), -e)) > levels)
+    ++e;
+  return {e, int32_t(std::floor(std::ldexp(double(lo), -e)))};
+}
+
+uint32_t Quantise(float v, const Quantiser& q, int bits) {
+  const int64_t code = std::llround(std::ldexp(double(v), -q.exponent)) - q.base;
+  return uint32_t(std::clamp<int64_t>(code, 0, (int64_t{1} << bits) - 1));
+}
+
+float Dequantise(uint32_t code, const Quantiser& q) { return std::ldexp(float(int64_t(q.base) + code), q.exponent); }
+
+class BitPacker {
+ public:
+  explicit BitPacker(std::string& out) : out_(out) {}
+  void Put(uint32_t v, int bits) {
+    acc_ |= uint64_t(v) << fill_;
+    fill_ += bits;
+    while (fill_ >= 8) {
+      out_.push_back(char(acc_ & 0xffu));
+      acc_ >>= 8;
+      fill_ -= 8;
     }
-  Writer w;
-  w.bytes.reserve(128 + order.size() * 28 + stored * kValuesPerVertex * 2);
+  }
+  void Flush() {
+    if (fill_ > 0) out_.push_back(char(acc_ & 0xffu));
+    acc_ = 0, fill_ = 0;
+  }
+
+ private:
+  std::string& out_;
+  uint64_t acc_ = 0;
+  int fill_ = 0;
+};
+
+int ChannelBits(const NerfFileOptions& o, int channel) {
+  if (channel == 0) return o.density_bits;
+  return (channel - 1) % 4 == 0 ? o.color_base_bits : o.color_slope_bits;
+}
+
+float& ChannelValue(NerfField& f, size_t slot, int channel) {
+  return channel == 0 ? f.density[slot] : f.color[slot * kNerfColorCoeffs + size_t(channel - 1)];
+}
+float ChannelValue(const NerfField& f, size_t slot, int channel) {
+  return channel == 0 ? f.density[slot] : f.color[slot * kNerfColorCoeffs + size_t(channel - 1)];
+}
+
+// The common header (up to the stored vertex count), as both versions have it.
+struct Header {
+  uint32_t version = 0;
+  uint32_t brick_count = 0;
+  uint64_t vertex_count = 0;
+};
+
+void PutHeader(Writer& w, const NerfField& f, uint32_t brick_count, uint64_t stored) {
   w.bytes.append(kMagic, 8);
   w.Put(kNerfFileVersion);
   w.Put(kColorModelLogLinear);
@@ -112,52 +176,29 @@ std::string SerializeNerf(const NerfField& f) {
   w.Put(f.voxel_m);
   w.Put(f.occupancy_sigma);
   for (int a = 0; a < 3; ++a) w.Put(int32_t(f.res[a]));
-  w.Put(uint32_t(order.size()));
+  w.Put(brick_count);
   w.Put(stored);
-  for (int32_t b : order) {
-    for (int a = 0; a < 3; ++a) w.Put(int32_t(f.brick_coords[3 * size_t(b) + a]));
-    w.Put(masks[b]);
-    w.Put(f.occupancy[b]);
-  }
-  for (int32_t b : order)
-    for (int v = 0; v < kNerfBrickSlots; ++v) {
-      if (!((masks[b] >> v) & 1u)) continue;
-      const size_t s = size_t(b) * kNerfBrickSlots + v;
-      w.Put(ToHalfBits(f.density[s]));
-      for (int m = 0; m < kNerfColorCoeffs; ++m) w.Put(ToHalfBits(f.color[s * kNerfColorCoeffs + m]));
-    }
-  w.Put(Fnv1a(w.bytes.data(), w.bytes.size()));
-  return std::move(w.bytes);
 }
 
-NerfField ParseNerf(const std::string& bytes, const std::string& source) {
-  if (bytes.size() < 8 || std::memcmp(bytes.data(), kMagic, 8) != 0)
-    ThrowInputError(source, "not a nerfar NeRF file (expected the magic 'NERFARF1' at byte 0)");
-  if (bytes.size() < 16)
-    ThrowInputError(source, "file is truncated in its header (" + std::to_string(bytes.size()) + " bytes)");
-  Reader r(bytes, source);
+Header ReadHeader(Reader& r, const std::string& source, NerfField& f) {
+  Header h;
   r.Get<uint64_t>("magic");
-  const uint32_t version = r.Get<uint32_t>("version");
-  if (version != kNerfFileVersion)
-    ThrowInputError(source,
-                    "file version " + std::to_string(version) + " (expected " + std::to_string(kNerfFileVersion) + ")");
-  // The checksum covers everything: check it first, so any flipped byte is named as corruption.
-  if (bytes.size() < 8 + 8) ThrowInputError(source, "file is truncated (no checksum)");
-  uint64_t stored_sum;
-  std::memcpy(&stored_sum, bytes.data() + bytes.size() - 8, 8);
+  h.version = r.Get<uint32_t>("version");
+  if (h.version != 1 && h.version != kNerfFileVersion)
+    ThrowInputError(source, "file version " + std::to_string(h.version) + " (expected 1 or " +
+                                std::to_string(kNerfFileVersion) + "; written by a newer nerfar?)");
   const uint32_t model = r.Get<uint32_t>("colour model");
   if (model != kColorModelLogLinear)
     ThrowInputError(
         source, "colour model " + std::to_string(model) + " (expected " + std::to_string(kColorModelLogLinear) + ")");
-  NerfField f;
   float box[6], origin[3];
   for (float& v : box) v = r.Get<float>("aabb");
   for (float& v : origin) v = r.Get<float>("origin");
   f.voxel_m = r.Get<float>("voxel size");
   f.occupancy_sigma = r.Get<float>("occupancy threshold");
   for (int& v : f.res) v = r.Get<int32_t>("resolution");
-  const uint32_t brick_count = r.Get<uint32_t>("brick count");
-  const uint64_t vertex_count = r.Get<uint64_t>("stored vertex count");
+  h.brick_count = r.Get<uint32_t>("brick count");
+  h.vertex_count = r.Get<uint64_t>("stored vertex count");
   Problems problems(source);
   for (float v : box)
     if (!std::isfinite(v)) problems.Add("aabb", "not finite (expected metres)");
@@ -179,23 +220,20 @@ NerfField ParseNerf(const std::string& bytes, const std::string& source) {
     f.bricks[a] = (f.res[a] + 3) / 4;
   }
   const size_t table = size_t(f.bricks[0]) * f.bricks[1] * f.bricks[2];
-  if (brick_count > table)
-    ThrowInputError(source, std::to_string(brick_count) + " bricks (expected at most " + std::to_string(table) + ")");
-  if (vertex_count > uint64_t(brick_count) * kNerfBrickSlots)
-    ThrowInputError(source, std::to_string(vertex_count) + " stored vertices for " + std::to_string(brick_count) +
+  if (h.brick_count > table)
+    ThrowInputError(source, std::to_string(h.brick_count) + " bricks (expected at most " + std::to_string(table) + ")");
+  if (h.vertex_count > uint64_t(h.brick_count) * kNerfBrickSlots)
+    ThrowInputError(source, std::to_string(h.vertex_count) + " stored vertices for " + std::to_string(h.brick_count) +
                                 " bricks (expected at most 64 each)");
-  const uint64_t expected_size = r.pos() + uint64_t(brick_count) * 28 + vertex_count * kValuesPerVertex * 2 + 8;
-  if (bytes.size() != expected_size)
-    ThrowInputError(source, "file has " + std::to_string(bytes.size()) + " bytes (expected " +
-                                std::to_string(expected_size) + " for " + std::to_string(brick_count) +
-                                " bricks; truncated or trailing data)");
-  if (Fnv1a(bytes.data(), bytes.size() - 8) != stored_sum)
-    ThrowInputError(source, "checksum mismatch (the file is corrupt)");
+  return h;
+}
 
-  f.brick_table.assign(table, -1);
-  std::vector<uint64_t> masks(brick_count);
+// Reads the brick list (coordinates, stored-vertex mask, occupancy) and allocates the bricks.
+std::vector<uint64_t> ReadBricks(Reader& r, const std::string& source, const Header& h, NerfField& f) {
+  f.brick_table.assign(size_t(f.bricks[0]) * f.bricks[1] * f.bricks[2], -1);
+  std::vector<uint64_t> masks(h.brick_count);
   uint64_t mask_total = 0;
-  for (uint32_t b = 0; b < brick_count; ++b) {
+  for (uint32_t b = 0; b < h.brick_count; ++b) {
     int32_t c[3];
     for (int32_t& v : c) v = r.Get<int32_t>("brick coordinates");
     masks[b] = r.Get<uint64_t>("brick mask");
@@ -210,29 +248,206 @@ NerfField ParseNerf(const std::string& bytes, const std::string& source) {
     f.occupancy[b] = occ;
     mask_total += uint64_t(__builtin_popcountll(masks[b]));
   }
-  if (mask_total != vertex_count)
+  if (mask_total != h.vertex_count)
     ThrowInputError(source, "brick masks hold " + std::to_string(mask_total) + " vertices (header says " +
-                                std::to_string(vertex_count) + ")");
-  for (uint32_t b = 0; b < brick_count; ++b)
+                                std::to_string(h.vertex_count) + ")");
+  return masks;
+}
+
+void CheckValue(const std::string& source, uint32_t brick, int channel, float v) {
+  if (channel == 0) {
+    if (!std::isfinite(v) || v < kNerfDensityRawMin || v > kNerfDensityRawMax)
+      ThrowInputError(source, "density of brick " + std::to_string(brick) + " is " + std::to_string(v) +
+                                  " (expected a finite value in [-30, 14])");
+  } else if (!std::isfinite(v) || std::fabs(v) > 1000.0f) {
+    ThrowInputError(source, "colour of brick " + std::to_string(brick) + " is " + std::to_string(v) +
+                                " (expected a finite log radiance)");
+  }
+}
+
+void ReadValuesV1(Reader& r, const std::string& source, const std::vector<uint64_t>& masks, NerfField& f) {
+  for (uint32_t b = 0; b < masks.size(); ++b)
     for (int v = 0; v < kNerfBrickSlots; ++v) {
       if (!((masks[b] >> v) & 1u)) continue;
       const size_t s = size_t(b) * kNerfBrickSlots + v;
-      const float d = FromHalfBits(r.Get<uint16_t>("density"));
-      if (!std::isfinite(d) || d < kNerfDensityRawMin || d > kNerfDensityRawMax)
-        ThrowInputError(source, "density of brick " + std::to_string(b) + " is " + std::to_string(d) +
-                                    " (expected a finite value in [-30, 14])");
-      f.density[s] = d;
-      for (int m = 0; m < kNerfColorCoeffs; ++m) {
-        const float q = FromHalfBits(r.Get<uint16_t>("colour"));
-        if (!std::isfinite(q) || std::fabs(q) > 1000.0f)
-          ThrowInputError(source, "colour of brick " + std::to_string(b) + " is " + std::to_string(q) +
-                                      " (expected a finite log radiance)");
-        f.color[s * kNerfColorCoeffs + m] = q;
+      for (int ch = 0; ch < kValuesPerVertex; ++ch) {
+        const float x = FromHalfBits(r.Get<uint16_t>(ch == 0 ? "density" : "colour"));
+        CheckValue(source, b, ch, x);
+        ChannelValue(f, s, ch) = x;
       }
     }
+}
+
+void ReadValuesV2(Reader& r, const std::string& source, const std::vector<uint64_t>& masks, const uint8_t bits[],
+                  NerfField& f) {
+  for (uint32_t b = 0; b < masks.size(); ++b) {
+    const int count = __builtin_popcountll(masks[b]);
+    for (int ch = 0; ch < kValuesPerVertex; ++ch) {
+      Quantiser q;
+      q.exponent = r.Get<int8_t>("quantiser exponent");
+      q.base = r.Get<int32_t>("quantiser base");
+      const int nbits = bits[ch];
+      if (q.exponent < -60 || q.exponent > 40 || std::abs(int64_t(q.base)) > (int64_t{1} << 24))
+        ThrowInputError(source, "brick " + std::to_string(b) + " has a quantiser out of range (exponent " +
+                                    std::to_string(q.exponent) + ", base " + std::to_string(q.base) + ")");
+      const uint8_t* p = reinterpret_cast<const uint8_t*>(r.Take((size_t(count) * nbits + 7) / 8, "quantised values"));
+      uint64_t acc = 0;
+      int fill = 0;
+      int v = -1;
+      const uint32_t mask_bits = uint32_t((uint64_t{1} << nbits) - 1);
+      for (int n = 0; n < count; ++n) {
+        while (fill < nbits) {
+          acc |= uint64_t(*p++) << fill;
+          fill += 8;
+        }
+        const uint32_t code = uint32_t(acc) & mask_bits;
+        acc >>= nbits;
+        fill -= nbits;
+        do ++v;
+        while (!((masks[b] >> v) & 1u));
+        const float x = Dequantise(code, q);
+        CheckValue(source, b, ch, x);
+        ChannelValue(f, size_t(b) * kNerfBrickSlots + size_t(v), ch) = x;
+      }
+    }
+  }
+}
+
+}  // namespace
+
+std::vector<std::string> NerfFileOptions::Validate() const {
+  std::vector<std::string> problems;
+  if (density_bits < 8 || density_bits > 16)
+    problems.push_back("density_bits " + std::to_string(density_bits) + " (expected 8..16)");
+  if (color_base_bits < 4 || color_base_bits > 16)
+    problems.push_back("color_base_bits " + std::to_string(color_base_bits) + " (expected 4..16)");
+  if (color_slope_bits < 4 || color_slope_bits > 16)
+    problems.push_back("color_slope_bits " + std::to_string(color_slope_bits) + " (expected 4..16)");
+  return problems;
+}
+
+std::string SerializeNerf(const NerfField& f, const NerfFileOptions& options) {
+  NERFAR_CHECK(f.Validate().empty());
+  NERFAR_CHECK(options.Validate().empty());
+  const std::vector<uint64_t> masks = NeededMasks(f);
+  // Bricks in table order (canonical), only those with stored vertices.
+  std::vector<int32_t> order;
+  uint64_t stored = 0;
+  for (int32_t b : f.brick_table)
+    if (b >= 0 && masks[b] != 0) {
+      order.push_back(b);
+      stored += uint64_t(__builtin_popcountll(masks[b]));
+    }
+  Writer payload;
+  for (int32_t b : order) {
+    for (int a = 0; a < 3; ++a) payload.Put(int32_t(f.brick_coords[3 * size_t(b) + a]));
+    payload.Put(masks[b]);
+    payload.Put(f.occupancy[b]);
+  }
+  for (int32_t b : order)
+    for (int ch = 0; ch < kValuesPerVertex; ++ch) {
+      const int bits = ChannelBits(options, ch);
+      float lo = std::numeric_limits<float>::max(), hi = -lo;
+      for (int v = 0; v < kNerfBrickSlots; ++v)
+        if ((masks[b] >> v) & 1u) {
+          const float x = ChannelValue(f, size_t(b) * kNerfBrickSlots + v, ch);
+          lo = std::min(lo, x), hi = std::max(hi, x);
+        }
+      const Quantiser q = ChooseQuantiser(lo, hi, bits);
+      payload.Put(int8_t(q.exponent));
+      payload.Put(q.base);
+      BitPacker packer(payload.bytes);
+      for (int v = 0; v < kNerfBrickSlots; ++v)
+        if ((masks[b] >> v) & 1u)
+          packer.Put(Quantise(ChannelValue(f, size_t(b) * kNerfBrickSlots + v, ch), q, bits), bits);
+      packer.Flush();
+    }
+  std::string body = std::move(payload.bytes);
+  const uint64_t payload_size = body.size();
+  if (options.compress) {
+    uLongf size = compressBound(uLong(body.size()));
+    std::string packed(size, '\0');
+    NERFAR_CHECK(compress2(reinterpret_cast<Bytef*>(packed.data()), &size, reinterpret_cast<const Bytef*>(body.data()),
+                           uLong(body.size()), 6) == Z_OK);
+    packed.resize(size);
+    body = std::move(packed);
+  }
+  Writer w;
+  w.bytes.reserve(body.size() + 160);
+  PutHeader(w, f, uint32_t(order.size()), stored);
+  for (int ch = 0; ch < kValuesPerVertex; ++ch) w.Put(uint8_t(ChannelBits(options, ch)));
+  w.Put(options.compress ? kCompressionZlib : kCompressionNone);
+  w.Put(uint16_t{0});
+  w.Put(payload_size);
+  w.Put(uint64_t(body.size()));
+  w.bytes += body;
+  w.Put(Fnv1a(w.bytes.data(), w.bytes.size()));
+  return std::move(w.bytes);
+}
+
+NerfField ParseNerf(const std::string& bytes, const std::string& source) {
+  if (bytes.size() < 8 || std::memcmp(bytes.data(), kMagic, 8) != 0)
+    ThrowInputError(source, "not a nerfar NeRF file (expected the magic 'NERFARF1' at byte 0)");
+  if (bytes.size() < 16)
+    ThrowInputError(source, "file is truncated in its header (" + std::to_string(bytes.size()) + " bytes)");
+  Reader r(bytes, source);
+  NerfField f;
+  const Header h = ReadHeader(r, source, f);
+  // The checksum covers everything: checked before the body, so any flipped byte is named as corruption.
+  uint64_t stored_sum;
+  std::memcpy(&stored_sum, bytes.data() + bytes.size() - 8, 8);
+  std::vector<uint64_t> masks;
+  if (h.version == 1) {
+    const uint64_t expected_size = r.pos() + uint64_t(h.brick_count) * 28 + h.vertex_count * kValuesPerVertex * 2 + 8;
+    if (bytes.size() != expected_size)
+      ThrowInputError(source, "file has " + std::to_string(bytes.size()) + " bytes (expected " +
+                                  std::to_string(expected_size) + " for " + std::to_string(h.brick_count) +
+                                  " bricks; truncated or trailing data)");
+    if (Fnv1a(bytes.data(), bytes.size() - 8) != stored_sum)
+      ThrowInputError(source, "checksum mismatch (the file is corrupt)");
+    masks = ReadBricks(r, source, h, f);
+    ReadValuesV1(r, source, masks, f);
+  } else {
+    uint8_t bits[kValuesPerVertex];
+    for (uint8_t& b : bits) b = r.Get<uint8_t>("bits per value");
+    const uint8_t compression = r.Get<uint8_t>("compression");
+    r.Get<uint16_t>("padding");
+    const uint64_t payload_size = r.Get<uint64_t>("payload size");
+    const uint64_t stored_size = r.Get<uint64_t>("stored payload size");
+    if (bytes.size() < r.pos() + 8 || bytes.size() - r.pos() - 8 != stored_size)
+      ThrowInputError(source, "file has " + std::to_string(bytes.size()) + " bytes (expected " +
+                                  std::to_string(r.pos() + stored_size + 8) + "; truncated or trailing data)");
+    if (Fnv1a(bytes.data(), bytes.size() - 8) != stored_sum)
+      ThrowInputError(source, "checksum mismatch (the file is corrupt)");
+    for (int ch = 0; ch < kValuesPerVertex; ++ch)
+      if (bits[ch] < 4 || bits[ch] > 16)
+        ThrowInputError(source, "channel " + std::to_string(ch) + " has " + std::to_string(bits[ch]) +
+                                    " bits per value (expected 4..16)");
+    if (compression != kCompressionNone && compression != kCompressionZlib)
+      ThrowInputError(source, "compression " + std::to_string(compression) + " (expected 0 none or 1 zlib)");
+    if (payload_size > kMaxPayloadBytes || (compression == kCompressionNone && payload_size != stored_size))
+      ThrowInputError(source, "payload size " + std::to_string(payload_size) + " does not match the file");
+    std::string inflated;
+    if (compression == kCompressionZlib) {
+      inflated.resize(payload_size);
+      uLongf size = uLongf(payload_size);
+      const int status = uncompress(reinterpret_cast<Bytef*>(inflated.data()), &size,
+                                    reinterpret_cast<const Bytef*>(bytes.data() + r.pos()), uLong(stored_size));
+      if (status != Z_OK || size != payload_size)
+        ThrowInputError(source, "compressed payload does not inflate to its stated " + std::to_string(payload_size) +
+                                    " bytes (the file is corrupt)");
+    } else {
+      inflated = bytes.substr(r.pos(), stored_size);
+    }
+    Reader p(inflated, source + " (payload)");
+    masks = ReadBricks(p, source, h, f);
+    ReadValuesV2(p, source, masks, bits, f);
+    if (p.remaining() != 0)
+      ThrowInputError(source, "payload has " + std::to_string(p.remaining()) + " bytes of trailing data");
+  }
   // Every corner of an occupied cell that lies in a listed brick must be stored
   // (else the reader would invent an empty corner where the field had a value).
-  for (uint32_t b = 0; b < brick_count; ++b) {
+  for (uint32_t b = 0; b < h.brick_count; ++b) {
     const uint64_t bits = f.occupancy[b];
     const int bx = f.brick_coords[3 * b], by = f.brick_coords[3 * b + 1], bz = f.brick_coords[3 * b + 2];
     for (int cell = 0; cell < 64; ++cell) {
@@ -252,7 +467,9 @@ NerfField ParseNerf(const std::string& bytes, const std::string& source) {
   return f;
 }
 
-void SaveNerf(const std::string& path, const NerfField& field) { WriteFileAtomic(path, SerializeNerf(field)); }
+void SaveNerf(const std::string& path, const NerfField& field, const NerfFileOptions& options) {
+  WriteFileAtomic(path, SerializeNerf(field, options));
+}
 
 NerfField LoadNerf(const std::string& path) { return ParseNerf(ReadFileBytes(path, kNerfMaxFileBytes), path); }
 

@@ -16,6 +16,17 @@ struct Corners {
   float weight[8];
 };
 
+// Slots (-1 = empty) of the 8 corners of cell (i,j,k), corner n at (i + (n&1), j + (n>>1 & 1), k + (n>>2));
+// i, j, k < res - 1. One brick look-up when the cell lies inside one brick (27 of a brick's 64 cells).
+inline void CellSlots(const NerfField& f, int i, int j, int k, int32_t slot[8]) {
+  if ((i & 3) < 3 && (j & 3) < 3 && (k & 3) < 3) {
+    const int32_t s0 = f.Slot(i, j, k);
+    for (int n = 0; n < 8; ++n) slot[n] = s0 < 0 ? -1 : s0 + (n & 1) + ((n >> 1) & 1) * 4 + (n >> 2) * 16;
+    return;
+  }
+  for (int n = 0; n < 8; ++n) slot[n] = f.Slot(i + (n & 1), j + ((n >> 1) & 1), k + (n >> 2));
+}
+
 // Trilinear corners at grid coordinates g (voxels). False when g lies outside the grid.
 inline bool LocateGrid(const NerfField& f, const Vec3f& g, Corners& c) {
   if (!(g.x >= 0.0f && g.y >= 0.0f && g.z >= 0.0f)) return false;
@@ -24,11 +35,8 @@ inline bool LocateGrid(const NerfField& f, const Vec3f& g, Corners& c) {
             k = std::min(int(g.z), f.res[2] - 2);
   const float fx = g.x - float(i), fy = g.y - float(j), fz = g.z - float(k);
   const float wx[2] = {1.0f - fx, fx}, wy[2] = {1.0f - fy, fy}, wz[2] = {1.0f - fz, fz};
-  for (int n = 0; n < 8; ++n) {
-    const int dx = n & 1, dy = (n >> 1) & 1, dz = n >> 2;
-    c.slot[n] = f.Slot(i + dx, j + dy, k + dz);
-    c.weight[n] = wx[dx] * wy[dy] * wz[dz];
-  }
+  CellSlots(f, i, j, k, c.slot);
+  for (int n = 0; n < 8; ++n) c.weight[n] = wx[n & 1] * wy[(n >> 1) & 1] * wz[n >> 2];
   return true;
 }
 
