@@ -25,6 +25,7 @@ int RunRender(const CommandArgs& args) {
   std::string model, dataset, output;
   NerfEvalOptions options;
   double step_voxels = options.render.step_voxels;
+  double min_transmittance = options.render.min_transmittance;
   double occupancy_sigma = 0;
   std::string save_model;
   NerfFileOptions file_options;
@@ -36,6 +37,8 @@ int RunRender(const CommandArgs& args) {
   parser.Option("-o", &output, "OUT", "output folder (required)");
   parser.Flag("--png", &options.write_png, "also write OUT/<name>.png: render beside reference, tone-mapped");
   parser.Option("--step-voxels", &step_voxels, "S", "sample spacing in voxels (default 0.5)");
+  parser.Option("--min-transmittance", &min_transmittance, "T",
+                "stop a ray once its transmittance falls below T (default 1e-3; larger is faster)");
   parser.Option("--occupancy-sigma", &occupancy_sigma, "S",
                 "re-threshold the model's occupancy at S (1/m) before rendering: cells whose corners all lie "
                 "below S are skipped (what train's save_occupancy_sigma does to the saved model; default: as saved)");
@@ -57,6 +60,9 @@ int RunRender(const CommandArgs& args) {
     throw InputError("nerfar render: --dataset DIR and -o OUT are required (see 'nerfar render --help')");
   if (!(step_voxels > 0.05 && step_voxels <= 2)) throw InputError("nerfar render: --step-voxels (expected 0.05..2)");
   options.render.step_voxels = float(step_voxels);
+  if (!(min_transmittance >= 0 && min_transmittance < 1))
+    throw InputError("nerfar render: --min-transmittance (expected 0..1)");
+  options.render.min_transmittance = float(min_transmittance);
   options.output_dir = output;
   if (!(occupancy_sigma >= 0 && occupancy_sigma < 1e3))
     throw InputError("nerfar render: --occupancy-sigma (expected 0..1000 per metre)");

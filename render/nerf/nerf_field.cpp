@@ -225,6 +225,25 @@ struct RenderCell {
   }
 };
 
+// Asks the memory system for the data of the cell holding grid point g (the
+// ray's next sample), so that its loads overlap the current sample's arithmetic:
+// the render is bound by the latency of these loads (measured: 150-350 ns per
+// cell on the shared VM, a few cache misses each).
+inline void PrefetchCell(const NerfField& f, const Vec3f& g) {
+  if (!(g.x >= 0.0f && g.y >= 0.0f && g.z >= 0.0f)) return;
+  const int i = std::min(int(g.x), f.res[0] - 2), j = std::min(int(g.y), f.res[1] - 2),
+            k = std::min(int(g.z), f.res[2] - 2);
+  const int32_t s = f.Slot(i, j, k);
+  if (s < 0) return;
+  __builtin_prefetch(&f.density[size_t(s)]);
+  for (int n : {0, 4, 16, 20}) {  // corner rows (y, z); x and x+1 are adjacent (96 bytes of colour)
+    if (size_t(s) + size_t(n) + 1 >= f.SlotCount()) break;
+    const float* c = &f.color[(size_t(s) + size_t(n)) * kNerfColorCoeffs];
+    __builtin_prefetch(c);
+    __builtin_prefetch(c + 2 * kNerfColorCoeffs - 1);
+  }
+}
+
 // Trilinear interpolation of corner values v (corner n at offsets n&1, n>>1&1, n>>2).
 inline float Trilinear(const float v[8], float fx, float fy, float fz) {
   const float x00 = v[0] + fx * (v[1] - v[0]), x10 = v[2] + fx * (v[3] - v[2]);
@@ -285,6 +304,7 @@ NerfRayResult NerfField::RenderRay(const NerfRay& ray, const NerfRenderOptions& 
     }
     ++n;
     ++result.samples;
+    if (options.prefetch) PrefetchCell(*this, o + d * (t + step));
     const float fx = g.x - float(i), fy = g.y - float(j), fz = g.z - float(k);
     const float sigma = std::exp(Trilinear(cell.s, fx, fy, fz));
     const float alpha = -std::expm1(-sigma * dt);

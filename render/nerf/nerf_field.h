@@ -63,6 +63,8 @@ struct NerfRenderOptions {
   float min_transmittance = 1e-3f;
   // Samples with α below this skip the colour evaluation (their colour weight is negligible).
   float min_alpha = 1e-5f;
+  // Prefetch the next sample's cell while evaluating this one (same result; speed only).
+  bool prefetch = true;
 };
 
 // The grid and its storage layout (public: the trainer and the file reader fill it).
