@@ -80,6 +80,11 @@ struct StageMedians {
   // A hand-held sequence (object still, camera 3 mm per frame): medians over
   // its frames after the first, with the preset's options and with exact receivers.
   double handheld_kappa = 0, handheld_frame = 0, handheld_marched = 0, handheld_reused = 0;
+  // Its parts (medians): κ's receivers / look-ups / multiply (ms), occlusion +
+  // composite (ms), receivers whose κ was taken, shared-lattice look-ups,
+  // pixels passed by the multiply.
+  double handheld_receivers_ms = 0, handheld_lookup_ms = 0, handheld_multiply_ms = 0, handheld_occlusion = 0;
+  double handheld_receivers = 0, handheld_lookups = 0, handheld_multiplied = 0;
   double handheld_kappa_marched_all = 0, handheld_frame_marched_all = 0, handheld_marched_all = 0;
   // κ of the preset against exact receivers: worst frame's Σ|Δκ| / Σ(1 − κ), worst pixel |Δκ|.
   double handheld_error_mean = 0, handheld_error_max = 0;
@@ -165,6 +170,7 @@ void TimeHandHeld(const NerfScene& scene, const SgMixture& environment, const In
       jitter(scene, environment, marched_options), truth(scene, environment, marched_options);
   const ImageF background(camera.width, camera.height, 3, 0.3f);
   std::vector<double> kappa, frame_ms, n_marched, n_reused, kappa_all, frame_all, n_marched_all;
+  std::vector<double> part_receivers, part_lookup, part_multiply, part_occlusion, n_receivers, n_lookups, n_multiplied;
   // NERFAR_BENCH_INSERT_HANDHELD_ONLY=1 (for profiling): the preset's
   // hand-held frames alone, no reference renders (error rows stay 0).
   const char* only_env = std::getenv("NERFAR_BENCH_INSERT_HANDHELD_ONLY");
@@ -177,6 +183,15 @@ void TimeHandHeld(const NerfScene& scene, const SgMixture& environment, const In
     InsertLayers la, lb;
     const InsertTimings ta =
         f == 0 ? reuse.Render(camera, cam, {object}, fa, &la) : RenderHandHeldFrame(reuse, camera, cam, object, fa, la);
+    if (f > 0) {
+      part_receivers.push_back(ta.kappa_receivers_ms);
+      part_lookup.push_back(ta.kappa_lookup_ms);
+      part_multiply.push_back(ta.kappa_multiply_ms);
+      part_occlusion.push_back(ta.occlusion_ms);
+      n_receivers.push_back(double(ta.kappa_receivers));
+      n_lookups.push_back(double(ta.kappa_lookups));
+      n_multiplied.push_back(double(ta.kappa_multiplied));
+    }
     if (handheld_only) {
       if (f > 0) kappa.push_back(ta.kappa_ms), frame_ms.push_back(ta.total_ms);
       if (f > 0) n_marched.push_back(double(ta.kappa_marched)), n_reused.push_back(double(ta.kappa_reused));
@@ -211,6 +226,13 @@ void TimeHandHeld(const NerfScene& scene, const SgMixture& environment, const In
     KappaDifference(lb, ld, camera, m.handheld_truth_exact_mean, unused);
   }
   m.handheld_kappa = MedianOf(kappa);
+  m.handheld_receivers_ms = MedianOf(part_receivers);
+  m.handheld_lookup_ms = MedianOf(part_lookup);
+  m.handheld_multiply_ms = MedianOf(part_multiply);
+  m.handheld_occlusion = MedianOf(part_occlusion);
+  m.handheld_receivers = MedianOf(n_receivers);
+  m.handheld_lookups = MedianOf(n_lookups);
+  m.handheld_multiplied = MedianOf(n_multiplied);
   m.handheld_frame = MedianOf(frame_ms);
   m.handheld_marched = MedianOf(n_marched);
   m.handheld_reused = MedianOf(n_reused);
@@ -424,6 +446,16 @@ std::vector<BenchFigure> BenchInsert(const BenchOptions& options) {
     figures.push_back({p + "handheld_kappa_ms", m.handheld_kappa, "ms", hh + ", options of the preset"});
     figures.push_back({p + "handheld_frame_ms", m.handheld_frame, "ms", hh + ", options of the preset"});
     figures.push_back({p + "handheld_marched", m.handheld_marched, "rays", hh + ", options of the preset"});
+    figures.push_back({p + "handheld_occlusion_ms", m.handheld_occlusion, "ms", hh + ", occlusion + composite"});
+    figures.push_back({p + "handheld_kappa_receivers_ms", m.handheld_receivers_ms, "ms",
+                       hh + ", κ part: receivers (reuse, marches, cell normals)"});
+    figures.push_back({p + "handheld_kappa_lookup_ms", m.handheld_lookup_ms, "ms",
+                       hh + ", κ part: κ at the receivers (lattice look-ups, new nodes)"});
+    figures.push_back(
+        {p + "handheld_kappa_multiply_ms", m.handheld_multiply_ms, "ms", hh + ", κ part: layer + background multiply"});
+    figures.push_back({p + "handheld_receivers", m.handheld_receivers, "", hh + ", receivers whose κ was taken"});
+    figures.push_back({p + "handheld_lookups", m.handheld_lookups, "", hh + ", shared-lattice look-ups"});
+    figures.push_back({p + "handheld_multiplied_px", m.handheld_multiplied, "px", hh + ", pixels the multiply passed"});
     figures.push_back({p + "handheld_reused", m.handheld_reused, "rays", hh + ", options of the preset"});
     figures.push_back(
         {p + "handheld_kappa_all_marched_ms", m.handheld_kappa_marched_all, "ms", hh + ", exact receivers"});

@@ -54,9 +54,15 @@ struct InsertTimings {
   double kappa_ms = 0;      // receivers + κ + multiplying the background
   double total_ms = 0;
   int lights_recomputed = 0;
-  size_t kappa_evaluated = 0;     // κ values computed this frame (cache misses, or every receiver without the cache)
-  size_t kappa_marched = 0;       // receiver rays marched through the scene for κ this frame
-  size_t kappa_reused = 0;        // receivers taken from the last frame's instead of marching (kappa_receiver_reuse)
+  size_t kappa_evaluated = 0;  // κ values computed this frame (cache misses, or every receiver without the cache)
+  size_t kappa_marched = 0;    // receiver rays marched through the scene for κ this frame
+  size_t kappa_reused = 0;     // receivers taken from the last frame's instead of marching (kappa_receiver_reuse)
+  // Parts of kappa_ms: finding the receivers (reuse, marches, cell normals),
+  // κ at them (lattice look-ups or exact), multiplying the background.
+  double kappa_receivers_ms = 0, kappa_lookup_ms = 0, kappa_multiply_ms = 0;
+  size_t kappa_receivers = 0;     // receivers whose κ was taken (grid nodes found or placed on a plane)
+  size_t kappa_lookups = 0;       // shared-lattice look-ups (past each thread's memo)
+  size_t kappa_multiplied = 0;    // pixels the κ multiply passed (grid cells not all κ = 1)
   bool gamma_recomputed = false;  // the per-vertex self-shadow cache was (re)built this frame
 };
 

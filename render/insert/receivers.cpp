@@ -1,6 +1,7 @@
 #include "render/insert/receivers.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <optional>
@@ -162,32 +163,38 @@ void CellNormals::Resolve(double spacing, std::vector<CellCandidate>& candidates
   if (!(spacing > 0)) return;
   const auto index = [spacing](float v) { return int64_t(std::floor(v / spacing)); };
   std::vector<uint64_t> keys(candidates.size());
-  // This pass's pick per new cell: a strict total order on the candidates'
-  // values, so the pick is the same in any order.
-  struct Pick {
-    size_t candidate;
-    float d2;
+  // The usable candidates in cells without a normal yet, sorted by cell and
+  // then by their values (a strict total order up to equal values): the sum
+  // below runs in the same order whatever order they came in.
+  struct Fresh {
+    uint64_t key;
+    std::array<float, 6> value;  // point, unit normal
   };
-  std::unordered_map<uint64_t, Pick> picks;
-  const auto before = [](const CellCandidate& a, float da, const CellCandidate& b, float db) {
-    const float ka[7] = {da, a.point.x, a.point.y, a.point.z, a.normal.x, a.normal.y, a.normal.z};
-    const float kb[7] = {db, b.point.x, b.point.y, b.point.z, b.normal.x, b.normal.y, b.normal.z};
-    return std::lexicographical_compare(ka, ka + 7, kb, kb + 7);
-  };
+  std::vector<Fresh> fresh;
   for (size_t c = 0; c < candidates.size(); ++c) {
     const CellCandidate& cand = candidates[c];
-    const int64_t i = index(cand.point.x), j = index(cand.point.y), k = index(cand.point.z);
-    keys[c] = LatticeKey(i, j, k, 0);
+    keys[c] = LatticeKey(index(cand.point.x), index(cand.point.y), index(cand.point.z), 0);
     if (normals_.count(keys[c])) continue;
     const Vec3f n = cand.normal;
     if (!Finite(n) || !(Dot(n, n) >= 0.25f)) continue;
-    const Vec3f centre = Vec3f(Vec3(double(i) + 0.5, double(j) + 0.5, double(k) + 0.5) * spacing);
-    const Vec3f off = cand.point - centre;
-    const float d2 = Dot(off, off);
-    const auto [it, added] = picks.emplace(keys[c], Pick{c, d2});
-    if (!added && before(cand, d2, candidates[it->second.candidate], it->second.d2)) it->second = {c, d2};
+    const Vec3f u = Normalized(n);
+    fresh.push_back({keys[c], {cand.point.x, cand.point.y, cand.point.z, u.x, u.y, u.z}});
   }
-  for (const auto& [key, pick] : picks) normals_.emplace(key, candidates[pick.candidate].normal);
+  std::sort(fresh.begin(), fresh.end(),
+            [](const Fresh& a, const Fresh& b) { return a.key != b.key ? a.key < b.key : a.value < b.value; });
+  // A new cell's normal: the mean of its receivers' unit normals (their
+  // scatter averages out; the first one where they cancel).
+  for (size_t begin = 0; begin < fresh.size();) {
+    size_t end = begin;
+    Vec3f sum{};
+    while (end < fresh.size() && fresh[end].key == fresh[begin].key) {
+      sum = sum + Vec3f{fresh[end].value[3], fresh[end].value[4], fresh[end].value[5]};
+      ++end;
+    }
+    const Vec3f first{fresh[begin].value[3], fresh[begin].value[4], fresh[begin].value[5]};
+    normals_.emplace(fresh[begin].key, Dot(sum, sum) > 1e-6f ? Normalized(sum) : first);
+    begin = end;
+  }
   for (size_t c = 0; c < candidates.size(); ++c) {
     const auto it = normals_.find(keys[c]);
     if (it != normals_.end()) candidates[c].normal = it->second;

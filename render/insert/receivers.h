@@ -43,9 +43,9 @@ struct CellCandidate {
 // (InsertOptions::receiver_normal_per_cell), so that a receiver's normal, its
 // lattice normal cell and κ do not change with the view. A cell's normal is
 // kept from the first pass that found a receiver in it; within that pass it
-// is the normal of the receiver nearest the cell's centre (ties: the smaller
-// point, then normal, compared coordinate by coordinate), so it does not
-// depend on the order in which threads found the receivers.
+// is the mean of its receivers' unit normals, summed in the order of their
+// values (point, then normal), so it does not depend on the order in which
+// threads found the receivers.
 class CellNormals {
  public:
   // Replaces every candidate's normal by its cell's (cells of `spacing`

@@ -25,6 +25,67 @@ struct ThreadScratch {
   LatticeMemo memo;
 };
 
+// κ over `rect` from the grid (nodes at columns xs, rows ys; values in
+// `grid`, row-major) into `layer` (over rect, 1 where the grid's cell holds
+// 1 at all four nodes), and `frame` multiplied by it where no object of `g`
+// covers the pixel. passed[r]: pixels of row r in cells not skipped.
+void MultiplyKappa(const std::vector<int>& xs, const std::vector<int>& ys, const std::vector<float>& grid,
+                   const PixelRect& rect, const ObjectGBuffer& g, ImageF& layer, ImageF& frame,
+                   std::vector<size_t>& passed) {
+  const size_t nx = xs.size(), ny = ys.size();
+  ParallelFor(
+      static_cast<size_t>(rect.height()),
+      [&](size_t r) {
+        const int y = rect.y0 + static_cast<int>(r);
+        const size_t iy =
+            std::min<size_t>(std::upper_bound(ys.begin(), ys.end(), y) - ys.begin() - 1, ny >= 2 ? ny - 2 : 0);
+        const size_t iy1 = ny >= 2 ? iy + 1 : iy;
+        const float wy = ny >= 2 ? float(y - ys[iy]) / float(ys[iy1] - ys[iy]) : 0.0f;
+        const float* g0 = &grid[iy * nx];
+        const float* g1 = &grid[iy1 * nx];
+        float* out_row = &layer.at(0, y - rect.y0);
+        float* f = &frame.pixels[static_cast<size_t>(y) * frame.width * 3];
+        // The objects' pixels on this row (left alone): [ox0, ox1) and their ids.
+        int ox0 = rect.x1, ox1 = rect.x1;
+        const int32_t* ids = nullptr;
+        if (y >= g.rect.y0 && y < g.rect.y1 && g.rect.x0 < g.rect.x1) {
+          ox0 = std::max(g.rect.x0, rect.x0);
+          ox1 = std::min(g.rect.x1, rect.x1);
+          ids = &g.object[g.Index(g.rect.x0, y)];
+        }
+        const auto multiply = [&](int x0, int x1) {
+          for (int x = x0; x < x1; ++x) {
+            const float k = out_row[x - rect.x0];
+            f[3 * x] *= k;
+            f[3 * x + 1] *= k;
+            f[3 * x + 2] *= k;
+          }
+        };
+        const size_t cells = nx >= 2 ? nx - 1 : 1;
+        for (size_t ix = 0; ix < cells; ++ix) {
+          const size_t ix1 = nx >= 2 ? ix + 1 : ix;
+          if (g0[ix] >= 1.0f && g0[ix1] >= 1.0f && g1[ix] >= 1.0f && g1[ix1] >= 1.0f) continue;
+          const float a = g0[ix] + wy * (g1[ix] - g0[ix]), b = g0[ix1] + wy * (g1[ix1] - g0[ix1]);
+          const int x_begin = nx >= 2 ? xs[ix] : rect.x0;
+          const int x_end = nx >= 2 && ix + 2 < nx ? xs[ix1] : rect.x1;
+          const float slope = nx >= 2 ? (b - a) / float(xs[ix1] - xs[ix]) : 0.0f;
+          for (int x = x_begin; x < x_end; ++x) out_row[x - rect.x0] = std::min(1.0f, a + slope * float(x - x_begin));
+          passed[r] += static_cast<size_t>(x_end - x_begin);
+          // κ = 1 multiplies by exactly 1: no test per pixel.
+          multiply(x_begin, std::min(x_end, ox0));
+          for (int x = std::max(x_begin, ox0); x < std::min(x_end, ox1); ++x)
+            if (ids[x - g.rect.x0] < 0) {
+              const float k = out_row[x - rect.x0];
+              f[3 * x] *= k;
+              f[3 * x + 1] *= k;
+              f[3 * x + 2] *= k;
+            }
+          multiply(std::max(x_begin, ox1), x_end);
+        }
+      },
+      4);
+}
+
 }  // namespace
 
 void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, std::unique_ptr<KappaCache>& cache_owner,
@@ -124,19 +185,11 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
                        rect.x0 == cache->last_rect.x0 && rect.y0 == cache->last_rect.y0 &&
                        rect.x1 == cache->last_rect.x1 && rect.y1 == cache->last_rect.y1;
     if (reuse) {
-      layers.kappa = cache->last_kappa;
-      ParallelFor(
-          static_cast<size_t>(rect.height()),
-          [&](size_t r) {
-            const int y = rect.y0 + static_cast<int>(r);
-            for (int x = rect.x0; x < rect.x1; ++x) {
-              const float k = layers.kappa.at(x - rect.x0, y - rect.y0);
-              if (k >= 1.0f) continue;
-              if (g.rect.Contains(x, y) && g.object[g.Index(x, y)] >= 0) continue;
-              for (int ch = 0; ch < 3; ++ch) frame.at(x, y, ch) *= k;
-            }
-          },
-          4);
+      const auto t_multiply = InsertClock::now();
+      std::vector<size_t> multiplied_per_row(static_cast<size_t>(rect.height()), 0);
+      MultiplyKappa(cache->last_xs, cache->last_ys, cache->last_grid, rect, g, layers.kappa, frame, multiplied_per_row);
+      for (size_t q : multiplied_per_row) times.kappa_multiplied += q;
+      times.kappa_multiply_ms = MsSince(t_multiply);
     } else if (!rect.empty()) {
       // Light owners: each receiver takes the light of its nearest object
       // (relative to size); queries of every caster at each owner's lobe axes.
@@ -156,6 +209,8 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
       const float min_opacity = static_cast<float>(options.receiver_min_opacity);
       const double one_minus_eps = 1.0 - options.shadow_epsilon;
       std::vector<size_t> evaluated_per_row(ny, 0), marched_per_row(ny, 0), reused_per_row(ny, 0);
+      std::vector<size_t> looked_up_per_row(ny, 0), receivers_per_row(ny, 0);
+      double find_ms = 0, kappa_ms = 0;
       // The last frame's receivers, when they can stand for marching.
       const bool reuse_receivers = cache != nullptr && receivers.distance == nullptr && options.kappa_receiver_reuse &&
                                    cache->receivers.valid &&
@@ -172,6 +227,7 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
           if (queried) ++queries_per_row[row];
           return k;
         }
+        ++receivers_per_row[row];
         // No bound test here: nodes that the bound clears hold κ = 1.
         // Trilinear over the lattice nodes around x, for x's normal cell.
         const uint32_t cell = NormalCell(n);
@@ -193,7 +249,7 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
           float value;
           if (sc.memo.key[slot] == key && sc.memo.value[slot] >= 0.0f) {
             value = sc.memo.value[slot];
-          } else if (!cache->lattice.Find(key, &value)) {
+          } else if (++looked_up_per_row[row], !cache->lattice.Find(key, &value)) {
             bool queried = false;
             const Vec3f node(Vec3(double(i), double(j), double(k)) * spacing);
             value = KappaAt(context, node, n_cell, sc.kappa, &queried);
@@ -330,11 +386,15 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
       const std::vector<size_t> cx = coarse_axis(nx), cy = coarse_axis(ny);
       std::vector<uint8_t> is_coarse_row(ny, 0);
       for (size_t r : cy) is_coarse_row[r] = 1;
+      auto t_stage = InsertClock::now();
       ParallelFor(
           cy.size(), [&](size_t i) { find_row(cy[i], cx); }, 1);
       resolve_cell_normals();
+      find_ms += MsSince(t_stage);
+      t_stage = InsertClock::now();
       ParallelFor(
           cy.size(), [&](size_t i) { kappa_row(cy[i], cx); }, 1);
+      kappa_ms += MsSince(t_stage);
       if (factor > 1) {
         // Nodes that need their own κ: those of cells with differing corners.
         std::vector<uint8_t> need(nx * ny, 0);
@@ -388,12 +448,18 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
         // Per row: nodes inside a planar coarse cell take their receiver
         // on the plane, the others needing κ are found, ...
         std::vector<std::vector<size_t>> refine_cols(ny);
+        struct PlaneNode {
+          size_t q;
+          Vec3f point;
+          const CellPlane* plane;
+        };
+        std::vector<std::vector<PlaneNode>> plane_nodes(ny);
+        t_stage = InsertClock::now();
         ParallelFor(
             ny,
             [&](size_t r) {
               std::vector<size_t>& cols = refine_cols[r];
               const size_t j = std::min<size_t>(r / factor, cy.size() - 2);
-              ThreadScratch scratch;
               for (size_t q = 0; q < nx; ++q) {
                 if (!need[r * nx + q] || (is_coarse_row[r] && is_coarse_col[q])) continue;
                 // Depth-aware upsampling: inside a planar coarse cell the
@@ -404,7 +470,7 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
                   const float cosine = Dot(d, plane.normal);
                   const float t = cosine < -0.05f ? Dot(plane.point - eye, plane.normal) / cosine : -1.0f;
                   if (t >= 0.9f * plane.t_min && t <= 1.1f * plane.t_max) {
-                    kappa_grid[r * nx + q] = receiver_kappa(eye + d * t, plane.normal, scratch, r);
+                    plane_nodes[r].push_back({q, eye + d * t, &plane});
                     continue;
                   }
                 }
@@ -414,10 +480,15 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
             },
             1);
         resolve_cell_normals();
+        find_ms += MsSince(t_stage);
         // ... then their κ, and the rest bilinear in their coarse cell.
+        t_stage = InsertClock::now();
         ParallelFor(
             ny,
             [&](size_t r) {
+              ThreadScratch scratch;
+              for (const PlaneNode& p : plane_nodes[r])
+                kappa_grid[r * nx + p.q] = receiver_kappa(p.point, p.plane->normal, scratch, r);
               kappa_row(r, refine_cols[r]);
               const size_t j = std::min<size_t>(r / factor, cy.size() - 2);
               const float wy = float(r - cy[j]) / float(cy[j + 1] - cy[j]);
@@ -432,7 +503,12 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
               }
             },
             1);
+        kappa_ms += MsSince(t_stage);
       }
+      times.kappa_receivers_ms = find_ms;
+      times.kappa_lookup_ms = kappa_ms;
+      for (size_t q : looked_up_per_row) times.kappa_lookups += q;
+      for (size_t q : receivers_per_row) times.kappa_receivers += q;
       for (size_t q : queries_per_row) layers.kappa_queries += q;
       for (size_t q : evaluated_per_row) times.kappa_evaluated += q;
       for (size_t q : marched_per_row) times.kappa_marched += q;
@@ -458,43 +534,21 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
       }
       // Bilinear from the sample grid to every pixel; multiply the background
       // where no object covers it. Cell by cell of the grid: a cell whose
-      // four nodes hold κ = 1 is skipped whole (the layer is 1 already; the
-      // per-pixel sum of its weights could round 1 ulp under 1, the only
-      // difference from doing every pixel).
-      ParallelFor(
-          static_cast<size_t>(rect.height()),
-          [&](size_t r) {
-            const int y = rect.y0 + static_cast<int>(r);
-            const size_t iy = std::min<size_t>((y - rect.y0) / step, ny >= 2 ? ny - 2 : 0);
-            const float wy = ny >= 2 ? float(y - ys[iy]) / float(ys[iy + 1] - ys[iy]) : 0.0f;
-            const size_t iy1 = ny >= 2 ? iy + 1 : iy;
-            const float* g0 = &kappa_grid[iy * nx];
-            const float* g1 = &kappa_grid[iy1 * nx];
-            float* out = &layers.kappa.at(0, y - rect.y0);
-            const bool object_row = y >= g.rect.y0 && y < g.rect.y1;
-            const size_t cells = nx >= 2 ? nx - 1 : 1;
-            for (size_t ix = 0; ix < cells; ++ix) {
-              const size_t ix1 = nx >= 2 ? ix + 1 : ix;
-              const float a = g0[ix], b = g0[ix1], c = g1[ix], d = g1[ix1];
-              if (a >= 1.0f && b >= 1.0f && c >= 1.0f && d >= 1.0f) continue;
-              const int x_begin = nx >= 2 ? xs[ix] : rect.x0;
-              const int x_end = nx >= 2 && ix + 2 < nx ? xs[ix1] : rect.x1;
-              const float span = nx >= 2 ? float(xs[ix1] - xs[ix]) : 1.0f;
-              for (int x = x_begin; x < x_end; ++x) {
-                const float wx = nx >= 2 ? float(x - xs[ix]) / span : 0.0f;
-                const float k = (1 - wx) * (1 - wy) * a + wx * (1 - wy) * b + (1 - wx) * wy * c + wx * wy * d;
-                out[x - rect.x0] = k;
-                if (k >= 1.0f) continue;
-                if (object_row && g.rect.Contains(x, y) && g.object[g.Index(x, y)] >= 0) continue;
-                for (int ch = 0; ch < 3; ++ch) frame.at(x, y, ch) *= k;
-              }
-            }
-          },
-          4);
+      // four nodes hold κ = 1 is skipped whole (the layer is 1 already).
+      // Per row, the grid's two rows are first blended in y at the cell's
+      // two columns, then each pixel is one step along x; the multiply runs
+      // over the row's passed pixels, around the objects' pixels.
+      const auto t_multiply = InsertClock::now();
+      std::vector<size_t> multiplied_per_row(static_cast<size_t>(rect.height()), 0);
+      MultiplyKappa(xs, ys, kappa_grid, rect, g, layers.kappa, frame, multiplied_per_row);
+      for (size_t q : multiplied_per_row) times.kappa_multiplied += q;
+      times.kappa_multiply_ms = MsSince(t_multiply);
       if (cache != nullptr && receivers.distance == nullptr) {
         cache->last_view = view;
         cache->last_rect = rect;
-        cache->last_kappa = layers.kappa;
+        cache->last_xs = xs;
+        cache->last_ys = ys;
+        cache->last_grid = std::move(kappa_grid);
       }
     }
   }

@@ -23,10 +23,12 @@ struct KappaCache {
   // Views (camera pose, intrinsics) whose whole reach rectangle was passed
   // under the current key: each visible receiver there has its nodes here.
   std::vector<std::vector<double>> explored;
-  // The last frame's κ layer, its rectangle and its exact view.
+  // The last frame's κ grid (nodes at pixel columns last_xs, rows
+  // last_ys), its rectangle and its exact view.
   std::vector<double> last_view;
   PixelRect last_rect;
-  ImageF last_kappa;
+  std::vector<int> last_xs, last_ys;
+  std::vector<float> last_grid;
   // The last frame's NeRF receivers (kept across Clear: they depend on the
   // scene and the opacity threshold only).
   ReceiverFrame receivers;
@@ -39,7 +41,7 @@ struct KappaCache {
     lattice.Clear();
     explored.clear();
     last_view.clear();
-    last_kappa = ImageF();
+    last_grid.clear();
   }
 };
 
