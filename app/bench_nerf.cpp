@@ -63,6 +63,13 @@ void Throughput(const NerfField& field, const std::string& dataset, const std::s
       const double ms = MedianMilliseconds([&] { RenderView(field, cam, pose, {}); }, 3, 0.5);
       figures.push_back(
           {"frame_" + std::to_string(w) + "x" + std::to_string(h) + "_ms", ms, "ms", cond + ", colour+depth+opacity"});
+      // The preview setting (USER_GUIDE): 2-voxel steps, rays stop at transmittance 3e-2.
+      NerfRenderOptions preview;
+      preview.step_voxels = 2.0f;
+      preview.min_transmittance = 3e-2f;
+      const double preview_ms = MedianMilliseconds([&] { RenderView(field, cam, pose, preview); }, 3, 0.5);
+      figures.push_back({"frame_" + std::to_string(w) + "x" + std::to_string(h) + "_preview_ms", preview_ms, "ms",
+                         cond + ", step 2 voxels, min transmittance 3e-2"});
     }
   }
   {
