@@ -89,12 +89,14 @@ int RunTrain(const CommandArgs& args) {
     while (!trainer.Done() && !g_stop) {
       loss = trainer.Step();
       const double now = trainer.elapsed_seconds();
-      // Held-out PSNR every 20 s, but never more than ~10 % of the time (a
+      // Held-out PSNR every 30 s, but never more than ~5 % of the time (a
       // foggy early field on a loaded machine renders slowly); eval_views 0: none.
       if (options.eval_views > 0 && now - last_eval > eval_gap) {
         psnr = trainer.HeldOutPsnr(options.eval_views);
         last_eval = trainer.elapsed_seconds();
-        eval_gap = std::max(20.0, 9.0 * (last_eval - now));
+        LogVerbose("train: held-out psnr_tm " + Fixed(psnr, 2) + " dB at step " + std::to_string(trainer.step()) +
+                   " took " + FormatDuration(last_eval - now));
+        eval_gap = std::max(30.0, 19.0 * (last_eval - now));
       }
       progress.Update(size_t(trainer.progress() * 1000), "step " + std::to_string(trainer.step()) + " level " +
                                                              std::to_string(trainer.level()) + " loss " +

@@ -96,6 +96,12 @@ struct NerfTrainOptions {
   // every level (not scaled with 1/voxel), so surfaces blurred by upsampling are
   // never pruned; 1/m stops under 1 % of the light over 1 cm.
   double occupancy_sigma = 1.0;
+  // Training occupancy threshold (1/m) at the finest level once its prune_delay
+  // has passed; 0: occupancy_sigma. Above occupancy_sigma it stops the faint fog
+  // around surfaces (σ of a few per metre, most of the finest level's occupied
+  // cells) from costing samples; a cell next to an occupied one still receives
+  // gradients through its shared corners, so surfaces can still grow.
+  double occupancy_sigma_finest = 0.0;
   // Occupancy threshold (1/m) of the saved model (FinalField); 0: occupancy_sigma.
   // Cells whose corners all stay below it are empty in the file: the renderer
   // skips them and the file stores none of their vertices. A higher value than
