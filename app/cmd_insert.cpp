@@ -114,11 +114,12 @@ Image8 TruthSheet(const ImageF& ours, const ImageF& ours_without, const ImageF& 
 
 int RunInsert(const CommandArgs& args) {
   std::string nerf_path, env_path, dataset_dir, split = "test", output, frames_dir, background = "images";
-  std::string preset = "balanced", light_source, truth_dir, light_probe;
+  std::string preset = "balanced", light_source, truth_dir, light_probe, probe_distances;
   std::vector<std::string> object_paths, pose_paths, mesh_paths, material_paths;
   int light_directions = -1, sg_lobes = -1, kappa_step = -1, occlusion_step = -1;
   double kappa_cache = -1, receiver_reuse = -1;
-  bool no_cell_normals = false;
+  bool no_cell_normals = false, no_parallax = false;
+  double parallax_min_sharpness = -1;
   bool gamma_per_pixel = false;
   double shadow_reach = -1, self_shadow_offset = -1, receiver_min_opacity = -1;
   bool no_self_shadow = false, no_shadows = false, paper_gamma = false, truth_geometry = false;
@@ -156,6 +157,10 @@ int RunInsert(const CommandArgs& args) {
   parser.Option("--receiver-reuse", &receiver_reuse, "T",
                 "κ receivers taken from the last frame's within T bounding radii of their planes (fast/balanced: "
                 "0.02; 0: every receiver marched)");
+  parser.Flag("--no-parallax", &no_parallax,
+              "the light is the same at every shadow receiver, as taken at the object centre (no lobe distances)");
+  parser.Option("--parallax-min-sharpness", &parallax_min_sharpness, "L",
+                "lobes at least this sharp are re-aimed from each receiver as compact sources (default 10)");
   parser.Flag("--no-cell-normals", &no_cell_normals,
               "a NeRF normal per κ receiver, not one per κ lattice cell shared by all views");
   parser.Flag("--gamma-per-pixel", &gamma_per_pixel, "self-shadow γ by an SSDF query per pixel, not per mesh vertex");
@@ -164,6 +169,9 @@ int RunInsert(const CommandArgs& args) {
   parser.Flag("--paper-gamma", &paper_gamma,
               "self-shadow γ = f_h(S)/f_h(π/2) as in the paper (default: horizon-relative)");
   parser.Option("--light-probe", &light_probe, "FILE", "light every object with this panorama fitted with SGs instead");
+  parser.Option("--probe-distances", &probe_distances, "NERF",
+                "with --light-probe: the probe's lobes get their distances (parallax of near light) from this "
+                "NeRF's depth seen from the object centre; only the lobe distances come from it");
   parser.Option("--truth", &truth_dir, "DIR",
                 "ground truth (scenes/*/insert/<object>): writes report.json with object psnr_tm, shadow and "
                 "lighting errors, and OUT/<name>_sheet.png (ours, truth, difference, both shadow ratios)");
@@ -184,6 +192,7 @@ int RunInsert(const CommandArgs& args) {
   if (dataset_dir.empty()) usage.Add("--dataset", "missing (expected the dataset folder)");
   if (output.empty()) usage.Add("-o", "missing (expected an output folder)");
   if (truth_geometry && truth_dir.empty()) usage.Add("--truth-geometry", "needs --truth DIR");
+  if (!probe_distances.empty() && light_probe.empty()) usage.Add("--probe-distances", "needs --light-probe FILE");
   if (object_paths.empty()) usage.Add("--object", "missing (expected at least one .ssdf)");
   if (pose_paths.size() != object_paths.size())
     usage.Add("--pose", std::to_string(pose_paths.size()) + " given for " + std::to_string(object_paths.size()) +
@@ -205,6 +214,8 @@ int RunInsert(const CommandArgs& args) {
   if (receiver_reuse == 0) options.kappa_receiver_reuse = false;
   if (receiver_reuse != -1 && receiver_reuse != 0) options.kappa_reuse_tolerance_radii = receiver_reuse;  // validated
   if (no_cell_normals) options.receiver_normal_per_cell = false;
+  if (no_parallax) options.light.parallax = false;
+  if (parallax_min_sharpness != -1) options.light.parallax_min_sharpness = parallax_min_sharpness;
   if (gamma_per_pixel) options.self_shadow_per_vertex = false;
   if (shadow_reach != -1) options.shadow_reach_radii = shadow_reach;
   if (self_shadow_offset != -1) options.self_shadow_offset_radii = self_shadow_offset;
@@ -269,6 +280,28 @@ int RunInsert(const CommandArgs& args) {
     LogInfo("insert: lighting every object with " + light_probe + " fitted with " + std::to_string(probe_light.size()) +
             " SGs");
   }
+  // The probe's lobe distances per object, from a NeRF's depth at its centre.
+  std::vector<std::vector<double>> probe_lobe_distances(loaded.size());
+  if (!probe_distances.empty() && options.light.parallax) {
+    const NerfField distance_nerf = LoadNerf(probe_distances);
+    const NerfScene distance_scene(distance_nerf);
+    const std::vector<Vec3> dirs = FibonacciSphere(options.light.directions);
+    for (size_t i = 0; i < loaded.size(); ++i) {
+      std::vector<float> opacity, depth;
+      const ObjectPlacement& placement = loaded[i].placement;
+      const Vec3 center = placement.center_world.value_or(
+          placement.T_world_object * (ComputeBoundingSphere(loaded[i].mesh).center * placement.scale));
+      const RadianceSamples near =
+          SampleIncidentLight(distance_scene, {}, center, dirs, LightSource::kNearFieldOnly, &opacity, &depth);
+      probe_lobe_distances[i] = LobeDistances(probe_light, dirs, opacity, depth, near.radiance);
+      std::string list;
+      for (size_t k = 0; k < probe_light.size(); ++k)
+        if (std::isfinite(probe_lobe_distances[i][k]))
+          list += " λ " + std::to_string(int(probe_light[k].sharpness)) + ": " +
+                  std::to_string(probe_lobe_distances[i][k]).substr(0, 5) + " m;";
+      LogVerbose("insert: object " + std::to_string(i) + " probe lobe distances:" + list);
+    }
+  }
   MakeDirectories(output);
   for (const auto& in : inputs)
     if (!in.empty()) CheckNotSameFile((fs::path(output) / "probe.exr").string(), {in});
@@ -286,6 +319,7 @@ int RunInsert(const CommandArgs& args) {
     o.visibility = loaded[i].visibility.get();
     o.light_center = loaded[i].placement.center_world;
     if (!light_probe.empty()) o.light_override = &probe_light;
+    if (!probe_lobe_distances[i].empty()) o.light_distances = &probe_lobe_distances[i];
   }
 
   Inserter inserter(scene, environment.lobes, options);

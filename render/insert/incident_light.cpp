@@ -1,7 +1,9 @@
 #include "render/insert/incident_light.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <limits>
 
 #include "calib/core/error.h"
 #include "calib/core/parallel.h"
@@ -39,19 +41,22 @@ std::vector<std::string> IncidentLightOptions::Validate() const {
     problems.push_back("light_directions: " + std::to_string(directions) + " is out of range (expected 16 to 1048576)");
   if (!(move_threshold_m >= 0.0) || !std::isfinite(move_threshold_m))
     problems.push_back("light_move_threshold_m: must be a finite number >= 0");
+  if (!(parallax_min_sharpness > 0.0) || !std::isfinite(parallax_min_sharpness))
+    problems.push_back("parallax_min_sharpness: must be a finite number > 0");
   for (const std::string& p : fit.Validate()) problems.push_back("fit." + p);
   return problems;
 }
 
 RadianceSamples SampleIncidentLight(const SceneField& scene, const SgMixture& environment, const Vec3& center,
                                     const std::vector<Vec3>& directions, LightSource source,
-                                    std::vector<float>* opacity) {
+                                    std::vector<float>* opacity, std::vector<float>* depth) {
   const size_t n = directions.size();
   RadianceSamples samples;
   samples.directions = directions;
   samples.radiance.assign(n, Vec3{});
   samples.solid_angles.assign(n, n > 0 ? 4.0 * kPi / static_cast<double>(n) : 0.0);
   if (opacity) opacity->assign(n, 0.0f);
+  if (depth) depth->assign(n, 0.0f);
   SceneSamples field;
   if (source != LightSource::kEnvironmentOnly) {
     // One batch per chunk so that threads share no scratch (RenderRays is const).
@@ -76,6 +81,7 @@ RadianceSamples SampleIncidentLight(const SceneField& scene, const SgMixture& en
           for (size_t i = begin; i < end; ++i) {
             field.colour[i] = out.colour[i - begin];
             field.opacity[i] = out.opacity[i - begin];
+            field.depth[i] = out.depth[i - begin];
           }
         },
         1);
@@ -96,8 +102,77 @@ RadianceSamples SampleIncidentLight(const SceneField& scene, const SgMixture& en
       if (!std::isfinite(l[c]) || l[c] < 0.0) l[c] = 0.0;
     samples.radiance[i] = l;
     if (opacity) (*opacity)[i] = o;
+    if (depth && source != LightSource::kEnvironmentOnly && std::isfinite(field.depth[i]) && field.depth[i] > 0.0f)
+      (*depth)[i] = field.depth[i];
   }
   return samples;
+}
+
+namespace {
+constexpr float kSurfaceOpacity = 0.5f;
+// How much of the re-aiming lobe k gets: 0 below the minimum sharpness, 1
+// from twice it, linear in between (no jump as a refit changes λ).
+double ParallaxWeight(double sharpness, double min_sharpness) {
+  return std::clamp((sharpness - min_sharpness) / min_sharpness, 0.0, 1.0);
+}
+}  // namespace
+
+bool LightParallax::Active(const SgMixture& light) const {
+  if (distance.size() != light.size()) return false;
+  for (size_t k = 0; k < light.size(); ++k)
+    if (std::isfinite(distance[k]) && ParallaxWeight(light[k].sharpness, min_sharpness) > 0.0) return true;
+  return false;
+}
+
+std::vector<double> LobeDistances(const SgMixture& light, const std::vector<Vec3>& directions,
+                                  const std::vector<float>& opacity, const std::vector<float>& depth,
+                                  const std::vector<Vec3>& near_radiance) {
+  std::vector<double> distance(light.size(), std::numeric_limits<double>::infinity());
+  const size_t n = std::min({directions.size(), opacity.size(), depth.size()});
+  // The near share of each direction's light (1 without near_radiance).
+  std::vector<double> share(n, 1.0);
+  if (near_radiance.size() >= n)
+    for (size_t i = 0; i < n; ++i) {
+      const double all = LuminanceOf(Evaluate(light, directions[i]));
+      const double near = LuminanceOf(near_radiance[i]);
+      share[i] = all > 0.0 && std::isfinite(near) ? std::clamp(near / all, 0.0, 1.0) : 0.0;
+    }
+  for (size_t k = 0; k < light.size(); ++k) {
+    const Sg& lobe = light[k];
+    const double mu = LuminanceOf(lobe.amplitude);
+    if (!(mu > 0.0) || !std::isfinite(mu)) continue;
+    double weight = 0.0, inverse = 0.0;
+    for (size_t i = 0; i < n; ++i) {
+      const double w = std::exp(lobe.sharpness * (Dot(lobe.axis, directions[i]) - 1.0));
+      if (!(w > 1e-6)) continue;  // beyond ~3.7 widths: no say
+      weight += w;
+      // A surface where the opacity reaches one half (as for κ receivers):
+      // thin fog in front of the distant light does not make it near.
+      if (opacity[i] >= kSurfaceOpacity && depth[i] > 0.0f && std::isfinite(depth[i]))
+        inverse += w * share[i] / depth[i];
+    }
+    if (weight > 0.0 && inverse > 0.0) distance[k] = weight / inverse;
+  }
+  return distance;
+}
+
+SgMixture ReaimLight(const SgMixture& light, const LightParallax& parallax, const Vec3& p) {
+  SgMixture out = light;
+  if (parallax.distance.size() != light.size()) return out;
+  for (size_t k = 0; k < light.size(); ++k) {
+    const double d = parallax.distance[k];
+    const double w = ParallaxWeight(light[k].sharpness, parallax.min_sharpness);
+    if (!std::isfinite(d) || !(d > 0.0) || !(w > 0.0)) continue;
+    const Vec3 to_source = parallax.center + light[k].axis * d - p;
+    const double d_new = Length(to_source);
+    if (!(d_new > 0.0) || !std::isfinite(d_new)) continue;
+    const double ratio = std::clamp(d_new / d, 0.25, 4.0);
+    const Vec3 axis = Normalized(light[k].axis * (1.0 - w) + (to_source / d_new) * w);
+    if (!(Length(axis) > 0.5)) continue;  // opposite directions blended to nothing: keep the lobe
+    out[k].axis = axis;
+    out[k].sharpness = light[k].sharpness * (1.0 + w * (ratio * ratio - 1.0));
+  }
+  return out;
 }
 
 void IncidentLight::Reset() {
@@ -110,11 +185,12 @@ IncidentLight::Update IncidentLight::Refresh(const SceneField& scene, const SgMi
   Update update;
   const bool same_setup =
       valid_ && directions_ == options.directions && source_ == options.source && lobes_ == options.fit.lobes;
-  if (same_setup && Length(center - center_) <= options.move_threshold_m) return update;
+  const bool same_parallax = options.parallax == !distances_.empty() || light_.empty();
+  if (same_setup && same_parallax && Length(center - center_) <= options.move_threshold_m) return update;
   update.recomputed = true;
   if (static_cast<int>(dirs_.size()) != options.directions) dirs_ = FibonacciSphere(options.directions);
   auto t0 = std::chrono::steady_clock::now();
-  samples_ = SampleIncidentLight(scene, environment, center, dirs_, options.source);
+  samples_ = SampleIncidentLight(scene, environment, center, dirs_, options.source, &opacity_, &depth_);
   update.sample_ms = MillisecondsSince(t0);
   double total = 0.0;
   for (const Vec3& l : samples_.radiance) total += LuminanceOf(l);
@@ -128,12 +204,54 @@ IncidentLight::Update IncidentLight::Refresh(const SceneField& scene, const SgMi
     light_ = FitSg(samples_, options.fit, warm ? &light_ : nullptr, &update.report);
     update.fit_ms = MillisecondsSince(t0);
   }
+  distances_.clear();
+  if (options.parallax && !light_.empty()) {
+    // The near-field part of each sample: Ĉ (the scene's own radiance).
+    std::vector<Vec3> near(samples_.radiance.size());
+    if (options.source != LightSource::kEnvironmentOnly)
+      for (size_t i = 0; i < near.size(); ++i)
+        near[i] = samples_.radiance[i] - (environment.empty() || options.source == LightSource::kNearFieldOnly
+                                              ? Vec3{}
+                                              : Evaluate(environment, dirs_[i]) * (1.0 - opacity_[i]));
+    distances_ = LobeDistances(light_, dirs_, opacity_, depth_, near);
+  }
   valid_ = true;
   center_ = center;
   directions_ = options.directions;
   source_ = options.source;
   lobes_ = options.fit.lobes;
   return update;
+}
+
+const std::vector<double>& IncidentLight::DistancesFor(const SceneField& scene, const SgMixture& light,
+                                                       const Vec3& center, const IncidentLightOptions& options) {
+  if (!options.parallax || light.empty()) {
+    distances_.clear();
+    given_valid_ = false;
+    return distances_;
+  }
+  const auto same_lobes = [&] {
+    if (given_light_.size() != light.size()) return false;
+    for (size_t k = 0; k < light.size(); ++k)
+      if (!(given_light_[k].axis == light[k].axis) || given_light_[k].sharpness != light[k].sharpness ||
+          !(given_light_[k].amplitude == light[k].amplitude))
+        return false;
+    return true;
+  };
+  if (given_valid_ && given_directions_ == options.directions &&
+      Length(center - given_center_) <= options.move_threshold_m && same_lobes())
+    return distances_;
+  if (static_cast<int>(dirs_.size()) != options.directions) dirs_ = FibonacciSphere(options.directions);
+  // Only the scene's opacity and depth are needed: the near-field source.
+  const RadianceSamples near =
+      SampleIncidentLight(scene, {}, center, dirs_, LightSource::kNearFieldOnly, &opacity_, &depth_);
+  distances_ = LobeDistances(light, dirs_, opacity_, depth_, near.radiance);
+  given_light_ = light;
+  given_center_ = center;
+  given_directions_ = options.directions;
+  given_valid_ = true;
+  valid_ = false;  // the fitted light (Refresh) no longer matches distances_
+  return distances_;
 }
 
 }  // namespace nerfar

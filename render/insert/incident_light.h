@@ -32,15 +32,62 @@ struct IncidentLightOptions {
   double move_threshold_m = 1e-4;  // the light is recomputed once the centre moved farther than this
   LightSource source = LightSource::kFull;
   SgFitOptions fit;  // lobe count and iterations of the SG fit (render/sg presets)
+  // Parallax of near light (LightParallax below): each lobe gets a distance
+  // from the scene's depth along the directions it covers, and shadows (κ at
+  // a receiver) re-aim it from there. false: the light is the same at every
+  // point, as taken at the centre (the paper). Off in the fast preset: each
+  // κ evaluation then prepares its own SSDF query (~2-3× the κ work when
+  // the lattice is rebuilt).
+  bool parallax = true;
+  // Lobes at least this sharp are treated as compact sources that can be
+  // re-aimed (a lobe of sharpness λ is ~1/√λ rad wide: 10 is ~18°); broader
+  // ones (walls, the table, the sky) stay as they are, fully re-aimed from
+  // twice this sharpness, blended in between.
+  double parallax_min_sharpness = 10.0;
   // Every problem as "field: what is wrong (what was expected)".
   std::vector<std::string> Validate() const;
 };
 
 // Radiance arriving at `center` from each unit direction (solid angle 4π/N
-// each), per `source`. `opacity` (optional) receives Ô per direction.
+// each), per `source`. `opacity` (optional) receives Ô per direction and
+// `depth` (optional) the scene's expected hit distance (0 where Ô = 0).
 RadianceSamples SampleIncidentLight(const SceneField& scene, const SgMixture& environment, const Vec3& center,
                                     const std::vector<Vec3>& directions, LightSource source,
-                                    std::vector<float>* opacity = nullptr);
+                                    std::vector<float>* opacity = nullptr, std::vector<float>* depth = nullptr);
+
+// The light taken at `center` with a distance per lobe: lobe k stands for a
+// source at center + distance[k]·axis_k (infinity: distant light, the
+// environment). Seen from another point p the source lies along
+// s_k − p at |s_k − p|; a compact source keeps its radiance (the amplitude)
+// while its solid angle scales with 1/distance², so its sharpness scales
+// with distance² (width ~ 1/√λ). This is what makes the shadows of near
+// lamps point the right way from each receiver.
+struct LightParallax {
+  Vec3 center;
+  std::vector<double> distance;  // per lobe, metres; +infinity for distant light (empty: no parallax)
+  double min_sharpness = 10.0;   // IncidentLightOptions::parallax_min_sharpness
+  // Whether any lobe would move (a finite distance on a sharp enough lobe).
+  bool Active(const SgMixture& light) const;
+};
+
+// Each lobe's distance from the samples taken at the centre: the inverse
+// distance averaged over the directions with the lobe's own value as the
+// weight, where a direction that meets a surface (opacity ≥ 1/2, as κ's
+// receivers) contributes s/depth and any other 1/∞ = 0 (distant light, or
+// thin fog in front of it); s is the share of the light there that the
+// scene's own radiance `near_radiance` (Ĉ) explains, min(1, Y(Ĉ)/Y(light)),
+// so that a bright distant source seen past a dark near surface stays
+// distant (all 1 when near_radiance is empty). Lobes whose directions meet
+// no near light get +infinity.
+std::vector<double> LobeDistances(const SgMixture& light, const std::vector<Vec3>& directions,
+                                  const std::vector<float>& opacity, const std::vector<float>& depth,
+                                  const std::vector<Vec3>& near_radiance = {});
+
+// The light of `parallax` as seen from point p (see LightParallax). The
+// ratio of new to old distance is clamped to [1/4, 4] so that a point next
+// to a source does not turn it into a spike. Lobes without a finite distance,
+// or broader than the minimum sharpness, are returned unchanged.
+SgMixture ReaimLight(const SgMixture& light, const LightParallax& parallax, const Vec3& p);
 
 // One object's incident light, refreshed per frame.
 class IncidentLight {
@@ -64,6 +111,15 @@ class IncidentLight {
   const SgMixture& light() const { return light_; }
   const RadianceSamples& samples() const { return samples_; }
   const Vec3& center() const { return center_; }
+  // The fitted lobes' distances (LobeDistances; empty without parallax).
+  const std::vector<double>& lobe_distances() const { return distances_; }
+
+  // For a light given from elsewhere (a probe): the scene is sampled from
+  // `center` for opacity and depth only, and `light`'s lobes get their
+  // distances from it; kept while the centre, the light and the options
+  // hold. Empty without parallax.
+  const std::vector<double>& DistancesFor(const SceneField& scene, const SgMixture& light, const Vec3& center,
+                                          const IncidentLightOptions& options);
 
  private:
   bool valid_ = false;
@@ -73,7 +129,14 @@ class IncidentLight {
   int lobes_ = 0;
   std::vector<Vec3> dirs_;
   RadianceSamples samples_;
+  std::vector<float> opacity_, depth_;
   SgMixture light_;
+  std::vector<double> distances_;
+  // DistancesFor's cache: the light and centre it was computed for.
+  SgMixture given_light_;
+  Vec3 given_center_;
+  int given_directions_ = 0;
+  bool given_valid_ = false;
 };
 
 }  // namespace nerfar

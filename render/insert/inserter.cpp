@@ -90,18 +90,27 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
     spheres[i].radius = static_cast<float>(bs.radius * std::abs(objects[i].scale));
   }
 
-  // 1. Incident light per object (cached while it stands still).
+  // 1. Incident light per object (cached while it stands still), with its
+  // lobes' distances for the parallax of near light.
+  std::vector<LightParallax> parallax(n_objects);
   for (size_t i = 0; i < n_objects; ++i) {
+    const Vec3 at = objects[i].light_center.value_or(Vec3(spheres[i].center));
+    parallax[i].center = at;
+    parallax[i].min_sharpness = options_.light.parallax_min_sharpness;
     if (objects[i].light_override) {
       used_lights_[i] = *objects[i].light_override;
+      if (objects[i].light_distances && options_.light.parallax)
+        parallax[i].distance = *objects[i].light_distances;
+      else
+        parallax[i].distance = lights_[i].DistancesFor(scene_, used_lights_[i], at, options_.light);
       continue;
     }
-    const Vec3 at = objects[i].light_center.value_or(Vec3(spheres[i].center));
     const IncidentLight::Update u = lights_[i].Refresh(scene_, environment_, at, options_.light);
     times.light_ms += u.sample_ms;
     times.fit_ms += u.fit_ms;
     times.lights_recomputed += u.recomputed ? 1 : 0;
     used_lights_[i] = lights_[i].light();
+    parallax[i].distance = lights_[i].lobe_distances();
   }
 
   // 2. G-buffer.
@@ -125,11 +134,8 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
   layers.object = ImageF(g.rect.width(), g.rect.height(), 3, 0.0f);
   layers.alpha = ImageF(g.rect.width(), g.rect.height(), 1, 0.0f);
   std::vector<LightPrep> preps(n_objects);
-  for (size_t o = 0; o < n_objects; ++o) {
-    bool seen = false;
-    for (uint32_t i : covered) seen = seen || g.object[i] == static_cast<int32_t>(o);
-    if (seen) PrepareLight(used_lights_[o], objects, preps[o]);
-  }
+  // Every object's light (the shadow pass needs those of objects not seen too).
+  for (size_t o = 0; o < n_objects; ++o) PrepareLight(used_lights_[o], objects, preps[o], &parallax[o]);
   // Self-shadow γ per mesh vertex, kept while the objects and the light
   // stand still (it does not depend on the view).
   const bool per_vertex = options_.self_shadow && options_.self_shadow_per_vertex;

@@ -41,6 +41,9 @@ struct InsertObject {
   const ImageF* metallic_map = nullptr;          // optional, 1 channel (first channel used)
   const ObjectVisibility* visibility = nullptr;  // its SSDF field, posed; nullptr: casts no shadow at all
   const SgMixture* light_override = nullptr;     // use this light instead of computing it (tests, ground truth)
+  // With light_override: its lobes' distances from the light centre
+  // (LightParallax; +infinity = distant); nullptr: taken from the scene.
+  const std::vector<double>* light_distances = nullptr;
   std::optional<Vec3> light_center;  // world point the incident light is taken at (default: bounding-sphere centre)
 };
 

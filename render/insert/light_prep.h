@@ -6,6 +6,7 @@
 #include <memory>
 #include <vector>
 
+#include "render/insert/incident_light.h"
 #include "render/insert/inserter.h"
 #include "render/insert/object_visibility.h"
 #include "render/sg/brdf.h"
@@ -18,9 +19,15 @@ struct LightPrep {
   std::vector<Vec3f> axes;
   std::vector<SgTableRow> gamma_rows;
   std::vector<std::unique_ptr<VisibilityQuery>> queries;  // one per object (nullptr: no field)
+  // Near lobes' distances (empty: the light is the same everywhere) and
+  // every object's field, to query S along lobes re-aimed at a receiver.
+  LightParallax parallax;
+  std::vector<const ObjectVisibility*> visibilities;
 };
 
-// Prepares `prep` for `light` once (nothing when already prepared).
-void PrepareLight(const SgMixture& light, const std::vector<InsertObject>& objects, LightPrep& prep);
+// Prepares `prep` for `light` once (nothing when already prepared), with
+// the lobes' distances when `parallax` is given and moves any lobe.
+void PrepareLight(const SgMixture& light, const std::vector<InsertObject>& objects, LightPrep& prep,
+                  const LightParallax* parallax = nullptr);
 
 }  // namespace nerfar

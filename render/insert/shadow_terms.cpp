@@ -78,14 +78,25 @@ float KappaAt(const KappaContext& context, const Vec3f& x, const Vec3f& n, Kappa
   const LightPrep& p = (*context.preps)[owner];
   const size_t m = p.axes.size();
   if (m == 0) return 1.0f;
-  const SgMixture cw = CosineWeightedLight((*context.lights)[owner], Vec3(n));
+  // Near lobes re-aimed from x (LightParallax): their axes, and S along them,
+  // are this receiver's own.
+  const bool parallax = !p.parallax.distance.empty();
+  SgMixture reaimed;
+  std::vector<Vec3f> reaimed_axes;
+  if (parallax) {
+    reaimed = ReaimLight((*context.lights)[owner], p.parallax, Vec3(x));
+    reaimed_axes.reserve(m);
+    for (const Sg& lobe : reaimed) reaimed_axes.push_back(Vec3f(lobe.axis));
+  }
+  const std::vector<Vec3f>& axes = parallax ? reaimed_axes : p.axes;
+  const SgMixture cw = CosineWeightedLight(parallax ? reaimed : (*context.lights)[owner], Vec3(n));
   // Lower bound of S from the bounding spheres: if even that leaves
   // κ ≥ 1 − ε, nothing needs the SSDF.
   sc.s_bound.assign(m, kPi);
   for (size_t j : casters)
     for (size_t l = 0; l < m; ++l)
       sc.s_bound[l] =
-          std::min<double>(sc.s_bound[l], BallSsdLowerBound(spheres[j].center, spheres[j].radius, x, p.axes[l]));
+          std::min<double>(sc.s_bound[l], BallSsdLowerBound(spheres[j].center, spheres[j].radius, x, axes[l]));
   if (ShadowRatio(cw, Vec3(n), sc.s_bound) >= context.one_minus_eps) return 1.0f;
   if (queried) *queried = true;
   sc.s_exact.assign(m, kPi);
@@ -93,7 +104,10 @@ float KappaAt(const KappaContext& context, const Vec3f& x, const Vec3f& n, Kappa
   sc.ssd.resize(m);
   for (size_t j : casters) {
     if (!p.queries[j]) continue;
-    p.queries[j]->Ssd(&x, 1, sc.ssd.data());
+    if (parallax && j < p.visibilities.size() && p.visibilities[j])
+      p.visibilities[j]->Prepare(axes)->Ssd(&x, 1, sc.ssd.data());
+    else
+      p.queries[j]->Ssd(&x, 1, sc.ssd.data());
     const float dist = Length(x - spheres[j].center);
     const double alpha = dist > spheres[j].radius ? std::asin(std::min(1.0f, spheres[j].radius / dist)) : 0.5 * kPi;
     for (size_t l = 0; l < m; ++l) {
