@@ -11,10 +11,11 @@
 // (near field alone; environment fitted ignoring the near field and NeRF
 // visibility, PhySG-like) and for env.exr itself seen through the NeRF (what
 // the NeRF alone limits). $NERFAR_BENCH_ENV_TRADE=1 adds the pixels x rays
-// table on the window scene. $NERFAR_BENCH_ENV_SET="key=value;..." overrides
+// table on the window scene (or "16x64,64x256": those cells only). $NERFAR_BENCH_ENV_SET="key=value;..." overrides
 // options as `nerfar env --set` does (the PhySG-like baseline takes them too).
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <map>
@@ -22,6 +23,7 @@
 #include <string>
 
 #include "app/bench.h"
+#include "calib/core/error.h"
 #include "calib/core/exr.h"
 #include "calib/core/log.h"
 #include "calib/object.h"
@@ -195,7 +197,9 @@ void SharedScene(const std::string& scenes_dir, const std::string& scene, const 
     const ObjectPlacement placement = ReadObjectPlacement((obj_dir / "pose.json").string());
     const Vec3 centre = placement.center_world ? *placement.center_world : placement.T_world_object.translation;
     const ImageF probe = ReadExrRgb((obj_dir / "probe.exr").string());
-    const NerfIncident in = NerfIncidentAt(field, centre, 4096, o.render);
+    // The near field as the estimate sees it (seen-radiance correction when on).
+    const SeenRadianceOptions seen = SeenOptions(o);
+    const NerfIncident in = NerfIncidentAt(field, centre, 4096, o.render, o.near_field_seen_radiance ? &seen : nullptr);
     const auto sg_light = [](const SgMixture& m) { return [&m](const Vec3& d) { return Evaluate(m, d); }; };
     const auto pano_light = [&truth_env](const Vec3& d) { return PanoramaLookup(truth_env, d); };
     std::vector<Vec3> truth, with_est, near_only, with_physg, oracle;
@@ -222,22 +226,36 @@ void SharedScene(const std::string& scenes_dir, const std::string& scene, const 
     figures.push_back(
         {at + "physg_env_to_near", near_sum > 0 ? physg_sum / near_sum : 0.0, "", note + ", PhySG-like E_env/E_nerf"});
   }
-  if (scene == "window" && std::getenv("NERFAR_BENCH_ENV_TRADE") != nullptr) {
-    for (int pixels : {16, 64})
-      for (int rays : {64, 256}) {
-        EnvEstimateOptions t = o;
-        t.ignore_near_field = false;
-        t.pixels_per_view = pixels;
-        t.rays_per_point = rays;
-        const double start = NowSeconds();
-        const EnvLight env = EstimateEnvironment(field, t);
-        const std::string label = "env_window_px" + std::to_string(pixels) + "_rays" + std::to_string(rays);
-        const std::string tn = note + "; " + std::to_string(pixels) + " px/view, " + std::to_string(rays) + " rays";
-        figures.push_back({label + "_s", NowSeconds() - start, "s", tn});
-        std::vector<Vec3> e;
-        for (const Vec3& n : upper) e.push_back(Irradiance(env.lobes, n));
-        figures.push_back({label + "_env_rel_rms", RelativeIrradianceRms(e, e_true), "", tn});
+  const char* trade = std::getenv("NERFAR_BENCH_ENV_TRADE");
+  if (scene == "window" && trade != nullptr) {
+    // "1": the four cells 16/64 px x 64/256 rays; else a list "PxR,PxR,...".
+    std::vector<std::pair<int, int>> cells;
+    if (std::string(trade) == "1") {
+      cells = {{16, 64}, {16, 256}, {64, 64}, {64, 256}};
+    } else {
+      std::stringstream list(trade);
+      std::string cell;
+      while (std::getline(list, cell, ',')) {
+        int p = 0, r = 0;
+        if (std::sscanf(cell.c_str(), "%dx%d", &p, &r) != 2 || p < 1 || r < 8)
+          throw InputError("NERFAR_BENCH_ENV_TRADE: cell \"" + cell + "\" (expected PIXELSxRAYS, e.g. 16x64)");
+        cells.push_back({p, r});
       }
+    }
+    for (const auto& [pixels, rays] : cells) {
+      EnvEstimateOptions t = o;
+      t.ignore_near_field = false;
+      t.pixels_per_view = pixels;
+      t.rays_per_point = rays;
+      const double start = NowSeconds();
+      const EnvLight env = EstimateEnvironment(field, t);
+      const std::string label = "env_window_px" + std::to_string(pixels) + "_rays" + std::to_string(rays);
+      const std::string tn = note + "; " + std::to_string(pixels) + " px/view, " + std::to_string(rays) + " rays";
+      figures.push_back({label + "_s", NowSeconds() - start, "s", tn});
+      std::vector<Vec3> e;
+      for (const Vec3& n : upper) e.push_back(Irradiance(env.lobes, n));
+      figures.push_back({label + "_env_rel_rms", RelativeIrradianceRms(e, e_true), "", tn});
+    }
   }
 }
 

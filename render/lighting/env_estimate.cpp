@@ -13,6 +13,7 @@
 #include "calib/core/log.h"
 #include "calib/core/parallel.h"
 #include "calib/core/random.h"
+#include "render/lighting/seen_radiance.h"
 #include "render/lighting/view_quality.h"
 #include "render/sg/sphere.h"
 #include "render/sg/visibility.h"
@@ -78,6 +79,8 @@ std::vector<OptionField> Fields(EnvEstimateOptions& o) {
           {"rays_per_point", F::kInt, &o.rays_per_point},
           {"ray_offset_voxels", F::kDouble, &o.ray_offset_voxels},
           {"near_field_pool_m", F::kDouble, &o.near_field_pool_m},
+          {"near_field_seen_radiance", F::kBool, &o.near_field_seen_radiance},
+          {"seen_radiance_views", F::kInt, &o.seen_radiance_views},
           {"step_voxels", F::kFloat, &o.render.step_voxels},
           {"min_transmittance", F::kFloat, &o.render.min_transmittance},
           {"ignore_near_field", F::kBool, &o.ignore_near_field},
@@ -91,6 +94,7 @@ std::vector<OptionField> Fields(EnvEstimateOptions& o) {
           {"albedo_prior_weight", F::kDouble, &o.albedo_prior_weight},
           {"loss_epsilon", F::kDouble, &o.loss_epsilon},
           {"robust_scale", F::kDouble, &o.robust_scale},
+          {"normal_balance", F::kDouble, &o.normal_balance},
           {"light_energy_weight", F::kDouble, &o.light_energy_weight},
           {"near_field_gain_max", F::kDouble, &o.near_field_gain_max},
           {"negligible_ratio", F::kDouble, &o.negligible_ratio},
@@ -98,6 +102,13 @@ std::vector<OptionField> Fields(EnvEstimateOptions& o) {
 }
 
 }  // namespace
+
+SeenRadianceOptions SeenOptions(const EnvEstimateOptions& o) {
+  SeenRadianceOptions seen;
+  seen.min_elevation_deg = std::max(0.0, o.min_view_elevation_deg);
+  seen.views = o.seen_radiance_views;
+  return seen;
+}
 
 EnvEstimateOptions EnvEstimateOptions::Preset(const std::string& name) {
   EnvEstimateOptions o;
@@ -148,6 +159,7 @@ std::vector<std::string> EnvEstimateOptions::Validate() const {
   range("rays_per_point", rays_per_point, 8, 65536);
   range("ray_offset_voxels", ray_offset_voxels, 0, 100);
   range("near_field_pool_m", near_field_pool_m, 0, 10);
+  range("seen_radiance_views", seen_radiance_views, 1, 1024);
   range("step_voxels", render.step_voxels, 0.01, 10);
   range("min_transmittance", render.min_transmittance, 0, 1);
   range("lobes", lobes, 1, kMaxSgLobes);
@@ -163,6 +175,7 @@ std::vector<std::string> EnvEstimateOptions::Validate() const {
   range("albedo_prior_weight", albedo_prior_weight, 0, 1e6);
   range("loss_epsilon", loss_epsilon, 1e-6, 1e3);
   range("robust_scale", robust_scale, 1e-3, 1e6);
+  range("normal_balance", normal_balance, 0, 1);
   range("light_energy_weight", light_energy_weight, 0, 1e3);
   range("near_field_gain_max", near_field_gain_max, 1, 1e3);
   range("negligible_ratio", negligible_ratio, 0, 1);
@@ -504,9 +517,15 @@ void ComputeNearField(const NerfField& field, const EnvEstimateOptions& options,
   samples.opacity.assign(n * R, 0.0f);
   samples.e_nerf.assign(n, Vec3f{});
   const float offset = static_cast<float>(options.ray_offset_voxels) * field.voxel_m;
-  const size_t chunk = 64;
+  // Chunks of samples: their rays are rendered together so that the
+  // seen-radiance look-ups (one per voxel) are shared within a chunk.
+  const size_t chunk = 512;
+  std::vector<NerfRay> rays;
+  std::vector<NerfRayResult> results;
   for (size_t begin = 0; begin < n; begin += chunk) {
     const size_t end = std::min(n, begin + chunk);
+    rays.assign((end - begin) * R, NerfRay{});
+    results.assign((end - begin) * R, NerfRayResult{});
     ParallelFor(
         end - begin,
         [&](size_t k) {
@@ -517,22 +536,30 @@ void ComputeNearField(const NerfField& field, const EnvEstimateOptions& options,
           const double turn = 2 * kPi * Uniform(options.seed, kRayTurn, i, 0);
           const double ct = std::cos(turn), st = std::sin(turn);
           const Vec3f origin = samples.positions[i] + samples.normals[i] * offset;
-          Vec3 sum;
           for (int j = 0; j < R; ++j) {
             const Vec3& l = local[j];
             const double lx = ct * l.x - st * l.y, ly = st * l.x + ct * l.y;
             const Vec3f dir(Normalized(t * lx + b * ly + normal * l.z));
             samples.ray_dirs[i * R + j] = dir;
             if (options.ignore_near_field) continue;
-            NerfRay ray{origin, dir, 0, 0};
+            NerfRay& ray = rays[k * R + j];
+            ray = NerfRay{origin, dir, 0, 0};
             if (!IntersectAabb(field.aabb, origin, dir, ray.t_near, ray.t_far)) continue;
-            const NerfRayResult res = field.RenderRay(ray, options.render);
-            samples.opacity[i * R + j] = std::clamp(res.opacity, 0.0f, 1.0f);
-            sum += ToD(res.color);
+            results[k * R + j] = field.RenderRay(ray, options.render);
           }
-          samples.e_nerf[i] = Vec3f(sum * (kPi / R));
         },
         1);
+    if (!options.ignore_near_field && options.near_field_seen_radiance)
+      ApplySeenRadiance(field, rays, results, SeenOptions(options), options.render);
+    for (size_t i = begin; i < end; ++i) {
+      Vec3 sum;
+      for (int j = 0; j < R; ++j) {
+        const NerfRayResult& res = results[(i - begin) * R + j];
+        samples.opacity[i * R + j] = std::clamp(res.opacity, 0.0f, 1.0f);
+        sum += ToD(res.color);
+      }
+      samples.e_nerf[i] = Vec3f(sum * (kPi / R));
+    }
     if (progress) progress("rays", end, n);
   }
   // Pool E_nerf over nearby samples facing the same way: a small bright
@@ -689,7 +716,8 @@ struct FitState {
   Eigen::MatrixXd mu;           // D × 3
   std::vector<int> cell;        // per sample
   std::vector<Vec3> albedo;     // per cell
-  std::vector<double> robust;   // per sample IRLS weight
+  std::vector<double> robust;   // per sample IRLS weight (times balance)
+  std::vector<double> balance;  // per sample weight of its normal's direction (NormalBalanceWeights)
   std::vector<Vec3> inv_scale;  // per sample and channel 1/(L + ε)
   double prior = 0.5, prior_weight = 0, robust_scale = 0.3;
   double energy_weight = 0, typical_irradiance = 1;
@@ -725,7 +753,7 @@ double Loss(const FitState& st, const Eigen::MatrixXd& S, bool update_robust, Fi
     }
     const double q = r2 / (st.robust_scale * st.robust_scale);
     total += std::log1p(q);  // Cauchy
-    if (update_robust) mutable_st->robust[i] = 1.0 / (1.0 + q);
+    if (update_robust) mutable_st->robust[i] = st.balance[i] / (1.0 + q);
   }
   return total * st.robust_scale * st.robust_scale / std::max<size_t>(n, 1);
 }
@@ -832,6 +860,45 @@ void SolveGain(FitState& st) {
   if (qa > 0 && std::isfinite(qb / qa)) st.gain = std::clamp(qb / qa, 1.0, st.gain_max);
 }
 
+}  // namespace
+
+std::vector<double> NormalBalanceWeights(const std::vector<Vec3f>& normals, double power,
+                                         const std::vector<Vec3f>* radiance) {
+  std::vector<double> w(normals.size(), 1.0);
+  if (!(power > 0) || normals.empty()) return w;
+  const std::vector<Vec3> bins = FibonacciSphere(kNormalBalanceBins);
+  std::vector<int> bin(normals.size());
+  std::vector<double> count(bins.size(), 0);
+  for (size_t i = 0; i < normals.size(); ++i) {
+    int best = 0;
+    double best_dot = -2;
+    for (size_t b = 0; b < bins.size(); ++b) {
+      const double d = Dot(ToD(normals[i]), bins[b]);
+      if (d > best_dot) best_dot = d, best = static_cast<int>(b);
+    }
+    bin[i] = best;
+    count[best] += 1;
+  }
+  double sum = 0;
+  for (size_t i = 0; i < normals.size(); ++i) sum += w[i] = std::pow(1.0 / count[bin[i]], power);
+  for (double& x : w) x *= static_cast<double>(normals.size()) / sum;  // mean 1
+  if (radiance != nullptr && radiance->size() == normals.size()) {
+    // Emitter-like samples (luminance above kEmitterLikeFactor x the median)
+    // are not weighted up: a lamp's own surface, seen from its sides, fills
+    // sparse normal bins, and the fit would explain its glow with light.
+    std::vector<double> y;
+    for (const Vec3f& l : *radiance) y.push_back(LuminanceOf(ToD(l)));
+    std::vector<double> sorted = y;
+    std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+    const double limit = kEmitterLikeFactor * sorted[sorted.size() / 2];
+    for (size_t i = 0; i < w.size(); ++i)
+      if (y[i] > limit) w[i] = std::min(w[i], 1.0);
+  }
+  return w;
+}
+
+namespace {
+
 std::vector<int> AlbedoCells(const EnvSurfaceSamples& s, const Aabb& aabb, double cell_m, size_t* count) {
   const Vec3 ext = aabb.max - aabb.min;
   const double h = cell_m > 0 ? cell_m : std::max({ext.x, ext.y, ext.z}) / 8;
@@ -872,7 +939,8 @@ SgMixture FitEnvironment(const EnvSurfaceSamples& samples, const Aabb& aabb, con
   size_t cells = 0;
   st.cell = AlbedoCells(samples, aabb, options.albedo_cell_m, &cells);
   st.albedo.assign(cells, Vec3{1, 1, 1} * options.albedo_prior);
-  st.robust.assign(samples.size(), 1.0);
+  st.balance = NormalBalanceWeights(samples.normals, options.normal_balance, &samples.radiance);
+  st.robust = st.balance;
   double mean_y = 0;
   for (const Vec3f& l : samples.radiance) mean_y += Y(ToD(l));
   mean_y /= samples.size();
@@ -971,14 +1039,15 @@ std::vector<Vec3> EnvironmentIrradiance(const EnvSurfaceSamples& samples, const 
   return e;
 }
 
-NerfIncident NerfIncidentAt(const NerfField& field, const Vec3& point, int directions,
-                            const NerfRenderOptions& render) {
+NerfIncident NerfIncidentAt(const NerfField& field, const Vec3& point, int directions, const NerfRenderOptions& render,
+                            const SeenRadianceOptions* seen) {
   NerfIncident in;
   std::vector<Vec3f> dirs;
   for (const Vec3& d : FibonacciSphere(directions)) dirs.push_back(Vec3f(d));
   const std::vector<NerfRay> rays = PointRays(Vec3f(point), dirs, field.aabb);
   std::vector<NerfRayResult> res(rays.size());
   field.RenderRays(rays.data(), rays.size(), res.data(), render);
+  if (seen != nullptr) ApplySeenRadiance(field, rays, res, *seen, render);
   for (size_t j = 0; j < dirs.size(); ++j) {
     const bool inside = rays[j].t_far > rays[j].t_near;
     in.dirs.push_back(ToD(dirs[j]));
@@ -1004,8 +1073,8 @@ Vec3 NerfIncident::DistantIrradiance(const std::function<Vec3(const Vec3&)>& lig
 }
 
 double EnvToNearRatioAt(const NerfField& field, const SgMixture& light, const Vec3& point, int directions, int normals,
-                        const NerfRenderOptions& render) {
-  const NerfIncident in = NerfIncidentAt(field, point, directions, render);
+                        const NerfRenderOptions& render, const SeenRadianceOptions* seen) {
+  const NerfIncident in = NerfIncidentAt(field, point, directions, render, seen);
   const auto env_light = [&light](const Vec3& d) { return Evaluate(light, d); };
   double env = 0, nerf = 0;
   for (const Vec3& n : FibonacciSphere(normals)) {
@@ -1049,8 +1118,9 @@ EnvLight EstimateEnvironment(const NerfField& field, const EnvEstimateOptions& o
     sum_nerf += Y(ToD(samples.e_nerf[i]));
   }
   env.env_to_near_surface = sum_nerf > 0 ? sum_env / sum_nerf : (sum_env > 0 ? 1e30 : 0.0);
-  const double centre_ratio =
-      EnvToNearRatioAt(field, env.lobes, (field.aabb.min + field.aabb.max) * 0.5, 1024, 64, options.render);
+  const SeenRadianceOptions seen = SeenOptions(options);
+  const double centre_ratio = EnvToNearRatioAt(field, env.lobes, (field.aabb.min + field.aabb.max) * 0.5, 1024, 64,
+                                               options.render, options.near_field_seen_radiance ? &seen : nullptr);
   env.env_to_near_center = std::isfinite(centre_ratio) ? std::min(centre_ratio, 1e30) : 1e30;
   env.threshold = options.negligible_ratio;
   env.negligible = env.env_to_near_surface < env.threshold && env.env_to_near_center < env.threshold;

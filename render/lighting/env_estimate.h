@@ -28,6 +28,7 @@
 
 #include "calib/core/math.h"
 #include "render/lighting/env_light.h"
+#include "render/lighting/seen_radiance.h"
 #include "render/nerf/nerf_field.h"
 #include "render/sg/sg.h"
 
@@ -90,6 +91,13 @@ struct EnvEstimateOptions {
   // agree (cos > 0.95): R rays per point see a small bright source only a few
   // times. 0 keeps each point's own estimate.
   double near_field_pool_m = 0.03;
+  // Near-field rays that meet a surface from below the capture hemisphere
+  // (elevation < min_view_elevation_deg seen from the surface) take the
+  // radiance of that surface point seen from the capture hemisphere
+  // (render/lighting/seen_radiance.h): a NeRF's emitters and surfaces are
+  // untrained towards directions no camera saw.
+  bool near_field_seen_radiance = true;
+  int seen_radiance_views = 12;    // views from the capture hemisphere per surface point
   NerfRenderOptions render;        // sample spacing etc. of every NeRF ray
   bool ignore_near_field = false;  // baseline: E_nerf = 0 and Ô = 0 (environment explains everything, PhySG-like)
   // --- fit
@@ -105,6 +113,13 @@ struct EnvEstimateOptions {
   double albedo_prior_weight = 1e-3;  // its weight, per cell, relative to one sample
   double loss_epsilon = 0.05;         // relative loss floor in units of the mean observed luminance
   double robust_scale = 0.3;          // Cauchy scale of the log residual (outliers: emitters, tags, bad normals)
+  // Each sample's weight in the data term is (1 / samples whose normal falls
+  // in the same of 32 direction bins)^normal_balance, normalised to mean 1:
+  // 0 weights every sample alike, 1 gives every occupied normal direction the
+  // same total weight. A tabletop gives most samples one normal (up), which
+  // tells the light's elevation only through shadows; the objects' sides,
+  // few in number, tell it through their shading.
+  double normal_balance = 0.75;
   // Minimum-energy prior on the light (relative to the data term): light that
   // no sample sees stays dark. 0 disables it.
   double light_energy_weight = 1e-3;
@@ -129,6 +144,9 @@ struct EnvEstimateOptions {
   // Sets one field from "key=value" (the CLI's --set); InputError if unknown or bad.
   void Set(const std::string& key_value);
 };
+
+// The seen-radiance settings that `o` implies (capture band from min_view_elevation_deg).
+SeenRadianceOptions SeenOptions(const EnvEstimateOptions& o);
 
 // The surface samples and their near-field cache.
 struct EnvSurfaceSamples {
@@ -177,6 +195,15 @@ struct EnvFitReport {
 SgMixture FitEnvironment(const EnvSurfaceSamples& samples, const Aabb& aabb, const EnvEstimateOptions& options,
                          EnvFitReport* report = nullptr, const EnvProgress& progress = nullptr);
 
+// Per-sample weights of FitEnvironment's data term from the normals'
+// directions (see EnvEstimateOptions::normal_balance), mean 1; all 1 at power 0.
+// With `radiance` (observed, per sample), samples brighter than
+// kEmitterLikeFactor x the median luminance keep at most weight 1.
+constexpr int kNormalBalanceBins = 32;
+constexpr double kEmitterLikeFactor = 10;
+std::vector<double> NormalBalanceWeights(const std::vector<Vec3f>& normals, double power,
+                                         const std::vector<Vec3f>* radiance = nullptr);
+
 // Irradiance E_env(x) = ∫ (1 − Ô) L_env max(n·d, 0) dd of each sample from its cache (as the fit uses it).
 std::vector<Vec3> EnvironmentIrradiance(const EnvSurfaceSamples& samples, const SgMixture& light);
 
@@ -191,15 +218,17 @@ struct NerfIncident {
   // A distant light L(d) seen through the NeRF: Σ (1 − Ô) L(d) max(n·d, 0) 4π/N.
   Vec3 DistantIrradiance(const std::function<Vec3(const Vec3&)>& light, const Vec3& normal) const;
 };
+// `seen`: the rays' radiance corrected as ApplySeenRadiance does (nullptr: the NeRF's own).
 NerfIncident NerfIncidentAt(const NerfField& field, const Vec3& point, int directions = 1024,
-                            const NerfRenderOptions& render = {});
+                            const NerfRenderOptions& render = {}, const SeenRadianceOptions* seen = nullptr);
 
 // E_env / E_nerf (luminance) at a point: rays in `directions` Fibonacci
 // directions from `point`, both irradiances averaged over `normals` normals
 // spread over the sphere. +inf when the near field is black and the
 // environment is not, 0 when both are.
 double EnvToNearRatioAt(const NerfField& field, const SgMixture& light, const Vec3& point, int directions = 1024,
-                        int normals = 64, const NerfRenderOptions& render = {});
+                        int normals = 64, const NerfRenderOptions& render = {},
+                        const SeenRadianceOptions* seen = nullptr);
 
 struct EnvEstimateReport {
   EnvViewReport views;

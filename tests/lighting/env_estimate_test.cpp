@@ -290,6 +290,11 @@ TEST(EnvEstimate, FlagsTheEnvironmentNegligibleWhenAllLightIsInside) {
 TEST(EnvEstimate, NearFieldGainAbsorbsADimNerfLamp) {
   const NerfField field = LampOverFloor(30, 3 * 30);
   EnvEstimateOptions o = TestOptions();  // as in the test above
+  // Measured: with the default normal_balance (0.75) the gained estimate
+  // stays at 0.35 of the near field (the floor's few tilted samples near the
+  // lamp get the weight of the whole floor); the gain is an option off by
+  // default, tested here on the unbalanced fit it was made for.
+  o.normal_balance = 0;
   o.rays_per_point = 512;
   o.near_field_pool_m = 0.15;
   o.light_energy_weight = 1e-2;
@@ -452,6 +457,115 @@ TEST(EnvEstimate, NearFieldIrradianceMatchesAUniformDome) {
   }
 }
 
+// 90 normals up and 10 along +x (two of the 32 direction bins): weights
+// against the counts worked out by hand.
+TEST(EnvEstimate, NormalBalanceWeightsFollowTheBinCounts) {
+  std::vector<Vec3f> normals(90, Vec3f{0, 0, 1});
+  normals.insert(normals.end(), 10, Vec3f{1, 0, 0});
+  for (double w : NormalBalanceWeights(normals, 0)) EXPECT_EQ(w, 1.0);
+  // power 1: both bins carry the same total, 90 w_up = 10 w_side, mean 1:
+  // w_up = 100 / (2·90), w_side = 100 / (2·10). Tolerance: rounding only.
+  const std::vector<double> full = NormalBalanceWeights(normals, 1);
+  EXPECT_NEAR(full.front(), 100.0 / 180, 1e-12);
+  EXPECT_NEAR(full.back(), 100.0 / 20, 1e-12);
+  // power 0.75: w ∝ count^−0.75, mean 1.
+  const double up = std::pow(90.0, -0.75), side = std::pow(10.0, -0.75), scale = 100 / (90 * up + 10 * side);
+  const std::vector<double> part = NormalBalanceWeights(normals, 0.75);
+  EXPECT_NEAR(part.front(), up * scale, 1e-12);
+  EXPECT_NEAR(part.back(), side * scale, 1e-12);
+  // The side samples glow (luminance 100 against a median of 1, above 10x):
+  // they are not weighted up (capped at 1); the up samples keep theirs.
+  std::vector<Vec3f> radiance(90, Vec3f{1, 1, 1});
+  radiance.insert(radiance.end(), 10, Vec3f{100, 100, 100});
+  const std::vector<double> glow = NormalBalanceWeights(normals, 1, &radiance);
+  EXPECT_NEAR(glow.front(), 100.0 / 180, 1e-12);
+  EXPECT_EQ(glow.back(), 1.0);
+}
+
+// A lamp (sphere of radius 2 cm, 20 cm above the points) whose NeRF
+// radiance is right on its upper half (le) and 8x too dark on its lower half,
+// which no camera from above saw well. The irradiance it gives points below
+// it, by the analytic formula for a uniform sphere, E = π le (ρ/D)² cos θ.
+NerfField HalfDarkLamp(const Vec3& lamp, double rho, double le) {
+  Shape s;
+  s.sd = [&](const Vec3& p) { return Length(p - lamp) - rho; };
+  s.project = [&](const Vec3& p, Vec3* x, Vec3* n) {
+    *n = Normalized(p - lamp);
+    *x = lamp + *n * rho;
+  };
+  const Aabb box{{-0.15, -0.15, 0.0}, {0.15, 0.15, 0.35}};
+  return MakeField(box, 0.005, s, [&](const Vec3& x, const Vec3&) {
+    const double l = x.z >= lamp.z ? le : le / 8;
+    return Vec3{l, l, l};
+  });
+}
+const Vec3 kHalfDarkLampAt{0, 0, 0.25};
+constexpr double kHalfDarkLampRadius = 0.02, kHalfDarkLampRadiance = 10;
+
+TEST(SeenRadiance, RestoresALampsUnseenUndersideInTheNearField) {
+  const Vec3 lamp = kHalfDarkLampAt;
+  const double rho = kHalfDarkLampRadius, le = kHalfDarkLampRadiance;
+  const NerfField field = HalfDarkLamp(lamp, rho, le);
+  EnvSurfaceSamples samples;
+  for (int k = 0; k < 16; ++k) {
+    samples.positions.push_back(Vec3f{0.01f * (k % 4) - 0.015f, 0.01f * (k / 4) - 0.015f, 0.05f});
+    samples.normals.push_back(Vec3f{0, 0, 1});
+    samples.radiance.push_back(Vec3f{1, 1, 1});
+  }
+  EnvEstimateOptions o = TestOptions();
+  o.rays_per_point = 4096;  // ~1 % of the cosine-weighted rays hit the lamp: ~40 per point
+  o.near_field_pool_m = 0;
+  o.ray_offset_voxels = 1;
+  double truth = 0;  // mean analytic irradiance over the points
+  for (const Vec3f& x : samples.positions) {
+    const Vec3 to = lamp - Vec3(x);
+    const double d = Length(to);
+    truth += kPi * le * (rho / d) * (rho / d) * (to.z / d) / samples.size();
+  }
+  auto mean_e = [&](bool seen) {
+    EnvSurfaceSamples s = samples;
+    o.near_field_seen_radiance = seen;
+    ComputeNearField(field, o, s);
+    double e = 0;
+    for (const Vec3f& v : s.e_nerf) e += LuminanceOf(Vec3(v)) / s.size();
+    return e;
+  };
+  const double without = mean_e(false), with = mean_e(true);
+  // Without: the rays see the dark half (le/8): < 0.3 of the truth.
+  EXPECT_LT(without, 0.3 * truth);
+  // With: within 20 % (the 5 mm voxels make the 2 cm sphere's outline
+  // uncertain by ~1/5 voxel, ~10 % of its solid angle; ~40 rays per point
+  // over 16 points: ~4 % noise).
+  EXPECT_GT(with, 0.8 * truth) << "without " << without << " truth " << truth;
+  EXPECT_LT(with, 1.2 * truth) << "without " << without << " truth " << truth;
+}
+
+TEST(SeenRadiance, LeavesRaysSeenFromAboveAndUnreachedPointsAlone) {
+  const NerfField field = HalfDarkLamp(kHalfDarkLampAt, kHalfDarkLampRadius, kHalfDarkLampRadiance);
+  // One ray up from below the lamp (hits the dark half), one down from above it (hits the bright half).
+  std::vector<NerfRay> rays(2);
+  rays[0] = NerfRay{Vec3f{0.0f, 0.0f, 0.05f}, Vec3f{0, 0, 1}, 0, 0};
+  rays[1] = NerfRay{Vec3f{0.0f, 0.0f, 0.34f}, Vec3f{0, 0, -1}, 0, 0};
+  for (NerfRay& r : rays) ASSERT_TRUE(IntersectAabb(field.aabb, r.origin, r.dir, r.t_near, r.t_far));
+  std::vector<NerfRayResult> raw(2);
+  field.RenderRays(rays.data(), rays.size(), raw.data());
+  ASSERT_GT(raw[0].opacity, 0.9f);
+  ASSERT_LT(raw[0].color.y, kHalfDarkLampRadiance / 4);  // the dark underside
+  // Reach 1 mm: no view from above lands that close to the underside's point: nothing changes.
+  SeenRadianceOptions tight;
+  tight.reach_m = 0.001;
+  std::vector<NerfRayResult> res = raw;
+  EXPECT_EQ(ApplySeenRadiance(field, rays, res, tight), 0u);
+  EXPECT_EQ(res[0].color.y, raw[0].color.y);
+  // Default reach (5 cm > the lamp's 4 cm diameter: every view from above reaches).
+  res = raw;
+  EXPECT_EQ(ApplySeenRadiance(field, rays, res, SeenRadianceOptions{}), 1u);
+  EXPECT_EQ(res[1].color.y, raw[1].color.y);  // seen from above: the NeRF's own colour
+  // The underside now shows the upper half's radiance, le times the ray's
+  // opacity, within 10 % (interpolated colour and opacity near the surface).
+  EXPECT_NEAR(res[0].color.y, kHalfDarkLampRadiance * raw[0].opacity, 0.1 * kHalfDarkLampRadiance);
+}
+
 TEST(EnvEstimate, OptionsValidateAndSet) {
   EnvEstimateOptions o;
   EXPECT_TRUE(o.Validate().empty());
@@ -460,6 +574,9 @@ TEST(EnvEstimate, OptionsValidateAndSet) {
   o.Set("rays_per_point=64");
   EXPECT_EQ(o.rays_per_point, 64);
   o.Set("ignore_near_field=true");
+  o.Set("normal_balance=0.5");
+  EXPECT_EQ(o.normal_balance, 0.5);
+  o.Set("seen_radiance_views=0");
   EXPECT_TRUE(o.ignore_near_field);
   EXPECT_THROW(o.Set("rays_per_pont=64"), InputError);
   EXPECT_THROW(o.Set("rays_per_point=6x"), InputError);
@@ -472,6 +589,7 @@ TEST(EnvEstimate, OptionsValidateAndSet) {
   for (const std::string& p : problems) all += p + "\n";
   EXPECT_NE(all.find("views:"), std::string::npos) << all;
   EXPECT_NE(all.find("lobes:"), std::string::npos) << all;
+  EXPECT_NE(all.find("seen_radiance_views:"), std::string::npos) << all;
 }
 
 TEST(ViewQuality, BrisqueRejectsNoiseAndKeepsACleanImage) {

@@ -1,0 +1,86 @@
+#include "render/lighting/seen_radiance.h"
+
+#include <cmath>
+#include <unordered_map>
+
+#include "calib/core/error.h"
+#include "calib/core/parallel.h"
+#include "render/sg/sg.h"
+
+namespace nerfar {
+namespace {
+constexpr float kFar = 4.0f;  // metres from the point to the start of a view's ray (outside any tabletop volume)
+}  // namespace
+
+size_t ApplySeenRadiance(const NerfField& field, const std::vector<NerfRay>& rays, std::vector<NerfRayResult>& results,
+                         const SeenRadianceOptions& options, const NerfRenderOptions& render) {
+  NERFAR_CHECK_EQ(rays.size(), results.size());
+  const double z_min = std::sin(options.min_elevation_deg * kPi / 180);
+  // The view directions (from the point towards the camera): a spiral over
+  // the capture band, the same for every point.
+  std::vector<Vec3f> view_dirs;
+  const double lo = options.min_elevation_deg * kPi / 180, hi = options.max_elevation_deg * kPi / 180;
+  const double golden = kPi * (3.0 - std::sqrt(5.0));
+  for (int k = 0; k < options.views; ++k) {
+    const double el = lo + (hi - lo) * (k + 0.5) / options.views, az = golden * k;
+    view_dirs.push_back(Vec3f(Vec3{std::cos(el) * std::cos(az), std::cos(el) * std::sin(az), std::sin(el)}));
+  }
+  // Rays to treat, grouped by the voxel of their surface point.
+  struct Key {
+    int64_t v;
+    bool operator==(const Key& o) const { return v == o.v; }
+  };
+  struct KeyHash {
+    size_t operator()(const Key& k) const { return std::hash<int64_t>()(k.v); }
+  };
+  std::unordered_map<Key, size_t, KeyHash> slot_of;
+  std::vector<Vec3f> points;  // one per voxel: the first ray's surface point
+  std::vector<size_t> ray_slot(rays.size(), SIZE_MAX);
+  const float voxel = field.voxel_m;
+  for (size_t r = 0; r < rays.size(); ++r) {
+    const NerfRayResult& res = results[r];
+    if (!(res.opacity > options.min_opacity) || !(res.surface_depth > 0)) continue;
+    if (-rays[r].dir.z >= z_min) continue;  // seen from the capture side: the NeRF's own colour
+    const Vec3f x = rays[r].origin + rays[r].dir * res.surface_depth;
+    const Vec3f g = (x - Vec3f(field.aabb.min)) * (1.0f / voxel);
+    const int64_t i = static_cast<int64_t>(std::floor(g.x)), j = static_cast<int64_t>(std::floor(g.y)),
+                  k = static_cast<int64_t>(std::floor(g.z));
+    const Key key{(i * 4096 + j) * 4096 + k};
+    const auto it = slot_of.emplace(key, points.size()).first;
+    if (it->second == points.size()) points.push_back(x);
+    ray_slot[r] = it->second;
+  }
+  // The seen radiance of each point: mean colour over the views that reach it.
+  std::vector<Vec3f> seen(points.size());
+  std::vector<bool> reached(points.size(), false);
+  ParallelFor(
+      points.size(),
+      [&](size_t p) {
+        double best = -1;
+        for (const Vec3f& u : view_dirs) {
+          NerfRay ray{points[p] + u * kFar, -u, 0, 0};  // from outside the volume, towards the point
+          if (!IntersectAabb(field.aabb, ray.origin, ray.dir, ray.t_near, ray.t_far)) continue;
+          const NerfRayResult res = field.RenderRay(ray, render);
+          if (!(res.opacity > options.min_opacity) || std::fabs(res.surface_depth - kFar) > options.reach_m) continue;
+          const Vec3f radiance = res.color * (1.0f / res.opacity);
+          const double y = LuminanceOf(Vec3(radiance));
+          if (y > best) {
+            best = y;
+            seen[p] = radiance;
+            reached[p] = true;
+          }
+        }
+      },
+      8);
+  size_t changed = 0;
+  for (size_t r = 0; r < rays.size(); ++r) {
+    if (ray_slot[r] == SIZE_MAX || !reached[ray_slot[r]]) continue;
+    const Vec3f color = seen[ray_slot[r]] * results[r].opacity;
+    if (!(LuminanceOf(Vec3(color)) > LuminanceOf(Vec3(results[r].color)))) continue;
+    results[r].color = color;
+    ++changed;
+  }
+  return changed;
+}
+
+}  // namespace nerfar
