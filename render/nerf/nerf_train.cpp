@@ -251,8 +251,10 @@ struct NerfTrainer::State {
   std::vector<std::vector<Record>> records;         // per chunk
   std::vector<std::vector<int32_t>> touched_lists;  // per block of slots: the touched ones, in slot order
   std::vector<int32_t> all_touched;                 // every touched slot, ascending (memory order)
+  size_t scatter_split = 0;                         // first slot of the second scatter part (0: the middle)
   // Measurement for the verbose log: seconds per phase and samples since the last report.
   double time_march = 0, time_scatter = 0, time_adam = 0, time_occupancy = 0;
+  double wall_march = 0, wall_scatter = 0, wall_adam = 0, wall_occupancy = 0;  // the same phases, wall-clock
   uint64_t samples_marched = 0, rays_marched = 0, vertices_updated = 0;
 
   explicit State(const NerfTrainData& d) : data(d) {}
@@ -379,8 +381,12 @@ double NerfTrainer::State::DoStep() {
     clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
     return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
   };
-  double phase_start = cpu_now();
+  const auto wall_now = [] {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+  };
+  double phase_start = cpu_now(), phase_wall = wall_now();
   const auto seconds_since = [&](double t) { return cpu_now() - t; };
+  const auto wall_since = [&](double t) { return wall_now() - t; };
 
   ParallelForChunks(chunks, 1, [&](size_t chunk_begin, size_t chunk_end) {
     thread_local std::vector<Sample> samples;
@@ -535,6 +541,8 @@ double NerfTrainer::State::DoStep() {
     }
   });
   time_march += seconds_since(phase_start);
+  wall_march += wall_since(phase_wall);
+  phase_wall = wall_now();
   for (const std::vector<Record>& chunk : records) samples_marched += chunk.size();
   rays_marched += batch;
   phase_start = cpu_now();
@@ -544,7 +552,11 @@ double NerfTrainer::State::DoStep() {
   const size_t slots = field.SlotCount();
   ParallelForChunks(kScatterParts, 1, [&](size_t part_begin, size_t part_end) {
     for (size_t part = part_begin; part < part_end; ++part) {
-      const int32_t lo = int32_t(slots * part / kScatterParts), hi = int32_t(slots * (part + 1) / kScatterParts);
+      // Two parts split at the median slot touched by the previous step, so both get
+      // about the same work (each slot's sum is in record order whatever the split).
+      const size_t split = scatter_split > 0 && scatter_split < slots ? scatter_split : slots / 2;
+      static_assert(kScatterParts == 2);
+      const int32_t lo = part == 0 ? 0 : int32_t(split), hi = part == 0 ? int32_t(split) : int32_t(slots);
       for (const std::vector<Record>& chunk : records)
         for (const Record& rec : chunk) {
           for (int n = 0; n < 8; ++n) {
@@ -568,6 +580,8 @@ double NerfTrainer::State::DoStep() {
   });
 
   time_scatter += seconds_since(phase_start);
+  wall_scatter += wall_since(phase_wall);
+  phase_wall = wall_now();
   phase_start = cpu_now();
   // Sparse Adam on the touched vertices, with the TV prior's gradient.
   ++adam_t;
@@ -591,6 +605,7 @@ double NerfTrainer::State::DoStep() {
   all.clear();
   for (const auto& list : touched_lists) all.insert(all.end(), list.begin(), list.end());
   vertices_updated += all.size();
+  scatter_split = all.empty() ? 0 : size_t(all[all.size() / 2]);
   // The TV prior's gradient first, reading the parameters only (each vertex adds
   // to its own gradient), then Adam in place: the order of the vertices does not matter.
   if (tv_d > 0 || tv_c > 0) {
@@ -661,6 +676,8 @@ double NerfTrainer::State::DoStep() {
       },
       1024);
   time_adam += seconds_since(phase_start);
+  wall_adam += wall_since(phase_wall);
+  phase_wall = wall_now();
   phase_start = cpu_now();
   ++step;
   if (options.prune_weight > 0 && adam_t >= options.prune_every && adam_t % options.prune_every == 0) {
@@ -670,6 +687,8 @@ double NerfTrainer::State::DoStep() {
     field.UpdateOccupancy(OccupancySigma());
   }
   time_occupancy += seconds_since(phase_start);
+  wall_occupancy += wall_since(phase_wall);
+  phase_wall = wall_now();
   if (step % 50 == 0) {
     char text[256];
     std::snprintf(text, sizeof text,
@@ -679,7 +698,12 @@ double NerfTrainer::State::DoStep() {
                   double(samples_marched) / double(std::max<uint64_t>(rays_marched, 1)),
                   double(vertices_updated) / 50.0, 100.0 * field.OccupiedFraction());
     LogVerbose(text);
+    std::snprintf(text, sizeof text,
+                  "nerf wall time of the same steps: march %.2f s, scatter %.2f s, adam %.2f s, occupancy %.2f s",
+                  wall_march, wall_scatter, wall_adam, wall_occupancy);
+    LogVerbose(text);
     time_march = time_scatter = time_adam = time_occupancy = 0;
+    wall_march = wall_scatter = wall_adam = wall_occupancy = 0;
     samples_marched = rays_marched = vertices_updated = 0;
   }
   double loss = 0.0;
