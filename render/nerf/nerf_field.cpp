@@ -261,51 +261,25 @@ NerfRayResult NerfField::RenderRay(const NerfRay& ray, const NerfRenderOptions& 
   const float t0 = ray.t_near, t1 = ray.t_far;
   if (!(t1 > t0) || empty()) return result;
   const float step = options.step_voxels * voxel_m;
-  constexpr float kOffset = 0.5f;
-  const float inv_h = 1.0f / voxel_m;
-  const Vec3f o = (ray.origin - origin) * inv_h;  // grid coordinates
-  const Vec3f d = ray.dir * inv_h;                // grid units per metre
-  const float inv_d[3] = {d.x != 0.0f ? 1.0f / d.x : 1e30f, d.y != 0.0f ? 1.0f / d.y : 1e30f,
-                          d.z != 0.0f ? 1.0f / d.z : 1e30f};
-  const int64_t count = int64_t(std::ceil((t1 - t0) / step));
-  const float max_g[3] = {float(res[0] - 1), float(res[1] - 1), float(res[2] - 1)};
+  const nerf_detail::RaySteps steps(*this, ray, step, 0.5f);
+  nerf_detail::RaySteps::Sample s;
   float transmittance = 1.0f, depth_sum = 0.0f;
   RenderCell cell;
-  for (int64_t n = 0; n < count;) {
-    const float a = t0 + float(n) * step;
-    const float dt = std::min(step, t1 - a);
-    if (!(dt > 0.0f)) break;
-    const float t = a + kOffset * dt;
-    Vec3f g = o + d * t;
-    g.x = std::clamp(g.x, 0.0f, max_g[0]);
-    g.y = std::clamp(g.y, 0.0f, max_g[1]);
-    g.z = std::clamp(g.z, 0.0f, max_g[2]);
-    const int i = std::min(int(g.x), res[0] - 2), j = std::min(int(g.y), res[1] - 2),
-              k = std::min(int(g.z), res[2] - 2);
-    if (i != cell.i || j != cell.j || k != cell.k) {
-      const int state = nerf_detail::CellState(*this, i, j, k);
+  for (int64_t n = 0; n < steps.count;) {
+    if (!steps.At(n, s)) break;
+    if (s.i != cell.i || s.j != cell.j || s.k != cell.k) {
+      const int state = nerf_detail::CellState(*this, s.i, s.j, s.k);
       if (state != 2) {
-        // Jump to the first sample beyond this empty brick (state 0) or empty cell (state 1).
-        const int shift = state == 0 ? 2 : 0;
-        const int b[3] = {i >> shift, j >> shift, k >> shift};
-        float t_exit = 1e30f;
-        for (int axis = 0; axis < 3; ++axis) {
-          const float dir = d[axis];
-          if (dir == 0.0f) continue;
-          const float plane = float((dir > 0.0f ? b[axis] + 1 : b[axis]) << shift);
-          t_exit = std::min(t_exit, (plane - o[axis]) * inv_d[axis]);
-        }
-        // 1e-3 of a step of slack: a sample that rounding puts on the exit plane is visited, never skipped.
-        const float next = std::ceil((t_exit - t0) / step - kOffset - 1e-3f);
-        n = next > float(n + 1) ? (next < float(count) ? int64_t(next) : count) : n + 1;
+        n = steps.SkipEmpty(n, state, s);
         continue;
       }
-      cell.Load(*this, i, j, k);
+      cell.Load(*this, s.i, s.j, s.k);
     }
     ++n;
     ++result.samples;
-    if (options.prefetch) PrefetchCell(*this, o + d * (t + step));
-    const float fx = g.x - float(i), fy = g.y - float(j), fz = g.z - float(k);
+    const float t = s.t, dt = s.dt;
+    if (options.prefetch) PrefetchCell(*this, steps.Grid(t + step));
+    const float fx = s.g.x - float(s.i), fy = s.g.y - float(s.j), fz = s.g.z - float(s.k);
     const float sigma = std::exp(Trilinear(cell.s, fx, fy, fz));
     const float alpha = -std::expm1(-sigma * dt);
     if (alpha < options.min_alpha) continue;

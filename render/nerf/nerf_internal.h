@@ -78,56 +78,93 @@ inline int CellState(const NerfField& f, int i, int j, int k) {
   return (bits >> (((k & 3) * 4 + (j & 3)) * 4 + (i & 3))) & 1u ? 2 : 1;
 }
 
-// Marches a ray over [t_near, t_far] in intervals of `step` metres; the sample
-// of interval n lies at t_near + (n + offset)·step (offset in [0,1); the last,
-// shorter interval places it at the same fraction of its length). Calls
-// visit(t, dt, corners) for every sample in an occupied cell, in order, until
-// it returns false. Empty bricks and empty cells are jumped over.
+// The samples of a ray marched over [t_near, t_far] in intervals of `step`
+// metres: the sample of interval n lies at t_near + (n + offset)·step (offset in
+// [0,1); the last, shorter interval places it at the same fraction of its
+// length). The trainer's MarchRay and the renderer take their samples from here,
+// so both see exactly the same ones.
+struct RaySteps {
+  // One sample: its ray parameter, interval length, grid point (clamped into the grid) and cell.
+  struct Sample {
+    float t, dt;
+    Vec3f g;
+    int i, j, k;
+  };
+
+  RaySteps(const NerfField& f, const NerfRay& ray, float step, float offset)
+      : t0(ray.t_near),
+        t1(ray.t_far),
+        step(step),
+        offset(offset),
+        o((ray.origin - f.origin) * (1.0f / f.voxel_m)),
+        d(ray.dir * (1.0f / f.voxel_m)),
+        count(int64_t(std::ceil((t1 - t0) / step))) {
+    for (int axis = 0; axis < 3; ++axis) {
+      inv_d[axis] = d[axis] != 0.0f ? 1.0f / d[axis] : 1e30f;
+      last_cell[axis] = f.res[axis] - 2;
+      max_g[axis] = float(f.res[axis] - 1);
+    }
+  }
+
+  // Grid coordinates of the ray at t (not clamped).
+  Vec3f Grid(float t) const { return o + d * t; }
+
+  // Sample of interval n; false when rounding leaves the interval empty (the ray's end).
+  bool At(int64_t n, Sample& s) const {
+    const float a = t0 + float(n) * step;
+    s.dt = std::min(step, t1 - a);
+    if (!(s.dt > 0.0f)) return false;
+    s.t = a + offset * s.dt;
+    const Vec3f g = Grid(s.t);
+    s.g = {std::clamp(g.x, 0.0f, max_g[0]), std::clamp(g.y, 0.0f, max_g[1]), std::clamp(g.z, 0.0f, max_g[2])};
+    s.i = std::min(int(s.g.x), last_cell[0]);
+    s.j = std::min(int(s.g.y), last_cell[1]);
+    s.k = std::min(int(s.g.z), last_cell[2]);
+    return true;
+  }
+
+  // The next interval to visit after interval n, whose sample s lies in an empty brick (state 0 of
+  // CellState) or an empty cell (state 1): the first one beyond it, and never n itself.
+  int64_t SkipEmpty(int64_t n, int state, const Sample& s) const {
+    const int shift = state == 0 ? 2 : 0;
+    const int b[3] = {s.i >> shift, s.j >> shift, s.k >> shift};
+    float t_exit = 1e30f;
+    for (int axis = 0; axis < 3; ++axis) {
+      const float dir = d[axis];
+      if (dir == 0.0f) continue;
+      const float plane = float((dir > 0.0f ? b[axis] + 1 : b[axis]) << shift);
+      t_exit = std::min(t_exit, (plane - o[axis]) * inv_d[axis]);
+    }
+    // 1e-3 of a step of slack: a sample that rounding puts on the exit plane is visited, never skipped.
+    const float next = std::ceil((t_exit - t0) / step - offset - 1e-3f);
+    return next > float(n + 1) ? (next < float(count) ? int64_t(next) : count) : n + 1;
+  }
+
+  float t0, t1, step, offset;
+  Vec3f o, d;  // grid coordinates, grid units per metre
+  int64_t count;
+  float inv_d[3], max_g[3];
+  int last_cell[3];
+};
+
+// Calls visit(t, dt, corners) for every sample of RaySteps in an occupied cell,
+// in order, until it returns false. Empty bricks and empty cells are jumped over.
 template <typename Visit>
 inline void MarchRay(const NerfField& f, const NerfRay& ray, float step, float offset, Visit&& visit) {
-  const float t0 = ray.t_near, t1 = ray.t_far;
-  if (!(t1 > t0) || f.empty()) return;
-  const float inv_h = 1.0f / f.voxel_m;
-  const Vec3f o = (ray.origin - f.origin) * inv_h;  // grid coordinates
-  const Vec3f d = ray.dir * inv_h;                  // grid units per metre
-  const float inv_d[3] = {d.x != 0.0f ? 1.0f / d.x : 1e30f, d.y != 0.0f ? 1.0f / d.y : 1e30f,
-                          d.z != 0.0f ? 1.0f / d.z : 1e30f};
-  const float span = t1 - t0;
-  const int64_t count = int64_t(std::ceil(span / step));
-  const float max_g[3] = {float(f.res[0] - 1), float(f.res[1] - 1), float(f.res[2] - 1)};
+  if (!(ray.t_far > ray.t_near) || f.empty()) return;
+  const RaySteps steps(f, ray, step, offset);
+  RaySteps::Sample s;
   Corners c;
-  for (int64_t n = 0; n < count;) {
-    const float a = t0 + float(n) * step;
-    const float dt = std::min(step, t1 - a);
-    if (!(dt > 0.0f)) break;
-    const float t = a + offset * dt;
-    Vec3f g = o + d * t;
-    g.x = std::clamp(g.x, 0.0f, max_g[0]);
-    g.y = std::clamp(g.y, 0.0f, max_g[1]);
-    g.z = std::clamp(g.z, 0.0f, max_g[2]);
-    const int i = std::min(int(g.x), f.res[0] - 2), j = std::min(int(g.y), f.res[1] - 2),
-              k = std::min(int(g.z), f.res[2] - 2);
-    const int state = CellState(f, i, j, k);
-    if (state == 2) {
-      if (!LocateGrid(f, g, c)) break;
-      if (!visit(t, dt, c)) return;
-      ++n;
-    } else {
-      // Jump to the first sample beyond this empty brick (state 0) or empty cell (state 1).
-      const int shift = state == 0 ? 2 : 0;
-      const int b[3] = {i >> shift, j >> shift, k >> shift};
-      float t_exit = 1e30f;
-      for (int axis = 0; axis < 3; ++axis) {
-        const float dir = axis == 0 ? d.x : (axis == 1 ? d.y : d.z);
-        const float org = axis == 0 ? o.x : (axis == 1 ? o.y : o.z);
-        if (dir == 0.0f) continue;
-        const float plane = float((dir > 0.0f ? b[axis] + 1 : b[axis]) << shift);
-        t_exit = std::min(t_exit, (plane - org) * inv_d[axis]);
-      }
-      // 1e-3 of a step of slack: a sample that rounding puts on the exit plane is visited, never skipped.
-      const float next = std::ceil((t_exit - t0) / step - offset - 1e-3f);
-      n = next > float(n + 1) ? (next < float(count) ? int64_t(next) : count) : n + 1;
+  for (int64_t n = 0; n < steps.count;) {
+    if (!steps.At(n, s)) break;
+    const int state = CellState(f, s.i, s.j, s.k);
+    if (state != 2) {
+      n = steps.SkipEmpty(n, state, s);
+      continue;
     }
+    if (!LocateGrid(f, s.g, c)) break;
+    if (!visit(s.t, s.dt, c)) return;
+    ++n;
   }
 }
 
