@@ -129,6 +129,11 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
                                  options.receiver_min_opacity};
       for (size_t j : casters) AppendObjectKey(objects[j], key);
       for (const SgMixture& light : lights) AppendLightKey(light, key);
+      // Near lobes re-aimed at each receiver change κ as much as the light does.
+      for (const LightPrep& prep : preps) {
+        key.push_back(prep.parallax.min_sharpness);
+        key.insert(key.end(), prep.parallax.distance.begin(), prep.parallax.distance.end());
+      }
       if (!cache_owner) cache_owner = std::make_unique<KappaCache>();
       if (key != cache_owner->key || cache_owner->lattice.Size() > kKappaCacheMaxNodes) {
         cache_owner->Clear();
