@@ -751,6 +751,27 @@ TEST(NerfTrain, PruningEmptiesUnseenSpaceAndKeepsSurfaces) {
   }
 }
 
+// Every occupied cell of `f` has a corner whose density exceeds `sigma` (1/m),
+// read from the stored log-densities directly; and some cell is occupied.
+void ExpectOccupiedCellsReach(const NerfField& f, float sigma) {
+  const float raw_threshold = std::log(sigma);
+  size_t occupied = 0;
+  for (size_t b = 0; b < f.BrickCount(); ++b)
+    for (int cell = 0; cell < 64; ++cell) {
+      if (!((f.occupancy[b] >> cell) & 1u)) continue;
+      const int i = f.brick_coords[3 * b] * 4 + (cell & 3), j = f.brick_coords[3 * b + 1] * 4 + ((cell >> 2) & 3),
+                k = f.brick_coords[3 * b + 2] * 4 + (cell >> 4);
+      float max_raw = -1e30f;
+      for (int n = 0; n < 8; ++n) {
+        const int32_t s = f.Slot(i + (n & 1), j + ((n >> 1) & 1), k + (n >> 2));
+        if (s >= 0) max_raw = std::max(max_raw, f.density[s]);
+      }
+      ASSERT_GT(max_raw, raw_threshold) << "occupied cell " << i << " " << j << " " << k;
+      ++occupied;
+    }
+  EXPECT_GT(occupied, 0u);
+}
+
 TEST(NerfTrain, RelativePruningAndSaveThresholdKeepSurfacesAndDropFaintCells) {
   // The tiny scene trained with the finest level's relative pruning and a save
   // threshold 10x the training one, against plain training: the saved model
@@ -771,22 +792,7 @@ TEST(NerfTrain, RelativePruningAndSaveThresholdKeepSurfacesAndDropFaintCells) {
   EXPECT_FLOAT_EQ(lean.occupancy_sigma, 10.0f);
   EXPECT_LT(lean.OccupiedFraction(), plain.OccupiedFraction());
   EXPECT_LT(SerializeNerf(lean).size(), SerializeNerf(plain).size());
-  const float raw_threshold = std::log(10.0f);
-  size_t checked = 0;
-  for (size_t b = 0; b < lean.BrickCount(); ++b)
-    for (int cell = 0; cell < 64; ++cell) {
-      if (!((lean.occupancy[b] >> cell) & 1u)) continue;
-      const int i = lean.brick_coords[3 * b] * 4 + (cell & 3), j = lean.brick_coords[3 * b + 1] * 4 + ((cell >> 2) & 3),
-                k = lean.brick_coords[3 * b + 2] * 4 + (cell >> 4);
-      float max_raw = -1e30f;
-      for (int n = 0; n < 8; ++n) {
-        const int32_t s = lean.Slot(i + (n & 1), j + ((n >> 1) & 1), k + (n >> 2));
-        if (s >= 0) max_raw = std::max(max_raw, lean.density[s]);
-      }
-      EXPECT_GT(max_raw, raw_threshold) << "occupied cell " << i << " " << j << " " << k;
-      ++checked;
-    }
-  EXPECT_GT(checked, 0u);
+  ExpectOccupiedCellsReach(lean, 10.0f);
   // Visible top faces at a training elevation (0.6 rad), as in the pruning test.
   const float faces[][3] = {{-0.3f, -0.2f, 0.0f}, {0.3f, 0.2f, 0.0f}, {-0.15f, 0.0f, 0.2f}, {0.15f, -0.1f, 0.1f}};
   for (const auto& p : faces) {
@@ -809,22 +815,7 @@ TEST(NerfTrain, FinestLevelTrainingThresholdSkipsFaintCellsAndKeepsQuality) {
   const NerfField& f = t.field();
   EXPECT_EQ(t.level(), 1);
   EXPECT_FLOAT_EQ(f.occupancy_sigma, 5.0f);
-  const float raw_threshold = std::log(5.0f);
-  size_t occupied = 0;
-  for (size_t b = 0; b < f.BrickCount(); ++b)
-    for (int cell = 0; cell < 64; ++cell) {
-      if (!((f.occupancy[b] >> cell) & 1u)) continue;
-      const int i = f.brick_coords[3 * b] * 4 + (cell & 3), j = f.brick_coords[3 * b + 1] * 4 + ((cell >> 2) & 3),
-                k = f.brick_coords[3 * b + 2] * 4 + (cell >> 4);
-      float max_raw = -1e30f;
-      for (int n = 0; n < 8; ++n) {
-        const int32_t s = f.Slot(i + (n & 1), j + ((n >> 1) & 1), k + (n >> 2));
-        if (s >= 0) max_raw = std::max(max_raw, f.density[s]);
-      }
-      ASSERT_GT(max_raw, raw_threshold) << "occupied cell " << i << " " << j << " " << k;
-      ++occupied;
-    }
-  EXPECT_GT(occupied, 0u);
+  ExpectOccupiedCellsReach(f, 5.0f);
   // The same stated bound as the plain tiny-scene training (30 dB; a grey fog
   // scores about 10): skipping faint cells must not lose the boxes.
   const double psnr = t.HeldOutPsnr(0);
