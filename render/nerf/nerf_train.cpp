@@ -214,9 +214,7 @@ constexpr float kTrainMinTransmittance = 1e-4f;
 
 struct Sample {
   Corners corners;
-  float sigma, alpha, dt, t;
-  Vec3f color;
-  float g_w;  // dL/dw of the distortion prior (w = T α, the sample's weight)
+  nerf_train_detail::RaySample ray;
 };
 
 // The gradient a sample sends to its 8 corners.
@@ -230,6 +228,97 @@ struct Record {
 };
 
 }  // namespace
+
+namespace nerf_train_detail {
+
+double RayLossAndGradient(const RaySample* s, size_t n, const float target[3], const RayLossTerms& terms,
+                          float* g_log_sigma, Vec3f* g_log_color, float* weights) {
+  // Forward: α, weights w = T α, colour C and opacity O.
+  float transmittance = 1.0f;
+  Vec3f color;
+  for (size_t i = 0; i < n; ++i) {
+    const float alpha = -std::expm1(-s[i].sigma * s[i].dt);
+    weights[i] = transmittance * alpha;
+    color += s[i].color * weights[i];
+    transmittance *= 1.0f - alpha;
+  }
+  const float opacity = 1.0f - transmittance;
+  const float scale = terms.gradient_scale, eps = terms.epsilon;
+  // Loss and its gradient with respect to the rendered colour and opacity.
+  double loss = 0.0;
+  float g_c[3];
+  for (int ch = 0; ch < 3; ++ch) {
+    const float pred = color[ch], denom = pred + eps;
+    const float diff = pred - target[ch];
+    loss += double(diff) * diff / (double(denom) * denom) / 3.0;
+    g_c[ch] = 2.0f * diff / (denom * denom) / 3.0f * scale;
+  }
+  float g_o = 0.0f;
+  if (terms.opacity_weight > 0.0f) {
+    const float miss = opacity - terms.opacity_target;
+    loss += double(terms.opacity_weight) * miss * miss;
+    g_o = 2.0f * terms.opacity_weight * miss * scale;
+  }
+  // Distortion prior: dL/dw_i = λ (2 Σ_j w_j |t_i - t_j| + 2 w_i δ_i / 3), the
+  // sum split at i into prefix and suffix sums of w and w·t (samples are in
+  // order of t). Its density gradient follows the colour's form with the
+  // per-sample "colour" dL/dw_i: suffix_w = Σ_{j>i} w_j dL/dw_j. g_w holds
+  // dL/dw_i in g_log_sigma until the backward pass below overwrites it.
+  const float dist_w = terms.distortion_weight;
+  float* g_w = g_log_sigma;
+  float suffix_w = 0.0f;
+  if (dist_w > 0.0f && n > 0) {
+    double w_all = 0, wt_all = 0;
+    for (size_t i = 0; i < n; ++i) {
+      w_all += weights[i];
+      wt_all += double(weights[i]) * s[i].t;
+    }
+    double w_before = 0, wt_before = 0, dist = 0;
+    for (size_t i = 0; i < n; ++i) {
+      const double w = weights[i], t = s[i].t;
+      const double w_after = w_all - w_before - w, wt_after = wt_all - wt_before - w * t;
+      const double spread = t * w_before - wt_before + wt_after - t * w_after;
+      dist += w * spread + w * w * s[i].dt / 3.0;
+      g_w[i] = float(dist_w * (2.0 * spread + 2.0 * w * s[i].dt / 3.0) * scale);
+      suffix_w += float(w) * g_w[i];
+      w_before += w;
+      wt_before += w * t;
+    }
+    loss += double(dist_w) * dist;
+  } else {
+    for (size_t i = 0; i < n; ++i) g_w[i] = 0.0f;
+  }
+  const float sparse_w = terms.sparsity_weight, sparse_g = sparse_w * scale;
+  if (sparse_w > 0.0f) {
+    double alpha_sum = 0;
+    for (size_t i = 0; i < n; ++i) alpha_sum += -std::expm1(-s[i].sigma * s[i].dt);
+    loss += double(sparse_w) * alpha_sum;
+  }
+  // Backward (front to back with the suffix colour S_i = C - prefix).
+  float t_i = 1.0f;
+  Vec3f prefix;
+  for (size_t i = 0; i < n; ++i) {
+    const float alpha = -std::expm1(-s[i].sigma * s[i].dt);
+    const float w = t_i * alpha;
+    const float t_next = t_i * (1.0f - alpha);
+    prefix += s[i].color * w;
+    const Vec3f suffix = color - prefix;
+    float g_raw = 0.0f;
+    for (int ch = 0; ch < 3; ++ch) {
+      g_raw += g_c[ch] * (t_next * s[i].color[ch] - suffix[ch]);
+      g_log_color[i][ch] = g_c[ch] * w * s[i].color[ch];
+    }
+    g_raw += g_o * transmittance;
+    suffix_w -= w * g_w[i];
+    g_raw += t_next * g_w[i] - suffix_w;
+    g_raw += sparse_g * (1.0f - alpha);  // d(λ α)/d(σ δ)
+    g_log_sigma[i] = g_raw * s[i].dt * s[i].sigma;
+    t_i = t_next;
+  }
+  return loss;
+}
+
+}  // namespace nerf_train_detail
 
 struct NerfTrainer::State {
   const NerfTrainData& data;
@@ -370,9 +459,11 @@ double NerfTrainer::State::DoStep() {
   const float eps = float(epsilon);
   const float bg_w = float(options.background_weight);
   const float fg_w = float(options.foreground_weight);
-  const float dist_w = float(options.distortion_weight);
-  const float sparse_w = float(options.sparsity_weight);
-  const float sparse_g = sparse_w * inv_batch;
+  nerf_train_detail::RayLossTerms base_terms;
+  base_terms.epsilon = eps;
+  base_terms.gradient_scale = inv_batch;
+  base_terms.distortion_weight = float(options.distortion_weight);
+  base_terms.sparsity_weight = float(options.sparsity_weight);
   const float relative = level == options.levels - 1 ? float(options.prune_relative) : 0.0f;
   const uint64_t step_key = Mix64(options.seed * 0x9e37ull + uint64_t(step));
   // Phase timers in process CPU seconds (all threads): comparable under load.
@@ -390,6 +481,9 @@ double NerfTrainer::State::DoStep() {
 
   ParallelForChunks(chunks, 1, [&](size_t chunk_begin, size_t chunk_end) {
     thread_local std::vector<Sample> samples;
+    thread_local std::vector<nerf_train_detail::RaySample> ray_samples;
+    thread_local std::vector<float> g_log_sigma, weights;
+    thread_local std::vector<Vec3f> g_log_color;
     for (size_t chunk = chunk_begin; chunk < chunk_end; ++chunk) {
       std::vector<Record>& out = records[chunk];
       out.clear();
@@ -428,113 +522,55 @@ double NerfTrainer::State::DoStep() {
           for (int ch = 0; ch < 3; ++ch) loss_sum += double(target[ch]) * target[ch] / (double(eps) * eps) / 3.0;
           continue;
         }
-        // Forward.
+        // Forward: the samples in occupied cells until the transmittance is spent.
         samples.clear();
         float transmittance = 1.0f;
-        Vec3f color;
         const float offset = UnitFloat(h3);
         nerf_detail::MarchRay(field, ray, step_m, offset, [&](float t, float dt, const Corners& c) {
           Sample s;
           s.corners = c;
-          s.t = t;
-          s.sigma = std::exp(nerf_detail::RawDensity(field, c));
-          s.alpha = -std::expm1(-s.sigma * dt);
-          s.dt = dt;
+          s.ray.t = t;
+          s.ray.dt = dt;
+          s.ray.sigma = std::exp(nerf_detail::RawDensity(field, c));
           float q[kNerfColorCoeffs];
           nerf_detail::ColorCoeffs(field, c, q);
-          s.color = nerf_detail::ColorFromCoeffs(q, ray.dir);
-          color += s.color * (transmittance * s.alpha);
-          transmittance *= 1.0f - s.alpha;
+          s.ray.color = nerf_detail::ColorFromCoeffs(q, ray.dir);
+          transmittance *= 1.0f + std::expm1(-s.ray.sigma * dt);  // 1 - α, as RayLossAndGradient
           samples.push_back(s);
           return transmittance >= kTrainMinTransmittance;
         });
-        const float opacity = 1.0f - transmittance;
-        // Loss and its gradient with respect to the rendered colour and opacity.
-        float g_c[3];
-        for (int ch = 0; ch < 3; ++ch) {
-          const float pred = color[ch], denom = pred + eps;
-          const float diff = pred - target[ch];
-          loss_sum += double(diff) * diff / (double(denom) * denom) / 3.0;
-          g_c[ch] = 2.0f * diff / (denom * denom) / 3.0f * inv_batch;
-        }
-        float g_o = 0.0f;
+        const size_t n = samples.size();
+        ray_samples.resize(n);
+        g_log_sigma.resize(n);
+        g_log_color.resize(n);
+        weights.resize(n);
+        for (size_t i = 0; i < n; ++i) ray_samples[i] = samples[i].ray;
+        nerf_train_detail::RayLossTerms terms = base_terms;
         if (background) {
-          loss_sum += double(bg_w) * opacity * opacity;
-          g_o = 2.0f * bg_w * opacity * inv_batch;
+          terms.opacity_weight = bg_w;
+          terms.opacity_target = 0.0f;
         } else if (foreground) {
-          loss_sum += double(fg_w) * (1.0f - opacity) * (1.0f - opacity);
-          g_o = -2.0f * fg_w * (1.0f - opacity) * inv_batch;
+          terms.opacity_weight = fg_w;
+          terms.opacity_target = 1.0f;
         }
-        // Distortion prior: dL/dw_i = λ (2 Σ_j w_j |t_i - t_j| + 2 w_i δ_i / 3), the
-        // sum split at i into prefix and suffix sums of w and w·t (samples are in
-        // order of t). Its density gradient follows the colour's form with the
-        // per-sample "colour" dL/dw_i: suffix_w = Σ_{j>i} w_j dL/dw_j.
-        float suffix_w = 0.0f;
-        if (dist_w > 0.0f && !samples.empty()) {
-          double w_all = 0, wt_all = 0;
-          float tw = 1.0f;
-          for (Sample& s : samples) {
-            const double w = double(tw) * s.alpha;
-            s.g_w = float(w);  // the weight, for now
-            w_all += w;
-            wt_all += w * s.t;
-            tw *= 1.0f - s.alpha;
-          }
-          double w_before = 0, wt_before = 0, dist = 0;
-          for (Sample& s : samples) {
-            const double w = s.g_w;
-            const double w_after = w_all - w_before - w, wt_after = wt_all - wt_before - w * s.t;
-            const double spread = s.t * w_before - wt_before + wt_after - s.t * w_after;
-            dist += w * spread + w * w * s.dt / 3.0;
-            s.g_w = float(dist_w * (2.0 * spread + 2.0 * w * s.dt / 3.0) * inv_batch);
-            suffix_w += float(w) * s.g_w;
-            w_before += w;
-            wt_before += w * s.t;
-          }
-          loss_sum += double(dist_w) * dist;
-        } else {
-          for (Sample& s : samples) s.g_w = 0.0f;
-        }
-        if (sparse_w > 0.0f) {
-          double alpha_sum = 0;
-          for (const Sample& s : samples) alpha_sum += s.alpha;
-          loss_sum += double(sparse_w) * alpha_sum;
-        }
+        loss_sum += nerf_train_detail::RayLossAndGradient(ray_samples.data(), n, target, terms, g_log_sigma.data(),
+                                                          g_log_color.data(), weights.data());
         // Samples below this weight do not count as seen for pruning (prune_relative).
         float seen_min = 0.0f;
         if (relative > 0.0f) {
-          float tw = 1.0f, peak = 0.0f;
-          for (const Sample& s : samples) {
-            peak = std::max(peak, tw * s.alpha);
-            tw *= 1.0f - s.alpha;
-          }
+          float peak = 0.0f;
+          for (float w : weights) peak = std::max(peak, w);
           seen_min = relative * peak;
         }
-        // Backward (front to back with the suffix colour S_i = C - prefix).
-        float t_i = 1.0f;
-        Vec3f prefix;
-        for (const Sample& s : samples) {
-          const float w = t_i * s.alpha;
-          const float t_next = t_i * (1.0f - s.alpha);
-          prefix += s.color * w;
-          const Vec3f suffix = color - prefix;
-          float g_raw = 0.0f;
+        for (size_t i = 0; i < n; ++i) {
           Record rec;
-          for (int ch = 0; ch < 3; ++ch) {
-            g_raw += g_c[ch] * (t_next * s.color[ch] - suffix[ch]);
-            rec.g_color[ch] = g_c[ch] * w * s.color[ch];
-          }
-          g_raw += g_o * transmittance;
-          suffix_w -= w * s.g_w;
-          g_raw += t_next * s.g_w - suffix_w;
-          g_raw += sparse_g * (1.0f - s.alpha);  // d(λ α)/d(σ δ)
-          rec.g_density = g_raw * s.dt * s.sigma;
-          rec.w = w >= seen_min ? w : 0.0f;
-          std::memcpy(rec.slot, s.corners.slot, sizeof rec.slot);
-          std::memcpy(rec.weight, s.corners.weight, sizeof rec.weight);
+          rec.g_density = g_log_sigma[i];
+          for (int ch = 0; ch < 3; ++ch) rec.g_color[ch] = g_log_color[i][ch];
+          rec.w = weights[i] >= seen_min ? weights[i] : 0.0f;
+          std::memcpy(rec.slot, samples[i].corners.slot, sizeof rec.slot);
+          std::memcpy(rec.weight, samples[i].corners.weight, sizeof rec.weight);
           rec.dir = ray.dir;
           out.push_back(rec);
-          t_i = t_next;
         }
       }
       chunk_loss[chunk] = loss_sum;

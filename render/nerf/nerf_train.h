@@ -147,6 +147,34 @@ struct NerfTrainOptions {
   void Set(const std::string& key_value);
 };
 
+// One training ray's loss and gradient, the trainer's inner computation (public
+// for the tests, which check it against finite differences).
+namespace nerf_train_detail {
+
+// A sample along the ray, in order of t: position t (m), interval δ (m), density σ (1/m), radiance.
+struct RaySample {
+  float t = 0, dt = 0, sigma = 0;
+  Vec3f color;
+};
+
+struct RayLossTerms {
+  float epsilon = 1;            // ε of the relative colour loss (absolute radiance)
+  float gradient_scale = 1;     // factor on every gradient (the trainer's 1 / batch); the loss is unscaled
+  float opacity_weight = 0;     // weight of (O - opacity_target)² (0: no opacity term)
+  float opacity_target = 0;     // 0: background pixel, 1: opaque foreground pixel
+  float distortion_weight = 0;  // NerfTrainOptions::distortion_weight
+  float sparsity_weight = 0;    // NerfTrainOptions::sparsity_weight
+};
+
+// Returns the ray's loss, Σ_ch (C - y)² / (C + ε)² / 3 + the opacity, distortion
+// and sparsity terms, and writes per sample the gradient with respect to log σ
+// and to the log radiance of each channel (times gradient_scale; C held fixed
+// in the denominator as sg(C)), and the sample's rendering weight T·α.
+double RayLossAndGradient(const RaySample* samples, size_t count, const float target[3], const RayLossTerms& terms,
+                          float* g_log_sigma, Vec3f* g_log_color, float* weights);
+
+}  // namespace nerf_train_detail
+
 class NerfTrainer {
  public:
   NerfTrainer(const NerfTrainData& data, const NerfTrainOptions& options);
