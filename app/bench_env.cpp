@@ -11,12 +11,13 @@
 // (near field alone; environment fitted ignoring the near field and NeRF
 // visibility, PhySG-like) and for env.exr itself seen through the NeRF (what
 // the NeRF alone limits). $NERFAR_BENCH_ENV_TRADE=1 adds the pixels x rays
-// table on the window scene (or "16x64,64x256": those cells only). $NERFAR_BENCH_ENV_SET="key=value;..." overrides
+// table on each scene (or "16x64,64x256": those cells only). $NERFAR_BENCH_ENV_SET="key=value;..." overrides
 // options as `nerfar env --set` does (the PhySG-like baseline takes them too).
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <ctime>
 #include <filesystem>
 #include <map>
 #include <sstream>
@@ -143,9 +144,12 @@ void SharedScene(const std::string& scenes_dir, const std::string& scene, const 
   const std::string note =
       scene + ", " + model + ", preset " + preset + (sets != nullptr && *sets != 0 ? ", " + std::string(sets) : "");
   double t0 = NowSeconds();
+  const std::clock_t cpu0 = std::clock();
   EnvEstimateReport report;
   const EnvLight est = EstimateEnvironment(field, o, &report);
   figures.push_back({"env_" + scene + "_s", NowSeconds() - t0, "s", note});
+  figures.push_back({"env_" + scene + "_cpu_s", static_cast<double>(std::clock() - cpu0) / CLOCKS_PER_SEC, "s",
+                     note + ", CPU time (all threads)"});
   figures.push_back({"env_" + scene + "_samples", static_cast<double>(report.samples), "", note});
   figures.push_back({"env_" + scene + "_near_field_gain", report.fit.near_field_gain, "", note});
   figures.push_back({"env_" + scene + "_fit_rel_rms", report.fit.relative_rms, "", note});
@@ -156,6 +160,9 @@ void SharedScene(const std::string& scenes_dir, const std::string& scene, const 
   figures.push_back({"env_" + scene + "_negligible", est.negligible ? 1.0 : 0.0, "", note});
   figures.push_back({"env_" + scene + "_env_to_near_surface", est.env_to_near_surface, "", note});
   figures.push_back({"env_" + scene + "_env_to_near_center", est.env_to_near_center, "", note});
+  figures.push_back(
+      {"env_" + scene + "_evidence", est.evidence, "", note + "; log-likelihood gain of the environment"});
+  figures.push_back({"env_" + scene + "_evidence_needed", est.evidence_needed, "", note + "; BIC penalty"});
 
   const ImageF truth_env = ReadExrRgb((dir / "env.exr").string());
   std::vector<Vec3> upper, all = FibonacciSphere(128);
@@ -223,15 +230,21 @@ void SharedScene(const std::string& scenes_dir, const std::string& scene, const 
     figures.push_back({at + "oracle_total_rel_rms", RelativeIrradianceRms(oracle, truth), "",
                        on + ", E_nerf + env.exr through NeRF visibility (the NeRF's share of the error)"});
     figures.push_back({at + "env_to_near", near_sum > 0 ? env_sum / near_sum : 0.0, "", note + ", E_env/E_nerf"});
+    // As insertion uses it: a negligible environment is dropped (E_env = 0).
+    figures.push_back({at + "env_to_near_used", est.negligible || !(near_sum > 0) ? 0.0 : env_sum / near_sum, "",
+                       note + ", E_env/E_nerf as insertion uses it (0 when negligible)"});
+    figures.push_back({at + "used_total_rel_rms", RelativeIrradianceRms(est.negligible ? near_only : with_est, truth),
+                       "", on + ", what insertion uses (near field alone when negligible)"});
     figures.push_back(
         {at + "physg_env_to_near", near_sum > 0 ? physg_sum / near_sum : 0.0, "", note + ", PhySG-like E_env/E_nerf"});
   }
   const char* trade = std::getenv("NERFAR_BENCH_ENV_TRADE");
-  if (scene == "window" && trade != nullptr) {
-    // "1": the four cells 16/64 px x 64/256 rays; else a list "PxR,PxR,...".
+  if (trade != nullptr) {
+    // "1": the cells 16/64 px x 64/256 rays other than the run above (64 x
+    // 256 with the balanced preset); else a list "PxR,PxR,...".
     std::vector<std::pair<int, int>> cells;
     if (std::string(trade) == "1") {
-      cells = {{16, 64}, {16, 256}, {64, 64}, {64, 256}};
+      cells = {{16, 64}, {16, 256}, {64, 64}};
     } else {
       std::stringstream list(trade);
       std::string cell;
@@ -248,13 +261,20 @@ void SharedScene(const std::string& scenes_dir, const std::string& scene, const 
       t.pixels_per_view = pixels;
       t.rays_per_point = rays;
       const double start = NowSeconds();
+      const std::clock_t cpu_start = std::clock();
       const EnvLight env = EstimateEnvironment(field, t);
-      const std::string label = "env_window_px" + std::to_string(pixels) + "_rays" + std::to_string(rays);
+      const std::string label = "env_" + scene + "_px" + std::to_string(pixels) + "_rays" + std::to_string(rays);
       const std::string tn = note + "; " + std::to_string(pixels) + " px/view, " + std::to_string(rays) + " rays";
       figures.push_back({label + "_s", NowSeconds() - start, "s", tn});
-      std::vector<Vec3> e;
-      for (const Vec3& n : upper) e.push_back(Irradiance(env.lobes, n));
-      figures.push_back({label + "_env_rel_rms", RelativeIrradianceRms(e, e_true), "", tn});
+      figures.push_back(
+          {label + "_cpu_s", static_cast<double>(std::clock() - cpu_start) / CLOCKS_PER_SEC, "s", tn + ", CPU time"});
+      if (true_energy > 0) {
+        std::vector<Vec3> e;
+        for (const Vec3& n : upper) e.push_back(Irradiance(env.lobes, n));
+        figures.push_back({label + "_env_rel_rms", RelativeIrradianceRms(e, e_true), "", tn});
+      }
+      figures.push_back({label + "_env_to_near_center", env.env_to_near_center, "", tn});
+      figures.push_back({label + "_negligible", env.negligible ? 1.0 : 0.0, "", tn});
     }
   }
 }

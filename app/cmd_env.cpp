@@ -99,9 +99,20 @@ int RunEnv(const CommandArgs& args) {
                 "env: environment / near-field irradiance: %.4f over the surface samples, %.4f at the volume centre",
                 env.env_to_near_surface, env.env_to_near_center);
   LogInfo(line);
+  if (env.evidence_needed > 0) {
+    std::snprintf(line, sizeof line,
+                  "env: model selection: the environment's log-likelihood gain over the near field alone %.1f, "
+                  "BIC penalty for its %d lobes %.1f: %s",
+                  env.evidence, report.fit.active_lobes, env.evidence_needed,
+                  report.fit.environment_supported ? "supported by the data" : "not supported by the data");
+    LogInfo(line);
+  }
   if (env.negligible)
-    LogInfo("env: the estimate is negligible (below " + std::to_string(env.threshold) +
-            " of the near field): all light is inside the NeRF; insertion drops the environment term");
+    LogInfo(std::string("env: the estimate is negligible (") +
+            (report.fit.environment_supported
+                 ? "below " + std::to_string(env.threshold) + " of the near field"
+                 : "the near field alone explains the observations as well, up to the environment's parameters") +
+            "): all light is inside the NeRF; env.json says so and insertion drops the environment term");
   LogInfo("env: wrote " + output + (preview.empty() ? "" : " and " + preview));
   return 0;
 }

@@ -19,216 +19,25 @@
 // multi-scale dictionary of SGs by non-negative least squares, alternating,
 // under a robust relative (HDR) loss; the best 32 lobes are then re-solved.
 // World frame, metres, linear RGB radiance.
+// The pieces, one job each: env_options.h (options), env_samples.h (views,
+// surface samples), env_near_field.h (E_nerf, visibility cache, the NeRF seen
+// from a point), env_fit.h (SG + albedo fit); env_light.h (env.json, preview).
 #pragma once
 
-#include <cstdint>
-#include <functional>
+#include <cstddef>
 #include <string>
 #include <vector>
 
 #include "calib/core/math.h"
+#include "render/lighting/env_fit.h"
 #include "render/lighting/env_light.h"
-#include "render/lighting/seen_radiance.h"
+#include "render/lighting/env_near_field.h"
+#include "render/lighting/env_options.h"
+#include "render/lighting/env_samples.h"
 #include "render/nerf/nerf_field.h"
 #include "render/sg/sg.h"
 
 namespace nerfar {
-
-struct EnvEstimateOptions {
-  // --- view sampling (paper: 100 views, 64 pixels each)
-  int views = 100;           // accepted views to collect
-  int pixels_per_view = 64;  // surface samples drawn per accepted view
-  int view_width = 128;      // rendering size of a sampled view (BRISQUE and pixel picking)
-  int view_height = 96;
-  double view_fov_deg = 60;  // horizontal field of view of the sampled views
-  // Camera distance from the volume's centre, in units of half the aabb
-  // diagonal (1: on the sphere around the box; the paper's "half the grid size").
-  double view_distance_scale = 1.0;
-  // Views below this elevation (degrees, seen from the centre) are not drawn.
-  // Captures are taken from above (the shared scenes: 15 to 70 degrees), so
-  // views from below see the untrained underside (fog, wrong normals), which
-  // BRISQUE does not reliably reject; −90 draws the whole sphere.
-  double min_view_elevation_deg = 10;
-  double brisque_max = 50;      // views scoring above are rejected (paper: 50); ≥ 100 disables BRISQUE
-  int max_view_attempts = 400;  // views rendered at most; the best-scoring are kept when too few pass
-  // A pixel passes through the NeRF when its opacity exceeds this. Trained
-  // grids can hold translucent surfaces (a table of opacity 0.1-0.5 seen from
-  // above on a black background); surface-likeness is judged by
-  // max_surface_spread_voxels instead (at 0.95 the lamps NeRF of session 3
-  // gave 2 table samples of 2400, at 0.2 811).
-  double min_pixel_opacity = 0.2;
-  // A pixel's surface x = o + t50·d lies where its accumulated opacity reaches
-  // half of the ray's total (not the expected depth, which fog pulls towards
-  // the camera). Pixels whose opacity builds up over more than this many
-  // voxels between its quarter and three quarters (a layer of fog, not a
-  // surface) are dropped.
-  // The trained tables of session 3 spread their opacity over 10-60 voxels
-  // along the ray (the median still within ~2 cm of the top): 20 keeps them
-  // and drops deeper fog.
-  double max_surface_spread_voxels = 20;
-  // At most this many pixels per wanted sample are tried in a view (bounds
-  // the marching when most pixels are rejected).
-  int max_pixel_tries_factor = 4;
-  float surface_step_voxels = 0.5f;  // march step for the surface quartiles
-  // Normals from the median-depth map (central differences over
-  // normal_baseline_px pixels; depth edges dropped) rather than from the
-  // density gradient (smoothed over normal_scale_voxels), which fog turns.
-  bool normal_from_depth = true;
-  double normal_baseline_px = 2;
-  double normal_scale_voxels = 1.5;
-  // Observed radiance L_o: the rendered pixel C (false; right on a black
-  // background, as the shared scenes' camera rays see) or C / opacity (true).
-  bool radiance_over_opacity = false;
-  double min_view_cosine = 0.25;  // samples whose normal is seen more grazing than this (n·view) are dropped
-  // --- near field
-  int rays_per_point = 256;  // R: rays per surface point (near-field irradiance and visibility cache)
-  // Rays start this far along the normal (in voxels) to leave the surface and
-  // the surface's own fog: on the window NeRF (5 mm voxels) E_nerf on the
-  // table fell ~3.5x from 2 to 12 voxels (the rays no longer collect the
-  // table's own smeared radiance); 4 is the compromise with thin objects.
-  double ray_offset_voxels = 4.0;
-  // E_nerf is averaged over samples within this distance (metres) whose normals
-  // agree (cos > 0.95): R rays per point see a small bright source only a few
-  // times. 0 keeps each point's own estimate.
-  double near_field_pool_m = 0.03;
-  // Near-field rays that meet a surface from below the capture hemisphere
-  // (elevation < min_view_elevation_deg seen from the surface) take the
-  // radiance of that surface point seen from the capture hemisphere
-  // (render/lighting/seen_radiance.h): a NeRF's emitters and surfaces are
-  // untrained towards directions no camera saw.
-  bool near_field_seen_radiance = true;
-  int seen_radiance_views = 12;    // views from the capture hemisphere per surface point
-  NerfRenderOptions render;        // sample spacing etc. of every NeRF ray
-  bool ignore_near_field = false;  // baseline: E_nerf = 0 and Ô = 0 (environment explains everything, PhySG-like)
-  // --- fit
-  int lobes = 32;  // M: lobes in the result (paper: 32)
-  // Dictionary levels: level l has dictionary_base·4^l lobes on a Fibonacci
-  // sphere with sharpness dictionary_sharpness·4^l (same relative overlap).
-  int dictionary_levels = 3;
-  int dictionary_base = 24;
-  double dictionary_sharpness = 3.0;
-  int iterations = 12;                // alternations of the albedo and light solves
-  double albedo_cell_m = 0;           // albedo grid cell (metres); 0: 1/8 of the aabb's largest side
-  double albedo_prior = 0.5;          // grey-world prior that fixes the scale when the near field does not
-  double albedo_prior_weight = 1e-3;  // its weight, per cell, relative to one sample
-  double loss_epsilon = 0.05;         // relative loss floor in units of the mean observed luminance
-  double robust_scale = 0.3;          // Cauchy scale of the log residual (outliers: emitters, tags, bad normals)
-  // Each sample's weight in the data term is (1 / samples whose normal falls
-  // in the same of 32 direction bins)^normal_balance, normalised to mean 1:
-  // 0 weights every sample alike, 1 gives every occupied normal direction the
-  // same total weight. A tabletop gives most samples one normal (up), which
-  // tells the light's elevation only through shadows; the objects' sides,
-  // few in number, tell it through their shading.
-  double normal_balance = 0.75;
-  // Minimum-energy prior on the light (relative to the data term): light that
-  // no sample sees stays dark. 0 disables it.
-  double light_energy_weight = 1e-3;
-  // The near field enters the model as g·E_nerf with one gain g in [1, this]
-  // fitted with the rest. A trained NeRF's emitters are often much dimmer
-  // towards directions no camera saw (the underside of a lamp seen from the
-  // table: 3-5x too dark on the shared lamps scene); without g the fit makes
-  // up the missing light with a bright environment. Light that E_nerf's
-  // pattern cannot explain (a window's shadows and lit sides) still goes to
-  // the environment. 1 disables it.
-  double near_field_gain_max = 1;
-  // The estimate is negligible when E_env / E_nerf (luminance) is below this
-  // both over the surface samples and at the volume's centre.
-  double negligible_ratio = 0.05;
-  uint64_t seed = 1;  // views, pixels and ray rotations
-
-  // "fast", "balanced" (the defaults), "accurate"; InputError otherwise.
-  static EnvEstimateOptions Preset(const std::string& name);
-  // Every problem as "field: what is wrong (what was expected)".
-  std::vector<std::string> Validate() const;
-  std::string ToJson() const;
-  // Sets one field from "key=value" (the CLI's --set); InputError if unknown or bad.
-  void Set(const std::string& key_value);
-};
-
-// The seen-radiance settings that `o` implies (capture band from min_view_elevation_deg).
-SeenRadianceOptions SeenOptions(const EnvEstimateOptions& o);
-
-// The surface samples and their near-field cache.
-struct EnvSurfaceSamples {
-  std::vector<Vec3f> positions;  // x_surf, world
-  std::vector<Vec3f> normals;    // unit
-  std::vector<Vec3f> radiance;   // observed L_o (linear RGB)
-  // Filled by ComputeNearField:
-  std::vector<Vec3f> e_nerf;    // near-field irradiance
-  int rays_per_point = 0;       // R
-  std::vector<Vec3f> ray_dirs;  // R per point (world, unit, cosine-distributed about the normal)
-  std::vector<float> opacity;   // R per point: Ô towards ray_dirs
-  size_t size() const { return positions.size(); }
-};
-
-struct EnvViewReport {
-  int rendered = 0, accepted = 0;
-  std::vector<double> scores;  // BRISQUE score per rendered view (−1: BRISQUE disabled)
-  std::vector<bool> kept;      // per rendered view
-  // Picked pixels of the kept views: tried, and dropped as not surface-like,
-  // without a usable normal, or seen too grazing.
-  long pixels_tried = 0, pixels_not_surface = 0, pixels_no_normal = 0, pixels_grazing = 0;
-};
-
-// Progress: stage name, done, total (called from the calling thread).
-using EnvProgress = std::function<void(const std::string& stage, size_t done, size_t total)>;
-
-// Views, BRISQUE rejection, surface points, normals and observed radiance.
-EnvSurfaceSamples SampleSurfaces(const NerfField& field, const EnvEstimateOptions& options,
-                                 EnvViewReport* report = nullptr, const EnvProgress& progress = nullptr);
-
-// E_nerf and the visibility cache for every sample (ray casting through the field).
-void ComputeNearField(const NerfField& field, const EnvEstimateOptions& options, EnvSurfaceSamples& samples,
-                      const EnvProgress& progress = nullptr);
-
-struct EnvFitReport {
-  double initial_loss = 0, final_loss = 0;  // robust loss per sample
-  int dictionary_size = 0;
-  int active_lobes = 0;        // lobes with non-zero amplitude at the end
-  double mean_albedo = 0;      // luminance of the fitted albedo, mean over samples
-  double relative_rms = 0;     // RMS of (model − L_o)/L_o over samples (luminance)
-  double near_field_gain = 1;  // g fitted (1 when near_field_gain_max is 1)
-};
-
-// Fits the environment (lobes only; the ratios and flag are set by EstimateEnvironment).
-// `aabb` sets the albedo grid. InputError for invalid options.
-SgMixture FitEnvironment(const EnvSurfaceSamples& samples, const Aabb& aabb, const EnvEstimateOptions& options,
-                         EnvFitReport* report = nullptr, const EnvProgress& progress = nullptr);
-
-// Per-sample weights of FitEnvironment's data term from the normals'
-// directions (see EnvEstimateOptions::normal_balance), mean 1; all 1 at power 0.
-// With `radiance` (observed, per sample), samples brighter than
-// kEmitterLikeFactor x the median luminance keep at most weight 1.
-constexpr int kNormalBalanceBins = 32;
-constexpr double kEmitterLikeFactor = 10;
-std::vector<double> NormalBalanceWeights(const std::vector<Vec3f>& normals, double power,
-                                         const std::vector<Vec3f>* radiance = nullptr);
-
-// Irradiance E_env(x) = ∫ (1 − Ô) L_env max(n·d, 0) dd of each sample from its cache (as the fit uses it).
-std::vector<Vec3> EnvironmentIrradiance(const EnvSurfaceSamples& samples, const SgMixture& light);
-
-// The NeRF seen from a point: its radiance Ĉ and opacity Ô towards N
-// Fibonacci directions (each standing for 4π/N sr).
-struct NerfIncident {
-  std::vector<Vec3> dirs;
-  std::vector<Vec3> color;
-  std::vector<double> opacity;
-  // Near-field irradiance Σ Ĉ max(n·d, 0) 4π/N.
-  Vec3 NearIrradiance(const Vec3& normal) const;
-  // A distant light L(d) seen through the NeRF: Σ (1 − Ô) L(d) max(n·d, 0) 4π/N.
-  Vec3 DistantIrradiance(const std::function<Vec3(const Vec3&)>& light, const Vec3& normal) const;
-};
-// `seen`: the rays' radiance corrected as ApplySeenRadiance does (nullptr: the NeRF's own).
-NerfIncident NerfIncidentAt(const NerfField& field, const Vec3& point, int directions = 1024,
-                            const NerfRenderOptions& render = {}, const SeenRadianceOptions* seen = nullptr);
-
-// E_env / E_nerf (luminance) at a point: rays in `directions` Fibonacci
-// directions from `point`, both irradiances averaged over `normals` normals
-// spread over the sphere. +inf when the near field is black and the
-// environment is not, 0 when both are.
-double EnvToNearRatioAt(const NerfField& field, const SgMixture& light, const Vec3& point, int directions = 1024,
-                        int normals = 64, const NerfRenderOptions& render = {},
-                        const SeenRadianceOptions* seen = nullptr);
 
 struct EnvEstimateReport {
   EnvViewReport views;

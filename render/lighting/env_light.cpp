@@ -42,6 +42,11 @@ void Check(const EnvLight& env, Problems& problems) {
   for (size_t k = 0; k < env.lobes.size(); ++k) CheckLobe(env.lobes[k], "/lobes/" + std::to_string(k), problems);
   CheckRatio(env.env_to_near_surface, "env_to_near_surface", problems);
   CheckRatio(env.env_to_near_center, "env_to_near_center", problems);
+  if (!std::isfinite(env.evidence))
+    problems.Add("/energy/evidence", "is " + std::to_string(env.evidence) + " (expected a finite number)");
+  if (!(env.evidence_needed >= 0 && std::isfinite(env.evidence_needed)))
+    problems.Add("/energy/evidence_needed",
+                 "is " + std::to_string(env.evidence_needed) + " (expected a finite number >= 0)");
   if (!(env.threshold >= 0 && env.threshold <= 1))
     problems.Add("/energy/threshold", "is " + std::to_string(env.threshold) + " (expected 0 to 1)");
 }
@@ -73,7 +78,9 @@ std::string SerializeEnvLight(const EnvLight& env) {
   doc["negligible"] = env.negligible;
   doc["energy"] = {{"env_to_near_surface", env.env_to_near_surface},
                    {"env_to_near_center", env.env_to_near_center},
-                   {"threshold", env.threshold}};
+                   {"threshold", env.threshold},
+                   {"evidence", env.evidence},
+                   {"evidence_needed", env.evidence_needed}};
   if (!env.source.empty()) doc["source"] = env.source;
   if (!env.options_json.empty()) doc["options"] = ParseJson(env.options_json, "env options");
   return DumpJson(doc) + "\n";
@@ -116,6 +123,8 @@ EnvLight ParseEnvLight(const std::string& text, const std::string& source) {
       env.env_to_near_surface = e.Number("env_to_near_surface", 0, 1e30);
       env.env_to_near_center = e.Number("env_to_near_center", 0, 1e30);
       env.threshold = e.Number("threshold", 0, 1);
+      env.evidence = e.OptionalNumber("evidence", -1e300, 1e300).value_or(0);
+      env.evidence_needed = e.OptionalNumber("evidence_needed", 0, 1e300).value_or(0);
       e.Finish();
     }
     if (root.Has("source")) env.source = root.OptionalString("source").value_or("");

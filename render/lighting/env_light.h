@@ -9,7 +9,8 @@
 //   { "format": "nerfar-env", "version": 1,
 //     "lobes": [ {"axis": [x, y, z], "sharpness": λ, "amplitude": [r, g, b]}, ... ],
 //     "negligible": false,
-//     "energy": { "env_to_near_surface": r1, "env_to_near_center": r2, "threshold": t },
+//     "energy": { "env_to_near_surface": r1, "env_to_near_center": r2, "threshold": t,
+//                 "evidence": e, "evidence_needed": b },   (the last two optional, default 0)
 //     "source": "...", "options": {...} }        (the last two: documentation only)
 #pragma once
 
@@ -31,8 +32,14 @@ struct EnvLight {
   double env_to_near_surface = 0;
   // The same at the NeRF volume's centre, averaged over normals spread over the sphere.
   double env_to_near_center = 0;
-  // `negligible` was set because both ratios were below this.
+  // `negligible` is set when both ratios are below this, ...
   double threshold = 0.05;
+  // ... or when the environment does not explain the observations better
+  // than the near field alone by more than BIC's penalty for its parameters:
+  // its log-likelihood gain `evidence` is at most `evidence_needed`
+  // (render/lighting/env_fit.h; both 0 when the test was off).
+  double evidence = 0;
+  double evidence_needed = 0;
   std::string source;        // the .nerf it came from (documentation)
   std::string options_json;  // the estimator's options as compact JSON ("" or an object; documentation)
 };

@@ -1,0 +1,231 @@
+#include "render/lighting/env_fit.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <map>
+#include <numeric>
+
+#include "calib/core/error.h"
+#include "calib/core/log.h"
+#include "render/lighting/env_fit_internal.h"
+#include "render/lighting/env_internal.h"
+#include "render/sg/sphere.h"
+
+namespace nerfar {
+
+using env_internal::Channel;
+using env_internal::Dictionary;
+using env_internal::FitState;
+using env_internal::LobeIrradianceMatrix;
+using env_internal::Loss;
+using env_internal::MakeDictionary;
+using env_internal::Shading;
+using env_internal::SolveAlbedo;
+using env_internal::SolveGain;
+using env_internal::SolveLight;
+using env_internal::SolveScale;
+using env_internal::ToD;
+using env_internal::Y;
+
+std::vector<double> NormalBalanceWeights(const std::vector<Vec3f>& normals, double power,
+                                         const std::vector<Vec3f>* radiance) {
+  std::vector<double> w(normals.size(), 1.0);
+  if (!(power > 0) || normals.empty()) return w;
+  const std::vector<Vec3> bins = FibonacciSphere(kNormalBalanceBins);
+  std::vector<int> bin(normals.size());
+  std::vector<double> count(bins.size(), 0);
+  for (size_t i = 0; i < normals.size(); ++i) {
+    int best = 0;
+    double best_dot = -2;
+    for (size_t b = 0; b < bins.size(); ++b) {
+      const double d = Dot(ToD(normals[i]), bins[b]);
+      if (d > best_dot) best_dot = d, best = static_cast<int>(b);
+    }
+    bin[i] = best;
+    count[best] += 1;
+  }
+  double sum = 0;
+  for (size_t i = 0; i < normals.size(); ++i) sum += w[i] = std::pow(1.0 / count[bin[i]], power);
+  for (double& x : w) x *= static_cast<double>(normals.size()) / sum;  // mean 1
+  if (radiance != nullptr && radiance->size() == normals.size()) {
+    // Emitter-like samples (luminance above kEmitterLikeFactor x the median)
+    // are not weighted up: a lamp's own surface, seen from its sides, fills
+    // sparse normal bins, and the fit would explain its glow with light.
+    std::vector<double> y;
+    for (const Vec3f& l : *radiance) y.push_back(LuminanceOf(ToD(l)));
+    std::vector<double> sorted = y;
+    std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+    const double limit = kEmitterLikeFactor * sorted[sorted.size() / 2];
+    for (size_t i = 0; i < w.size(); ++i)
+      if (y[i] > limit) w[i] = std::min(w[i], 1.0);
+  }
+  return w;
+}
+
+namespace {
+
+std::vector<int> AlbedoCells(const EnvSurfaceSamples& s, const Aabb& aabb, double cell_m, size_t* count) {
+  const Vec3 ext = aabb.max - aabb.min;
+  const double h = cell_m > 0 ? cell_m : std::max({ext.x, ext.y, ext.z}) / 8;
+  std::map<std::array<int, 3>, int> ids;
+  std::vector<int> cell(s.size());
+  for (size_t i = 0; i < s.size(); ++i) {
+    const Vec3 p = (ToD(s.positions[i]) - aabb.min) / h;
+    const std::array<int, 3> key{static_cast<int>(std::floor(p.x)), static_cast<int>(std::floor(p.y)),
+                                 static_cast<int>(std::floor(p.z))};
+    const auto it = ids.emplace(key, static_cast<int>(ids.size())).first;
+    cell[i] = it->second;
+  }
+  *count = ids.size();
+  return cell;
+}
+
+// The fit's state before any light: albedo cells at the prior, the data
+// term's per-sample scales and balance weights.
+FitState PrepareFit(const EnvSurfaceSamples& samples, const Aabb& aabb, const EnvEstimateOptions& options) {
+  FitState st;
+  st.s = &samples;
+  st.prior = options.albedo_prior;
+  st.prior_weight = options.albedo_prior_weight;
+  st.robust_scale = options.robust_scale;
+  st.gain_max = options.ignore_near_field ? 1.0 : options.near_field_gain_max;
+  size_t cells = 0;
+  st.cell = AlbedoCells(samples, aabb, options.albedo_cell_m, &cells);
+  st.albedo.assign(cells, Vec3{1, 1, 1} * options.albedo_prior);
+  st.balance = NormalBalanceWeights(samples.normals, options.normal_balance, &samples.radiance);
+  st.robust = st.balance;
+  double mean_y = 0;
+  for (const Vec3f& l : samples.radiance) mean_y += Y(ToD(l));
+  mean_y /= samples.size();
+  const double eps = options.loss_epsilon * std::max(mean_y, 1e-12);
+  st.eps = Vec3{eps, eps, eps};
+  st.inv_scale.resize(samples.size());
+  for (size_t i = 0; i < samples.size(); ++i)
+    for (int c = 0; c < 3; ++c) st.inv_scale[i][c] = 1.0 / (std::max(0.0, Channel(samples.radiance[i], c)) + eps);
+
+  st.energy_weight = options.light_energy_weight;
+  st.typical_irradiance = kPi * mean_y / options.albedo_prior;
+  return st;
+}
+
+// The same model without environment (L_o = a/π · g·E_nerf), fitted by the
+// same alternation; its robust loss per sample.
+double NearFieldOnlyLoss(const EnvSurfaceSamples& samples, const Aabb& aabb, const EnvEstimateOptions& options,
+                         int steps) {
+  FitState st = PrepareFit(samples, aabb, options);
+  st.A = Eigen::MatrixXd::Zero(static_cast<Eigen::Index>(samples.size()), 0);
+  st.mu = Eigen::MatrixXd::Zero(0, 3);
+  Loss(st, Shading(st), true, &st);
+  for (int it = 0; it < steps; ++it) {
+    SolveGain(st);
+    SolveAlbedo(st, Shading(st));
+    SolveScale(st);
+    Loss(st, Shading(st), true, &st);
+  }
+  return Loss(st, Shading(st), false, nullptr);
+}
+
+}  // namespace
+
+SgMixture FitEnvironment(const EnvSurfaceSamples& samples, const Aabb& aabb, const EnvEstimateOptions& options,
+                         EnvFitReport* report, const EnvProgress& progress) {
+  const std::vector<std::string> problems = options.Validate();
+  if (!problems.empty()) ThrowInputError("env options", problems.front());
+  NERFAR_CHECK_EQ(samples.e_nerf.size(), samples.size());
+  NERFAR_CHECK_EQ(samples.opacity.size(), samples.size() * samples.rays_per_point);
+  EnvFitReport local;
+  if (samples.size() == 0) {
+    if (report) *report = local;
+    return {};
+  }
+  const Dictionary dict = MakeDictionary(options);
+  local.dictionary_size = static_cast<int>(dict.size());
+  FitState st = PrepareFit(samples, aabb, options);
+  st.A = LobeIrradianceMatrix(samples, dict.axes, dict.sharpness);
+  for (size_t k = 0; k < dict.size(); ++k) st.lobe_integral.push_back(SgUnitIntegral(dict.sharpness[k]));
+  st.mu = Eigen::MatrixXd::Zero(st.A.cols(), 3);
+  const int total_steps = options.iterations + std::max(3, options.iterations / 2);
+  // Start: albedo at the prior, robust weights from the near field alone.
+  local.initial_loss = Loss(st, Shading(st), true, &st);
+  int step = 0;
+  auto iterate = [&](int count) {
+    for (int it = 0; it < count; ++it, ++step) {
+      // The gain first: at the start (no light yet) it takes all that the
+      // near field's pattern explains before any lobe can.
+      SolveGain(st);
+      SolveLight(st);
+      SolveAlbedo(st, Shading(st));
+      SolveScale(st);
+      const double loss = Loss(st, Shading(st), true, &st);
+      double albedo = 0, light = 0;
+      for (size_t i = 0; i < samples.size(); ++i) albedo += Y(st.albedo[st.cell[i]]) / samples.size();
+      for (Eigen::Index k = 0; k < st.mu.rows(); ++k) light += st.mu(k, 1) * st.lobe_integral[k];
+      LogVerbose("env fit: step " + std::to_string(step) + " loss " + std::to_string(loss) + " mean albedo " +
+                 std::to_string(albedo) + " light green integral " + std::to_string(light));
+      if (progress) progress("fit", static_cast<size_t>(step + 1), static_cast<size_t>(total_steps));
+    }
+  };
+  iterate(options.iterations);
+
+  // Keep the M lobes carrying the most energy and re-solve with them only.
+  std::vector<Eigen::Index> order(st.A.cols());
+  std::iota(order.begin(), order.end(), 0);
+  std::vector<double> energy(st.A.cols());
+  for (Eigen::Index k = 0; k < st.A.cols(); ++k)
+    energy[k] = Y(Vec3{st.mu(k, 0), st.mu(k, 1), st.mu(k, 2)}) * SgUnitIntegral(dict.sharpness[k]);
+  std::stable_sort(order.begin(), order.end(), [&](Eigen::Index a, Eigen::Index b) { return energy[a] > energy[b]; });
+  order.resize(std::min<size_t>(order.size(), static_cast<size_t>(options.lobes)));
+  std::sort(order.begin(), order.end());
+  Eigen::MatrixXd A_kept(st.A.rows(), static_cast<Eigen::Index>(order.size()));
+  Eigen::MatrixXd mu_kept(static_cast<Eigen::Index>(order.size()), 3);
+  std::vector<double> kept_integral;
+  for (size_t k = 0; k < order.size(); ++k) {
+    kept_integral.push_back(st.lobe_integral[order[k]]);
+    A_kept.col(k) = st.A.col(order[k]);
+    mu_kept.row(k) = st.mu.row(order[k]);
+  }
+  st.A = std::move(A_kept);
+  st.mu = std::move(mu_kept);
+  st.lobe_integral = kept_integral;
+  iterate(total_steps - options.iterations);
+
+  SgMixture result;
+  for (size_t k = 0; k < order.size(); ++k) {
+    const Vec3 mu{st.mu(k, 0), st.mu(k, 1), st.mu(k, 2)};
+    if (!(mu.x > 0 || mu.y > 0 || mu.z > 0)) continue;
+    result.push_back({dict.axes[order[k]], dict.sharpness[order[k]], mu});
+  }
+  const Eigen::MatrixXd S = Shading(st);
+  local.final_loss = Loss(st, S, false, nullptr);
+  local.active_lobes = static_cast<int>(result.size());
+  double albedo_sum = 0, err2 = 0, ref2 = 0;
+  for (size_t i = 0; i < samples.size(); ++i) {
+    const Vec3& a = st.albedo[st.cell[i]];
+    albedo_sum += Y(a);
+    const Vec3 model{a.x / kPi * S(i, 0), a.y / kPi * S(i, 1), a.z / kPi * S(i, 2)};
+    const double obs = Y(ToD(samples.radiance[i]));
+    err2 += std::pow(Y(model) - obs, 2);
+    ref2 += obs * obs;
+  }
+  local.mean_albedo = albedo_sum / samples.size();
+  local.relative_rms = ref2 > 0 ? std::sqrt(err2 / ref2) : 0;
+  local.near_field_gain = st.gain;
+  // Model selection: the environment must explain what the near field
+  // cannot by more than its own parameters would explain of noise. The loss
+  // is a Cauchy negative log-likelihood at scale s (up to constants):
+  // n·loss/s². The environment's log-likelihood gain over the near field
+  // alone must exceed BIC's (k/2)·ln n, k = 6 parameters per active lobe
+  // (axis 2, sharpness 1, RGB amplitude 3).
+  if (!options.ignore_near_field && options.evidence_bic_factor > 0) {
+    local.near_only_loss = NearFieldOnlyLoss(samples, aabb, options, total_steps);
+    const double n = static_cast<double>(samples.size()), s2 = options.robust_scale * options.robust_scale;
+    local.evidence = n * (local.near_only_loss - local.final_loss) / s2;
+    local.evidence_needed = options.evidence_bic_factor * 0.5 * kSgLobeParameters * local.active_lobes * std::log(n);
+    local.environment_supported = local.active_lobes > 0 && local.evidence > local.evidence_needed;
+  }
+  if (report) *report = local;
+  return result;
+}
+
+}  // namespace nerfar

@@ -1,0 +1,54 @@
+// The environment fit (paper §4.2, eq. 3): L_o = a(x)/π (E_nerf + E_env)
+// with a piecewise-constant albedo on a coarse grid (solved in closed form per
+// cell: the smooth albedo model) and the lobes chosen from a multi-scale
+// dictionary of SGs by non-negative least squares, alternating, under a
+// robust relative (HDR) loss; the best M lobes are then re-solved.
+// env_fit.cpp drives it; env_fit_steps.cpp holds the solves, env_lobes.cpp
+// the lobes' irradiance through the visibility cache.
+#pragma once
+
+#include <vector>
+
+#include "calib/core/math.h"
+#include "render/lighting/env_options.h"
+#include "render/lighting/env_samples.h"
+#include "render/sg/sg.h"
+
+namespace nerfar {
+
+struct EnvFitReport {
+  double initial_loss = 0, final_loss = 0;  // robust loss per sample
+  int dictionary_size = 0;
+  int active_lobes = 0;        // lobes with non-zero amplitude at the end
+  double mean_albedo = 0;      // luminance of the fitted albedo, mean over samples
+  double relative_rms = 0;     // RMS of (model − L_o)/L_o over samples (luminance)
+  double near_field_gain = 1;  // g fitted (1 when near_field_gain_max is 1)
+  // Model selection (EnvEstimateOptions::evidence_bic_factor; all 0 and
+  // supported when it is off or the near field is ignored):
+  double near_only_loss = 0;          // robust loss per sample of the best fit without environment
+  double evidence = 0;                // n·(near_only_loss − final_loss)/s²: the environment's log-likelihood gain
+  double evidence_needed = 0;         // evidence_bic_factor · (k/2)·ln n, k = kSgLobeParameters · active lobes
+  bool environment_supported = true;  // evidence > evidence_needed
+};
+
+// Free parameters of one SG lobe in the model selection: axis 2, sharpness 1, RGB amplitude 3.
+constexpr int kSgLobeParameters = 6;
+
+// Fits the environment (lobes only; the ratios and flag are set by EstimateEnvironment).
+// `aabb` sets the albedo grid. InputError for invalid options.
+SgMixture FitEnvironment(const EnvSurfaceSamples& samples, const Aabb& aabb, const EnvEstimateOptions& options,
+                         EnvFitReport* report = nullptr, const EnvProgress& progress = nullptr);
+
+// Per-sample weights of FitEnvironment's data term from the normals'
+// directions (see EnvEstimateOptions::normal_balance), mean 1; all 1 at power 0.
+// With `radiance` (observed, per sample), samples brighter than
+// kEmitterLikeFactor x the median luminance keep at most weight 1.
+constexpr int kNormalBalanceBins = 32;
+constexpr double kEmitterLikeFactor = 10;
+std::vector<double> NormalBalanceWeights(const std::vector<Vec3f>& normals, double power,
+                                         const std::vector<Vec3f>* radiance = nullptr);
+
+// Irradiance E_env(x) = ∫ (1 − Ô) L_env max(n·d, 0) dd of each sample from its cache (as the fit uses it).
+std::vector<Vec3> EnvironmentIrradiance(const EnvSurfaceSamples& samples, const SgMixture& light);
+
+}  // namespace nerfar

@@ -1,0 +1,26 @@
+// Small helpers shared by the environment estimate's source files
+// (render/lighting/env_*.cpp); not part of the module's interface.
+#pragma once
+
+#include <cmath>
+#include <cstdint>
+#include <vector>
+
+#include "calib/core/math.h"
+#include "calib/core/random.h"
+#include "render/sg/sg.h"
+
+namespace nerfar::env_internal {
+
+// Counter-based randomness: a number is fixed by (seed, stream, item, k), so
+// results do not depend on the order or the thread that draws them.
+inline double Uniform(uint64_t seed, uint64_t stream, uint64_t item, uint64_t k) {
+  return UnitDouble(CounterHash(seed, stream, item, k));
+}
+enum Stream : uint64_t { kViewDir = 1, kPixelPick = 2, kRayTurn = 3 };
+
+inline double Y(const Vec3& rgb) { return LuminanceOf(rgb); }
+inline Vec3 ToD(const Vec3f& v) { return Vec3(v); }
+inline double Channel(const Vec3f& v, int c) { return v[c]; }
+
+}  // namespace nerfar::env_internal

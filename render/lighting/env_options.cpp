@@ -1,0 +1,212 @@
+#include "render/lighting/env_options.h"
+
+#include <algorithm>
+#include <cmath>
+#include <nlohmann/json.hpp>
+#include <stdexcept>
+
+#include "calib/core/error.h"
+#include "calib/core/json.h"
+#include "render/sg/sg.h"
+
+namespace nerfar {
+namespace {
+
+// ------------------------------------------------------------------- options
+struct OptionField {
+  const char* name;
+  enum Kind { kInt, kDouble, kBool, kFloat, kU64 } kind;
+  void* ptr;
+};
+std::vector<OptionField> Fields(EnvEstimateOptions& o) {
+  using F = OptionField;
+  return {{"views", F::kInt, &o.views},
+          {"pixels_per_view", F::kInt, &o.pixels_per_view},
+          {"view_width", F::kInt, &o.view_width},
+          {"view_height", F::kInt, &o.view_height},
+          {"view_fov_deg", F::kDouble, &o.view_fov_deg},
+          {"view_distance_scale", F::kDouble, &o.view_distance_scale},
+          {"min_view_elevation_deg", F::kDouble, &o.min_view_elevation_deg},
+          {"brisque_max", F::kDouble, &o.brisque_max},
+          {"max_view_attempts", F::kInt, &o.max_view_attempts},
+          {"min_pixel_opacity", F::kDouble, &o.min_pixel_opacity},
+          {"min_view_cosine", F::kDouble, &o.min_view_cosine},
+          {"max_surface_spread_voxels", F::kDouble, &o.max_surface_spread_voxels},
+          {"max_pixel_tries_factor", F::kInt, &o.max_pixel_tries_factor},
+          {"surface_step_voxels", F::kFloat, &o.surface_step_voxels},
+          {"normal_from_depth", F::kBool, &o.normal_from_depth},
+          {"normal_baseline_px", F::kDouble, &o.normal_baseline_px},
+          {"normal_scale_voxels", F::kDouble, &o.normal_scale_voxels},
+          {"radiance_over_opacity", F::kBool, &o.radiance_over_opacity},
+          {"rays_per_point", F::kInt, &o.rays_per_point},
+          {"ray_offset_voxels", F::kDouble, &o.ray_offset_voxels},
+          {"near_field_pool_m", F::kDouble, &o.near_field_pool_m},
+          {"near_field_seen_radiance", F::kBool, &o.near_field_seen_radiance},
+          {"seen_radiance_views", F::kInt, &o.seen_radiance_views},
+          {"step_voxels", F::kFloat, &o.render.step_voxels},
+          {"min_transmittance", F::kFloat, &o.render.min_transmittance},
+          {"ignore_near_field", F::kBool, &o.ignore_near_field},
+          {"lobes", F::kInt, &o.lobes},
+          {"dictionary_levels", F::kInt, &o.dictionary_levels},
+          {"dictionary_base", F::kInt, &o.dictionary_base},
+          {"dictionary_sharpness", F::kDouble, &o.dictionary_sharpness},
+          {"iterations", F::kInt, &o.iterations},
+          {"albedo_cell_m", F::kDouble, &o.albedo_cell_m},
+          {"albedo_prior", F::kDouble, &o.albedo_prior},
+          {"albedo_prior_weight", F::kDouble, &o.albedo_prior_weight},
+          {"loss_epsilon", F::kDouble, &o.loss_epsilon},
+          {"robust_scale", F::kDouble, &o.robust_scale},
+          {"normal_balance", F::kDouble, &o.normal_balance},
+          {"light_energy_weight", F::kDouble, &o.light_energy_weight},
+          {"near_field_gain_max", F::kDouble, &o.near_field_gain_max},
+          {"negligible_ratio", F::kDouble, &o.negligible_ratio},
+          {"evidence_bic_factor", F::kDouble, &o.evidence_bic_factor},
+          {"seed", F::kU64, &o.seed}};
+}
+
+}  // namespace
+
+SeenRadianceOptions SeenOptions(const EnvEstimateOptions& o) {
+  SeenRadianceOptions seen;
+  seen.min_elevation_deg = std::max(0.0, o.min_view_elevation_deg);
+  seen.views = o.seen_radiance_views;
+  return seen;
+}
+
+EnvEstimateOptions EnvEstimateOptions::Preset(const std::string& name) {
+  EnvEstimateOptions o;
+  if (name == "balanced") return o;
+  if (name == "fast") {
+    o.views = 50;
+    o.pixels_per_view = 48;
+    o.rays_per_point = 128;
+    o.dictionary_levels = 2;
+    o.iterations = 8;
+    o.max_view_attempts = 200;
+    return o;
+  }
+  if (name == "accurate") {
+    o.pixels_per_view = 128;
+    o.rays_per_point = 512;
+    o.iterations = 20;
+    o.view_width = 160;
+    o.view_height = 120;
+    return o;
+  }
+  ThrowInputError("--preset", "is \"" + name + "\" (expected fast, balanced or accurate)");
+}
+
+std::vector<std::string> EnvEstimateOptions::Validate() const {
+  std::vector<std::string> p;
+  auto range = [&p](const char* name, double v, double lo, double hi) {
+    if (!(v >= lo && v <= hi))
+      p.push_back(std::string(name) + ": is " + std::to_string(v) + " (expected " + std::to_string(lo) + " to " +
+                  std::to_string(hi) + ")");
+  };
+  range("views", views, 1, 10000);
+  range("pixels_per_view", pixels_per_view, 1, 100000);
+  range("view_width", view_width, 16, 4096);
+  range("view_height", view_height, 16, 4096);
+  range("view_fov_deg", view_fov_deg, 1, 170);
+  range("view_distance_scale", view_distance_scale, 0.1, 100);
+  range("min_view_elevation_deg", min_view_elevation_deg, -90, 89);
+  range("brisque_max", brisque_max, 0, 1e9);
+  range("max_view_attempts", max_view_attempts, views, 1e6);
+  range("min_pixel_opacity", min_pixel_opacity, 0, 1);
+  range("min_view_cosine", min_view_cosine, 0, 1);
+  range("max_surface_spread_voxels", max_surface_spread_voxels, 0.1, 1e6);
+  range("surface_step_voxels", surface_step_voxels, 0.05, 10);
+  range("max_pixel_tries_factor", max_pixel_tries_factor, 1, 1e6);
+  range("normal_baseline_px", normal_baseline_px, 0.25, 64);
+  range("normal_scale_voxels", normal_scale_voxels, 0.25, 64);
+  range("rays_per_point", rays_per_point, 8, 65536);
+  range("ray_offset_voxels", ray_offset_voxels, 0, 100);
+  range("near_field_pool_m", near_field_pool_m, 0, 10);
+  range("seen_radiance_views", seen_radiance_views, 1, 1024);
+  range("step_voxels", render.step_voxels, 0.01, 10);
+  range("min_transmittance", render.min_transmittance, 0, 1);
+  range("lobes", lobes, 1, kMaxSgLobes);
+  range("dictionary_levels", dictionary_levels, 1, 5);
+  range("dictionary_base", dictionary_base, 4, 4096);
+  range("dictionary_sharpness", dictionary_sharpness, 1e-2, 1e3);
+  if (dictionary_levels >= 1 && dictionary_base >= 1 &&
+      dictionary_base * ((std::pow(4.0, dictionary_levels) - 1) / 3) > 8192)
+    p.push_back("dictionary_base: gives more than 8192 dictionary lobes (expected fewer levels or a smaller base)");
+  range("iterations", iterations, 1, 1000);
+  range("albedo_cell_m", albedo_cell_m, 0, 100);
+  range("albedo_prior", albedo_prior, 0.01, 1);
+  range("albedo_prior_weight", albedo_prior_weight, 0, 1e6);
+  range("loss_epsilon", loss_epsilon, 1e-6, 1e3);
+  range("robust_scale", robust_scale, 1e-3, 1e6);
+  range("normal_balance", normal_balance, 0, 1);
+  range("light_energy_weight", light_energy_weight, 0, 1e3);
+  range("near_field_gain_max", near_field_gain_max, 1, 1e3);
+  range("negligible_ratio", negligible_ratio, 0, 1);
+  range("evidence_bic_factor", evidence_bic_factor, 0, 1e6);
+  return p;
+}
+
+std::string EnvEstimateOptions::ToJson() const {
+  Json doc = Json::object();
+  EnvEstimateOptions copy = *this;
+  for (const OptionField& f : Fields(copy)) {
+    switch (f.kind) {
+      case OptionField::kInt:
+        doc[f.name] = *static_cast<int*>(f.ptr);
+        break;
+      case OptionField::kDouble:
+        doc[f.name] = *static_cast<double*>(f.ptr);
+        break;
+      case OptionField::kFloat:
+        doc[f.name] = *static_cast<float*>(f.ptr);
+        break;
+      case OptionField::kBool:
+        doc[f.name] = *static_cast<bool*>(f.ptr);
+        break;
+      case OptionField::kU64:
+        doc[f.name] = *static_cast<uint64_t*>(f.ptr);
+        break;
+    }
+  }
+  return DumpJson(doc, -1);
+}
+
+void EnvEstimateOptions::Set(const std::string& key_value) {
+  const size_t eq = key_value.find('=');
+  if (eq == std::string::npos) ThrowInputError("--set " + key_value, "has no '=' (expected key=value)");
+  const std::string key = key_value.substr(0, eq), value = key_value.substr(eq + 1);
+  for (const OptionField& f : Fields(*this)) {
+    if (key != f.name) continue;
+    try {
+      size_t used = 0;
+      switch (f.kind) {
+        case OptionField::kInt:
+          *static_cast<int*>(f.ptr) = std::stoi(value, &used);
+          break;
+        case OptionField::kDouble:
+          *static_cast<double*>(f.ptr) = std::stod(value, &used);
+          break;
+        case OptionField::kFloat:
+          *static_cast<float*>(f.ptr) = std::stof(value, &used);
+          break;
+        case OptionField::kU64:
+          *static_cast<uint64_t*>(f.ptr) = std::stoull(value, &used);
+          break;
+        case OptionField::kBool:
+          if (value != "true" && value != "false") throw std::invalid_argument("bool");
+          *static_cast<bool*>(f.ptr) = value == "true";
+          used = value.size();
+          break;
+      }
+      if (used != value.size()) throw std::invalid_argument("trailing");
+    } catch (const std::exception&) {
+      ThrowInputError(
+          "--set " + key_value,
+          "has a bad value (expected a " + std::string(f.kind == OptionField::kBool ? "true/false" : "number") + ")");
+    }
+    return;
+  }
+  ThrowInputError("--set " + key_value, "names no option (expected one of the keys of the logged options)");
+}
+
+}  // namespace nerfar
