@@ -3,7 +3,8 @@
 // and reports training time, psnr_tm of the test views against the low-noise
 // insert/bg_XXX.exr, depth error on surfaces, model size, and the query
 // throughput (density and radiance samples/s, 1280x720 and 320x180 colour+depth
-// frames, with the mean samples per ray of the 720p frame) on 1 thread and on
+// frames at quality full and live, with the mean samples per ray of the 720p
+// frame) on 1 thread and on
 // all threads. --quick: a 20-step run on one scene.
 // $NERFAR_BENCH_NERF_MODELS="lamps=A.nerf,window=B.nerf": no training; the
 // given saved models are scored and timed instead.
@@ -63,24 +64,25 @@ void Throughput(const NerfField& field, const std::string& dataset, const std::s
       const double ms = MedianMilliseconds([&] { RenderView(field, cam, pose, {}); }, 3, 0.5);
       figures.push_back(
           {"frame_" + std::to_string(w) + "x" + std::to_string(h) + "_ms", ms, "ms", cond + ", colour+depth+opacity"});
-      // The preview setting (USER_GUIDE): 2-voxel steps, rays stop at transmittance 3e-2.
-      NerfRenderOptions preview;
-      preview.step_voxels = 2.0f;
-      preview.min_transmittance = 3e-2f;
-      const double preview_ms = MedianMilliseconds([&] { RenderView(field, cam, pose, preview); }, 3, 0.5);
-      figures.push_back({"frame_" + std::to_string(w) + "x" + std::to_string(h) + "_preview_ms", preview_ms, "ms",
-                         cond + ", step 2 voxels, min transmittance 3e-2"});
+      // The live setting (NerfRenderOptions::Preset("live")): 2-voxel steps, rays stop at transmittance 3e-2.
+      const NerfRenderOptions live = NerfRenderOptions::Preset("live");
+      const double live_ms = MedianMilliseconds([&] { RenderView(field, cam, pose, live); }, 3, 0.5);
+      figures.push_back({"frame_" + std::to_string(w) + "x" + std::to_string(h) + "_live_ms", live_ms, "ms",
+                         cond + ", quality live (step 2 voxels, min transmittance 3e-2)"});
     }
   }
-  {
+  for (const std::string quality : {"full", "live"}) {
     // What a 720p frame's rays cost: density samples and colour evaluations per ray (all rays, misses included).
     const std::vector<NerfRay> hd = CameraRays(test.camera.Scaled(1280, 720), pose, field.aabb);
     std::vector<NerfRayResult> out(hd.size());
-    field.RenderRays(hd.data(), hd.size(), out.data());
+    field.RenderRays(hd.data(), hd.size(), out.data(), NerfRenderOptions::Preset(quality));
     double samples = 0, colour = 0;
     for (const NerfRayResult& r : out) samples += r.samples, colour += r.color_samples;
-    figures.push_back({"samples_per_ray", samples / double(hd.size()), "", tag + ", 1280x720 frame, all rays"});
-    figures.push_back({"colour_samples_per_ray", colour / double(hd.size()), "", tag + ", 1280x720 frame"});
+    const std::string suffix = quality == "full" ? "" : "_live";
+    figures.push_back(
+        {"samples_per_ray" + suffix, samples / double(hd.size()), "", tag + ", 1280x720 frame, all rays, " + quality});
+    figures.push_back(
+        {"colour_samples_per_ray" + suffix, colour / double(hd.size()), "", tag + ", 1280x720 frame, " + quality});
   }
   SetThreadCount(all);
 }

@@ -24,8 +24,8 @@ namespace nerfar {
 int RunRender(const CommandArgs& args) {
   std::string model, dataset, output;
   NerfEvalOptions options;
-  double step_voxels = options.render.step_voxels;
-  double min_transmittance = options.render.min_transmittance;
+  std::string quality = "full";
+  double step_voxels = -1, min_transmittance = -1;  // < 0: as the quality preset says
   double occupancy_sigma = 0;
   std::string save_model;
   NerfFileOptions file_options;
@@ -36,9 +36,12 @@ int RunRender(const CommandArgs& args) {
   parser.Option("--split", &options.split, "NAME", "split: test (default) or train");
   parser.Option("-o", &output, "OUT", "output folder (required)");
   parser.Flag("--png", &options.write_png, "also write OUT/<name>.png: render beside reference, tone-mapped");
-  parser.Option("--step-voxels", &step_voxels, "S", "sample spacing in voxels (default 0.5)");
+  parser.Option("--quality", &quality, "Q",
+                "render setting: full (default; 0.5-voxel steps, rays stop at transmittance 1e-3) or live "
+                "(2-voxel steps, stop at 3e-2: ~4.5x fewer samples, psnr_tm within 0.05 dB of full)");
+  parser.Option("--step-voxels", &step_voxels, "S", "sample spacing in voxels (default: as --quality says)");
   parser.Option("--min-transmittance", &min_transmittance, "T",
-                "stop a ray once its transmittance falls below T (default 1e-3; larger is faster)");
+                "stop a ray once its transmittance falls below T (default: as --quality says; larger is faster)");
   parser.Option("--occupancy-sigma", &occupancy_sigma, "S",
                 "re-threshold the model's occupancy at S (1/m) before rendering: cells whose corners all lie "
                 "below S are skipped (what train's save_occupancy_sigma does to the saved model; default: as saved)");
@@ -58,11 +61,19 @@ int RunRender(const CommandArgs& args) {
   if (!parser.Parse(args)) return 0;
   if (dataset.empty() || output.empty())
     throw InputError("nerfar render: --dataset DIR and -o OUT are required (see 'nerfar render --help')");
-  if (!(step_voxels > 0.05 && step_voxels <= 2)) throw InputError("nerfar render: --step-voxels (expected 0.05..2)");
-  options.render.step_voxels = float(step_voxels);
-  if (!(min_transmittance >= 0 && min_transmittance < 1))
-    throw InputError("nerfar render: --min-transmittance (expected 0..1)");
-  options.render.min_transmittance = float(min_transmittance);
+  try {
+    options.render = NerfRenderOptions::Preset(quality);
+  } catch (const InputError& e) {
+    throw InputError(std::string("nerfar render: --quality: ") + e.what());
+  }
+  if (step_voxels >= 0) {
+    if (!(step_voxels > 0.05 && step_voxels <= 4)) throw InputError("nerfar render: --step-voxels (expected 0.05..4)");
+    options.render.step_voxels = float(step_voxels);
+  }
+  if (min_transmittance >= 0) {
+    if (!(min_transmittance < 1)) throw InputError("nerfar render: --min-transmittance (expected 0..1)");
+    options.render.min_transmittance = float(min_transmittance);
+  }
   options.output_dir = output;
   if (!(occupancy_sigma >= 0 && occupancy_sigma < 1e3))
     throw InputError("nerfar render: --occupancy-sigma (expected 0..1000 per metre)");

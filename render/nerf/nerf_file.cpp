@@ -124,7 +124,9 @@ uint32_t Quantise(float v, const Quantiser& q, int bits) {
   return uint32_t(std::clamp<int64_t>(code, 0, (int64_t{1} << bits) - 1));
 }
 
-float Dequantise(uint32_t code, const Quantiser& q) { return std::ldexp(float(int64_t(q.base) + code), q.exponent); }
+// (base + code)·2^exponent; scale = 2^exponent (a normal float for exponents -60..40, so the product is
+// the correctly rounded value ldexp gives, at a multiply's cost).
+float Dequantise(uint32_t code, const Quantiser& q, float scale) { return float(int64_t(q.base) + code) * scale; }
 
 class BitPacker {
  public:
@@ -301,6 +303,7 @@ void ReadValuesV2(Reader& r, const std::string& source, const std::vector<uint64
       int fill = 0;
       int v = -1;
       const uint32_t mask_bits = uint32_t((uint64_t{1} << nbits) - 1);
+      const float scale = std::ldexp(1.0f, q.exponent);
       for (int n = 0; n < count; ++n) {
         while (fill < nbits) {
           acc |= uint64_t(*p++) << fill;
@@ -311,7 +314,7 @@ void ReadValuesV2(Reader& r, const std::string& source, const std::vector<uint64
         fill -= nbits;
         do ++v;
         while (!((masks[b] >> v) & 1u));
-        const float x = Dequantise(code, q);
+        const float x = Dequantise(code, q, scale);
         CheckValue(source, b, ch, x);
         ChannelValue(f, size_t(b) * kNerfBrickSlots + size_t(v), ch) = x;
       }
@@ -470,6 +473,7 @@ NerfField ParseNerf(const std::string& bytes, const std::string& source) {
       }
     }
   }
+  f.UpdateSkipGrid();
   return f;
 }
 

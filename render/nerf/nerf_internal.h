@@ -27,6 +27,27 @@ inline void CellSlots(const NerfField& f, int i, int j, int k, int32_t slot[8]) 
   for (int n = 0; n < 8; ++n) slot[n] = f.Slot(i + (n & 1), j + ((n >> 1) & 1), k + (n >> 2));
 }
 
+// CellSlots for a cell whose own brick (the one holding corner 0) has index b0 >= 0: the other
+// bricks are looked up only where the cell's corners cross into them.
+inline void CellSlotsInBrick(const NerfField& f, int i, int j, int k, int32_t b0, int32_t slot[8]) {
+  const int li = i & 3, lj = j & 3, lk = k & 3;
+  const int32_t s0 = b0 * kNerfBrickSlots + (lk * 4 + lj) * 4 + li;
+  if (li < 3 && lj < 3 && lk < 3) {
+    for (int n = 0; n < 8; ++n) slot[n] = s0 + (n & 1) + ((n >> 1) & 1) * 4 + (n >> 2) * 16;
+    return;
+  }
+  // i + 1 <= res - 1, so every neighbouring brick index lies inside the table.
+  const size_t row = size_t(f.bricks[0]), plane = row * size_t(f.bricks[1]);
+  const size_t base = (size_t(k >> 2) * size_t(f.bricks[1]) + size_t(j >> 2)) * row + size_t(i >> 2);
+  for (int n = 0; n < 8; ++n) {
+    const int ci = li + (n & 1), cj = lj + ((n >> 1) & 1), ck = lk + (n >> 2);
+    const int cross = (ci >> 2) | (cj >> 2) << 1 | (ck >> 2) << 2;
+    const int32_t b =
+        cross == 0 ? b0 : f.brick_table[base + size_t(ci >> 2) + size_t(cj >> 2) * row + size_t(ck >> 2) * plane];
+    slot[n] = b < 0 ? -1 : b * kNerfBrickSlots + ((ck & 3) * 4 + (cj & 3)) * 4 + (ci & 3);
+  }
+}
+
 // Trilinear corners at grid coordinates g (voxels). False when g lies outside the grid.
 inline bool LocateGrid(const NerfField& f, const Vec3f& g, Corners& c) {
   if (!(g.x >= 0.0f && g.y >= 0.0f && g.z >= 0.0f)) return false;
@@ -125,8 +146,11 @@ struct RaySteps {
 
   // The next interval to visit after interval n, whose sample s lies in an empty brick (state 0 of
   // CellState) or an empty cell (state 1): the first one beyond it, and never n itself.
-  int64_t SkipEmpty(int64_t n, int state, const Sample& s) const {
-    const int shift = state == 0 ? 2 : 0;
+  int64_t SkipEmpty(int64_t n, int state, const Sample& s) const { return SkipBlock(n, state == 0 ? 2 : 0, s); }
+
+  // The next interval to visit after interval n, whose sample s lies in an empty block of 2^shift
+  // cells per side (aligned to multiples of 2^shift): the first one beyond the block, never n itself.
+  int64_t SkipBlock(int64_t n, int shift, const Sample& s) const {
     const int b[3] = {s.i >> shift, s.j >> shift, s.k >> shift};
     float t_exit = 1e30f;
     for (int axis = 0; axis < 3; ++axis) {

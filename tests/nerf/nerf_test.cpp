@@ -557,6 +557,7 @@ TEST(NerfRender, MarcherMatchesBruteForcePointQueries) {
   NerfField skip = TexturedBall(1.0 / 32, 11, false);
   NerfField full = skip;
   std::fill(full.occupancy.begin(), full.occupancy.end(), ~uint64_t{0});
+  full.UpdateSkipGrid();
   NerfRenderOptions options;
   options.min_transmittance = 0.0f;
   options.min_alpha = 0.0f;
@@ -594,6 +595,104 @@ TEST(NerfRender, MarcherMatchesBruteForcePointQueries) {
       EXPECT_NEAR_WHY(fast.color[ch], ref.color[ch], 2e-3 * 250 + 1e-4 * ref.color[ch], "σ below the threshold");
   }
   EXPECT_GT(hits, 10) << "precondition: many rays cross the ball";
+}
+
+// A unit-box field, every brick allocated, empty but for a blob of radius 0.08 m
+// around (0.86, 0.86, 0.86) (σ 0.5..50 / m, random log-linear colours 1e-2..1e2):
+// occupied cells only in the far corner of the grid.
+NerfField CornerBlob(double voxel, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  NerfField f = NerfField::Dense(UnitBox(), voxel, kNerfEmptyDensityRaw, Vec3f(0, 0, 0));
+  for (int k = 0; k < f.res[2]; ++k)
+    for (int j = 0; j < f.res[1]; ++j)
+      for (int i = 0; i < f.res[0]; ++i) {
+        const Vec3f p = f.origin + Vec3f(float(i), float(j), float(k)) * f.voxel_m;
+        if (Length(p - Vec3f(0.86f, 0.86f, 0.86f)) > 0.08f) continue;
+        const int32_t s = f.Slot(i, j, k);
+        f.density[s] = std::log(0.5f) + u(rng) * std::log(100.0f);
+        float* q = &f.color[size_t(s) * kNerfColorCoeffs];
+        for (int ch = 0; ch < 3; ++ch) {
+          q[4 * ch] = std::log(1e-2f) + u(rng) * std::log(1e4f);
+          for (int a = 1; a < 4; ++a) q[4 * ch + a] = 0.6f * (u(rng) - 0.5f);
+        }
+      }
+  f.UpdateOccupancy(1e-3f);
+  return f;
+}
+
+TEST(NerfRender, SkipGridJumpsOnlyEmptySpace) {
+  // 1/64 m voxels: 64 cells per axis, 4 blocks of 16 cells, the blob in the last block of each axis.
+  const NerfField f = CornerBlob(1.0 / 64, 17);
+  ASSERT_TRUE(f.SkipGridCurrent()) << "UpdateOccupancy builds the skip grid";
+  // Occupied cells: those with a corner above 1e-3 / m, i.e. next to the blob's vertices (0.78..0.94 m).
+  for (int a = 0; a < 3; ++a) {
+    EXPECT_GE(f.skip.lo[a], int(0.78 * 64) - 2);
+    EXPECT_LE(f.skip.hi[a], int(0.94 * 64) + 1);
+  }
+  EXPECT_EQ(f.skip.levels.front().shift, 4);
+  EXPECT_FALSE(f.skip.levels.front().Occupied(0, 0, 0)) << "the first 16-cell block is empty";
+  EXPECT_TRUE(f.skip.levels.front().Occupied(55, 55, 55)) << "the block holding the blob centre";
+  // The same field without the coarse levels (bricks and cells skipped only), and with every cell
+  // marked occupied (no skipping at all: the samples of the brute-force march).
+  NerfField plain = f;
+  plain.skip = NerfSkipGrid{};
+  ASSERT_FALSE(plain.SkipGridCurrent());
+  NerfField all = f;
+  std::fill(all.occupancy.begin(), all.occupancy.end(), ~uint64_t{0});
+  EXPECT_FALSE(all.SkipGridCurrent()) << "a copy whose occupancy changed does not use the old skip grid";
+  all.UpdateSkipGrid();
+  EXPECT_TRUE(all.SkipGridCurrent());
+  NerfRenderOptions options;
+  options.min_transmittance = 0.0f;
+  options.min_alpha = 0.0f;
+  const float step = options.step_voxels * f.voxel_m;
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  int hits = 0, misses = 0;
+  for (int n = 0; n < 120; ++n) {
+    NerfRay ray;
+    if (n < 100) {
+      // From outside and inside the box towards points around the blob.
+      ray.origin = n % 2 ? Vec3f(0.5f + 1.5f * u(rng), 0.5f + 1.5f * u(rng), 0.5f + 1.5f * u(rng))
+                         : Vec3f(0.4f + 0.35f * u(rng), 0.4f + 0.35f * u(rng), 0.4f + 0.35f * u(rng));
+      ray.dir = Normalized(Vec3f(0.86f + 0.12f * u(rng), 0.86f + 0.12f * u(rng), 0.86f + 0.12f * u(rng)) - ray.origin);
+    } else {
+      // Axis-aligned rays (two direction components exactly 0), some through the blob, some along the grid's faces.
+      const int axis = n % 3;
+      ray.origin = Vec3f(0.86f + 0.05f * u(rng), 0.86f + 0.05f * u(rng), 0.86f + 0.05f * u(rng));
+      if (n % 5 == 0) ray.origin[(axis + 1) % 3] = 1.0f;
+      ray.origin[axis] = -0.5f;
+      ray.dir = Vec3f(0, 0, 0);
+      ray.dir[axis] = 1.0f;
+    }
+    if (!IntersectAabb(f.aabb, ray.origin, ray.dir, ray.t_near, ray.t_far)) continue;
+    if (n % 7 == 3) ClipRayToDepth(ray, 0.5f * (ray.t_near + ray.t_far) + 0.2f);  // the compositing rule
+    const NerfRayResult fast = f.RenderRay(ray, options), ref_skip = plain.RenderRay(ray, options);
+    // Only empty blocks are jumped: exactly the samples (and so the values) of brick-and-cell skipping.
+    EXPECT_EQ(fast.samples, ref_skip.samples);
+    EXPECT_EQ(fast.opacity, ref_skip.opacity);
+    EXPECT_EQ(fast.color, ref_skip.color);
+    EXPECT_EQ(fast.depth, ref_skip.depth);
+    EXPECT_EQ(fast.surface_depth, ref_skip.surface_depth);
+    // Against the brute-force march of point queries (every sample of the ray): skipped cells have
+    // σ < 1e-3 / m at every corner, so at most 1e-3 · 1.8 m of opacity is lost; their colour is
+    // 0 (empty corners), so colour differs by float rounding (~1e-4 relative) only.
+    const NerfRayResult brute = BruteForceRender(all, ray, step);
+    EXPECT_NEAR_WHY(fast.opacity, brute.opacity, 2e-3, "skipped cells hold σ below the occupancy threshold");
+    for (int ch = 0; ch < 3; ++ch)
+      EXPECT_NEAR_WHY(fast.color[ch], brute.color[ch], 2e-3 * 250 + 1e-4 * brute.color[ch], "σ below the threshold");
+    if (brute.opacity > 0.1f) {
+      // The depth moves by at most the lost opacity (2e-3 / 0.1) times the ray length (1.8 m), and rounding.
+      EXPECT_NEAR_WHY(fast.depth, brute.depth, 2e-2 * 1.8 + 1e-4, "skipped cells hold σ below the threshold");
+    }
+    const NerfRayResult every = all.RenderRay(ray, options);
+    EXPECT_EQ(every.samples, brute.samples) << "all cells occupied: no sample is jumped";
+    hits += brute.opacity > 0.1f;
+    misses += fast.samples == 0;
+  }
+  EXPECT_GT(hits, 30) << "precondition: many rays cross the blob";
+  EXPECT_GT(misses, 3) << "precondition: some rays pass beside the occupied box";
 }
 
 // ------------------------------------------------------------- training
