@@ -4,6 +4,7 @@
 
 #include "calib/core/error.h"
 #include "calib/core/parallel.h"
+#include "render/insert/cache_keys.h"
 #include "render/insert/insert_common.h"
 #include "render/insert/light_prep.h"
 #include "render/insert/object_shading.h"
@@ -12,6 +13,12 @@
 #include "render/insert/vertex_gamma.h"
 
 namespace nerfar {
+
+// The objects' prepared lights and what they were prepared for.
+struct LightPrepCache {
+  std::vector<double> key;
+  std::vector<LightPrep> preps;
+};
 
 ImageF ExpandLayer(const ImageF& layer, const PixelRect& rect, int width, int height, float fill) {
   const int channels = layer.channels > 0 ? layer.channels : 1;
@@ -97,15 +104,16 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
     const Vec3 at = objects[i].light_center.value_or(Vec3(spheres[i].center));
     parallax[i].center = at;
     parallax[i].min_sharpness = options_.light.parallax_min_sharpness;
+    const LightObjectVolume volume{objects[i].mesh, objects[i].T_world_object, objects[i].scale};
     if (objects[i].light_override) {
       used_lights_[i] = *objects[i].light_override;
       if (objects[i].light_distances && options_.light.parallax)
         parallax[i].distance = *objects[i].light_distances;
       else
-        parallax[i].distance = lights_[i].DistancesFor(scene_, used_lights_[i], at, options_.light);
+        parallax[i].distance = lights_[i].DistancesFor(scene_, used_lights_[i], at, options_.light, &volume);
       continue;
     }
-    const IncidentLight::Update u = lights_[i].Refresh(scene_, environment_, at, options_.light);
+    const IncidentLight::Update u = lights_[i].Refresh(scene_, environment_, at, options_.light, &volume);
     times.light_ms += u.sample_ms;
     times.fit_ms += u.fit_ms;
     times.lights_recomputed += u.recomputed ? 1 : 0;
@@ -133,8 +141,25 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
   t0 = InsertClock::now();
   layers.object = ImageF(g.rect.width(), g.rect.height(), 3, 0.0f);
   layers.alpha = ImageF(g.rect.width(), g.rect.height(), 1, 0.0f);
-  std::vector<LightPrep> preps(n_objects);
-  // Every object's light (the shadow pass needs those of objects not seen too).
+  // Every object's light (the shadow pass needs those of objects not seen
+  // too), prepared again only when a light, its parallax or an object (its
+  // field's queries are posed) changed.
+  {
+    std::vector<double> key = {double(n_objects)};
+    for (size_t o = 0; o < n_objects; ++o) {
+      AppendObjectKey(objects[o], key);
+      AppendLightKey(used_lights_[o], key);
+      const Vec3& c = parallax[o].center;
+      key.insert(key.end(), {c.x, c.y, c.z, parallax[o].min_sharpness, double(parallax[o].distance.size())});
+      key.insert(key.end(), parallax[o].distance.begin(), parallax[o].distance.end());
+    }
+    if (!preps_) preps_ = std::make_unique<LightPrepCache>();
+    if (key != preps_->key) {
+      preps_->preps = std::vector<LightPrep>(n_objects);
+      preps_->key = std::move(key);
+    }
+  }
+  std::vector<LightPrep>& preps = preps_->preps;
   for (size_t o = 0; o < n_objects; ++o) PrepareLight(used_lights_[o], objects, preps[o], &parallax[o]);
   // Self-shadow γ per mesh vertex, kept while the objects and the light
   // stand still (it does not depend on the view).

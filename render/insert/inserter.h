@@ -29,6 +29,7 @@ namespace nerfar {
 
 struct VertexGamma;
 struct KappaCache;
+struct LightPrepCache;
 
 // One virtual object in this frame. Pointers are loans for the call.
 struct InsertObject {
@@ -134,6 +135,9 @@ class Inserter {
   std::vector<SgMixture> used_lights_;
   std::vector<VertexGamma> vertex_gamma_;    // γ per mesh vertex and lobe for each object (vertex_gamma.h)
   std::unique_ptr<KappaCache> kappa_cache_;  // what the shadow pass keeps between frames (shadow_pass.h)
+  // Every object's prepared light (SG shader, γ table rows, SSDF queries),
+  // kept while the lights, their parallax and the objects are unchanged.
+  std::unique_ptr<LightPrepCache> preps_;
 
  public:
   ~Inserter();

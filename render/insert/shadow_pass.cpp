@@ -3,6 +3,11 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <utility>
+
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
 
 #include "calib/core/parallel.h"
 #include "render/insert/cache_keys.h"
@@ -24,6 +29,25 @@ struct ThreadScratch {
   KappaScratch kappa;
   LatticeMemo memo;
 };
+
+// rgb[3i + c] *= k[i] for i < n (the same products as one pixel at a time).
+void MultiplyRgb(float* rgb, const float* k, int n) {
+  int i = 0;
+#ifdef __SSE2__
+  for (; i + 4 <= n; i += 4) {
+    const __m128 kv = _mm_loadu_ps(k + i);
+    float* p = rgb + 3 * i;
+    _mm_storeu_ps(p, _mm_mul_ps(_mm_loadu_ps(p), _mm_shuffle_ps(kv, kv, _MM_SHUFFLE(1, 0, 0, 0))));
+    _mm_storeu_ps(p + 4, _mm_mul_ps(_mm_loadu_ps(p + 4), _mm_shuffle_ps(kv, kv, _MM_SHUFFLE(2, 2, 1, 1))));
+    _mm_storeu_ps(p + 8, _mm_mul_ps(_mm_loadu_ps(p + 8), _mm_shuffle_ps(kv, kv, _MM_SHUFFLE(3, 3, 3, 2))));
+  }
+#endif
+  for (; i < n; ++i) {
+    rgb[3 * i] *= k[i];
+    rgb[3 * i + 1] *= k[i];
+    rgb[3 * i + 2] *= k[i];
+  }
+}
 
 // κ over `rect` from the grid (nodes at columns xs, rows ys; values in
 // `grid`, row-major) into `layer` (over rect, 1 where the grid's cell holds
@@ -48,20 +72,15 @@ void MultiplyKappa(const std::vector<int>& xs, const std::vector<int>& ys, const
         // The objects' pixels on this row (left alone): [ox0, ox1) and their ids.
         int ox0 = rect.x1, ox1 = rect.x1;
         const int32_t* ids = nullptr;
+        std::vector<std::pair<int, int>> runs;
         if (y >= g.rect.y0 && y < g.rect.y1 && g.rect.x0 < g.rect.x1) {
           ox0 = std::max(g.rect.x0, rect.x0);
           ox1 = std::min(g.rect.x1, rect.x1);
           ids = &g.object[g.Index(g.rect.x0, y)];
         }
-        const auto multiply = [&](int x0, int x1) {
-          for (int x = x0; x < x1; ++x) {
-            const float k = out_row[x - rect.x0];
-            f[3 * x] *= k;
-            f[3 * x + 1] *= k;
-            f[3 * x + 2] *= k;
-          }
-        };
+        // The layer first, cell by cell; the passed cells merged into runs.
         const size_t cells = nx >= 2 ? nx - 1 : 1;
+        runs.clear();
         for (size_t ix = 0; ix < cells; ++ix) {
           const size_t ix1 = nx >= 2 ? ix + 1 : ix;
           if (g0[ix] >= 1.0f && g0[ix1] >= 1.0f && g1[ix] >= 1.0f && g1[ix1] >= 1.0f) continue;
@@ -71,8 +90,16 @@ void MultiplyKappa(const std::vector<int>& xs, const std::vector<int>& ys, const
           const float slope = nx >= 2 ? (b - a) / float(xs[ix1] - xs[ix]) : 0.0f;
           for (int x = x_begin; x < x_end; ++x) out_row[x - rect.x0] = std::min(1.0f, a + slope * float(x - x_begin));
           passed[r] += static_cast<size_t>(x_end - x_begin);
-          // κ = 1 multiplies by exactly 1: no test per pixel.
-          multiply(x_begin, std::min(x_end, ox0));
+          if (!runs.empty() && runs.back().second == x_begin)
+            runs.back().second = x_end;
+          else
+            runs.emplace_back(x_begin, x_end);
+        }
+        // Then the background, run by run (κ = 1 multiplies by exactly 1:
+        // skipped cells need nothing), around the objects' pixels.
+        for (const auto& [x_begin, x_end] : runs) {
+          const int left = std::min(x_end, ox0), right = std::max(x_begin, ox1);
+          if (left > x_begin) MultiplyRgb(f + 3 * x_begin, out_row + (x_begin - rect.x0), left - x_begin);
           for (int x = std::max(x_begin, ox0); x < std::min(x_end, ox1); ++x)
             if (ids[x - g.rect.x0] < 0) {
               const float k = out_row[x - rect.x0];
@@ -80,7 +107,7 @@ void MultiplyKappa(const std::vector<int>& xs, const std::vector<int>& ys, const
               f[3 * x + 1] *= k;
               f[3 * x + 2] *= k;
             }
-          multiply(std::max(x_begin, ox1), x_end);
+          if (x_end > right) MultiplyRgb(f + 3 * right, out_row + (right - rect.x0), x_end - right);
         }
       },
       4);
@@ -485,6 +512,18 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
             },
             1);
         resolve_cell_normals();
+        // Plane-placed nodes take their world cell's normal too (a new
+        // cell's from their planes' normals), so that their lattice nodes,
+        // like every receiver's, do not change with the view: the mean normal
+        // of a coarse cell's corners changes as the grid slides over the
+        // scene, and each new normal cell costs eight new lattice nodes.
+        if (cell_normals) {
+          std::vector<CellCandidate> placed;
+          for (size_t r = 0; r < ny; ++r)
+            for (const PlaneNode& p : plane_nodes[r]) placed.push_back({r * nx + p.q, p.point, p.plane->normal});
+          cache->cell_normals.Resolve(spacing, placed);
+          for (const CellCandidate& c : placed) node_normal[c.node] = c.normal;
+        }
         find_ms += MsSince(t_stage);
         // ... then their κ, and the rest bilinear in their coarse cell.
         t_stage = InsertClock::now();
@@ -493,7 +532,8 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
             [&](size_t r) {
               ThreadScratch scratch;
               for (const PlaneNode& p : plane_nodes[r])
-                kappa_grid[r * nx + p.q] = receiver_kappa(p.point, p.plane->normal, scratch, r);
+                kappa_grid[r * nx + p.q] =
+                    receiver_kappa(p.point, cell_normals ? node_normal[r * nx + p.q] : p.plane->normal, scratch, r);
               kappa_row(r, refine_cols[r]);
               const size_t j = std::min<size_t>(r / factor, cy.size() - 2);
               const float wy = float(r - cy[j]) / float(cy[j + 1] - cy[j]);
