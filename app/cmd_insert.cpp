@@ -123,6 +123,8 @@ int RunInsert(const CommandArgs& args) {
   bool gamma_per_pixel = false;
   double shadow_reach = -1, self_shadow_offset = -1, receiver_min_opacity = -1;
   bool no_self_shadow = false, no_shadows = false, paper_gamma = false, truth_geometry = false;
+  bool light_from_centre = false, no_seen_radiance = false, expected_depth = false;
+  double normal_probe_voxels = -1;
   ArgParser parser("insert", "Insert virtual objects into a captured scene: light, shade, occlude, shadow, composite.");
   parser.Option(
       "--nerf", &nerf_path, "FILE",
@@ -161,6 +163,17 @@ int RunInsert(const CommandArgs& args) {
               "the light is the same at every shadow receiver, as taken at the object centre (no lobe distances)");
   parser.Option("--parallax-min-sharpness", &parallax_min_sharpness, "L",
                 "lobes at least this sharp are re-aimed from each receiver as compact sources (default 10)");
+  parser.Flag("--light-from-centre", &light_from_centre,
+              "incident-light rays start at the object centre (the paper), not where they leave the object's mesh");
+  parser.Flag("--no-seen-radiance", &no_seen_radiance,
+              "incident light takes the NeRF's own colour of surfaces seen from below the capture band (default: "
+              "the brightest radiance seen from the band nearby)");
+  parser.Flag("--expected-depth", &expected_depth,
+              "NeRF depth (κ receivers, lobe distances) as the opacity-weighted mean, not where transmittance "
+              "crosses 1/2");
+  parser.Option("--normal-probe-voxels", &normal_probe_voxels, "V",
+                "NeRF receiver normals from the surface found V voxels to each side (default 3; 0: density "
+                "gradient only)");
   parser.Flag("--no-cell-normals", &no_cell_normals,
               "a NeRF normal per κ receiver, not one per κ lattice cell shared by all views");
   parser.Flag("--gamma-per-pixel", &gamma_per_pixel, "self-shadow γ by an SSDF query per pixel, not per mesh vertex");
@@ -215,6 +228,11 @@ int RunInsert(const CommandArgs& args) {
   if (receiver_reuse != -1 && receiver_reuse != 0) options.kappa_reuse_tolerance_radii = receiver_reuse;  // validated
   if (no_cell_normals) options.receiver_normal_per_cell = false;
   if (no_parallax) options.light.parallax = false;
+  if (light_from_centre) options.light.start_outside_object = false;
+  NerfSceneOptions nerf_options;
+  if (no_seen_radiance) nerf_options.light_seen_radiance = false;
+  if (expected_depth) nerf_options.surface_depth = false;
+  if (normal_probe_voxels != -1) nerf_options.normal_probe_voxels = normal_probe_voxels;
   if (parallax_min_sharpness != -1) options.light.parallax_min_sharpness = parallax_min_sharpness;
   if (gamma_per_pixel) options.self_shadow_per_vertex = false;
   if (shadow_reach != -1) options.shadow_reach_radii = shadow_reach;
@@ -227,6 +245,7 @@ int RunInsert(const CommandArgs& args) {
   {
     Problems p("nerfar insert options");
     for (const std::string& s : options.Validate()) p.Add("", s);
+    for (const std::string& s : nerf_options.Validate()) p.Add("", s);
     p.ThrowIfAny();
   }
 
@@ -238,7 +257,7 @@ int RunInsert(const CommandArgs& args) {
   if (without_nerf)
     scene_field = std::make_unique<EmptyScene>(dataset.aabb ? *dataset.aabb : Aabb{{-1, -1, -1}, {1, 1, 1}});
   else
-    scene_field = std::make_unique<NerfScene>(nerf);
+    scene_field = std::make_unique<NerfScene>(nerf, nerf_options);
   const SceneField& scene = *scene_field;
   EnvLight environment;
   if (!env_path.empty()) {
@@ -284,15 +303,19 @@ int RunInsert(const CommandArgs& args) {
   std::vector<std::vector<double>> probe_lobe_distances(loaded.size());
   if (!probe_distances.empty() && options.light.parallax) {
     const NerfField distance_nerf = LoadNerf(probe_distances);
-    const NerfScene distance_scene(distance_nerf);
+    const NerfScene distance_scene(distance_nerf, nerf_options);
     const std::vector<Vec3> dirs = FibonacciSphere(options.light.directions);
     for (size_t i = 0; i < loaded.size(); ++i) {
       std::vector<float> opacity, depth;
       const ObjectPlacement& placement = loaded[i].placement;
       const Vec3 center = placement.center_world.value_or(
           placement.T_world_object * (ComputeBoundingSphere(loaded[i].mesh).center * placement.scale));
-      const RadianceSamples near =
-          SampleIncidentLight(distance_scene, {}, center, dirs, LightSource::kNearFieldOnly, &opacity, &depth);
+      // As the inserter does: the rays start where they leave the object.
+      std::vector<float> starts;
+      if (options.light.start_outside_object)
+        starts = ObjectExitDistances({&loaded[i].mesh, placement.T_world_object, placement.scale}, center, dirs);
+      const RadianceSamples near = SampleIncidentLight(distance_scene, {}, center, dirs, LightSource::kNearFieldOnly,
+                                                       &opacity, &depth, starts.empty() ? nullptr : &starts);
       probe_lobe_distances[i] = LobeDistances(probe_light, dirs, opacity, depth, near.radiance);
       std::string list;
       for (size_t k = 0; k < probe_light.size(); ++k)
@@ -306,7 +329,11 @@ int RunInsert(const CommandArgs& args) {
   for (const auto& in : inputs)
     if (!in.empty()) CheckNotSameFile((fs::path(output) / "probe.exr").string(), {in});
   const std::string options_json = options.ToJson();
-  LogInfo("insert: options " + options_json + ", threads " + std::to_string(ThreadCount()));
+  LogInfo("insert: options " + options_json + ", threads " + std::to_string(ThreadCount()) +
+          (without_nerf ? std::string()
+                        : std::string(", nerf depth ") + (nerf_options.surface_depth ? "surface" : "expected") +
+                              ", light seen radiance " + (nerf_options.light_seen_radiance ? "on" : "off") +
+                              ", normal probe " + std::to_string(nerf_options.normal_probe_voxels) + " voxels"));
   WriteFileAtomic((fs::path(output) / "options.json").string(), options_json + "\n");
 
   std::vector<InsertObject> objects(loaded.size());

@@ -49,7 +49,8 @@ std::vector<std::string> IncidentLightOptions::Validate() const {
 
 RadianceSamples SampleIncidentLight(const SceneField& scene, const SgMixture& environment, const Vec3& center,
                                     const std::vector<Vec3>& directions, LightSource source,
-                                    std::vector<float>* opacity, std::vector<float>* depth) {
+                                    std::vector<float>* opacity, std::vector<float>* depth,
+                                    const std::vector<float>* start) {
   const size_t n = directions.size();
   RadianceSamples samples;
   samples.directions = directions;
@@ -73,11 +74,12 @@ RadianceSamples SampleIncidentLight(const SceneField& scene, const SgMixture& en
           rays.Reserve(end - begin);
           for (size_t i = begin; i < end; ++i) {
             const auto range = IntersectBox(box, center, directions[i]);
-            const float t0 = range ? static_cast<float>(range->first) : 0.0f;
+            float t0 = range ? static_cast<float>(range->first) : 0.0f;
             const float t1 = range ? static_cast<float>(range->second) : 0.0f;
-            rays.Add(Vec3f(center), Vec3f(directions[i]), t0, t1);
+            if (start && i < start->size() && std::isfinite((*start)[i])) t0 = std::max(t0, (*start)[i]);
+            rays.Add(Vec3f(center), Vec3f(directions[i]), std::min(t0, t1), t1);
           }
-          scene.RenderRays(rays, out);
+          scene.RenderLightRays(rays, out);
           for (size_t i = begin; i < end; ++i) {
             field.colour[i] = out.colour[i - begin];
             field.opacity[i] = out.opacity[i - begin];
@@ -106,6 +108,46 @@ RadianceSamples SampleIncidentLight(const SceneField& scene, const SgMixture& en
       (*depth)[i] = field.depth[i];
   }
   return samples;
+}
+
+std::vector<float> ObjectExitDistances(const LightObjectVolume& volume, const Vec3& center,
+                                       const std::vector<Vec3>& directions) {
+  std::vector<float> exit(directions.size(), 0.0f);
+  if (volume.mesh == nullptr || volume.mesh->triangles.empty() || !(std::abs(volume.scale) > 0.0)) return exit;
+  const TriangleMesh& mesh = *volume.mesh;
+  // In the object's frame: o + t'·d' with t' = t / scale (d' = R^T d).
+  const Pose T_object_world = volume.T_world_object.Inverse();
+  const double s = std::abs(volume.scale);
+  const Vec3 o = T_object_world * center / s;
+  for (const auto& tri : mesh.triangles)
+    for (uint32_t v : tri)
+      if (v >= mesh.positions.size()) return exit;  // a broken mesh skips nothing
+  ParallelFor(
+      directions.size(),
+      [&](size_t i) {
+        const Vec3 d = T_object_world.Rotate(directions[i]);
+        double farthest = 0.0;
+        for (const auto& tri : mesh.triangles) {
+          // Möller-Trumbore, both faces (the mesh need not be closed or wound).
+          const Vec3 a(mesh.positions[tri[0]]), b(mesh.positions[tri[1]]), c(mesh.positions[tri[2]]);
+          const Vec3 e1 = b - a, e2 = c - a;
+          const Vec3 p = Cross(d, e2);
+          const double det = Dot(e1, p);
+          if (std::abs(det) < 1e-300) continue;
+          const double inv = 1.0 / det;
+          const Vec3 q = o - a;
+          const double u = Dot(q, p) * inv;
+          if (u < 0.0 || u > 1.0) continue;
+          const Vec3 r = Cross(q, e1);
+          const double v = Dot(d, r) * inv;
+          if (v < 0.0 || u + v > 1.0) continue;
+          const double t = Dot(e2, r) * inv;
+          if (t > farthest && std::isfinite(t)) farthest = t;
+        }
+        exit[i] = static_cast<float>(farthest * s);
+      },
+      16);
+  return exit;
 }
 
 namespace {
@@ -180,17 +222,46 @@ void IncidentLight::Reset() {
   light_.clear();
 }
 
+const std::vector<float>* IncidentLight::Starts(const Vec3& center, const IncidentLightOptions& options,
+                                                const LightObjectVolume* volume) {
+  if (!options.start_outside_object || volume == nullptr || volume->mesh == nullptr) {
+    starts_.clear();
+    starts_mesh_ = nullptr;
+    return nullptr;
+  }
+  const bool same = starts_mesh_ == volume->mesh && starts_scale_ == volume->scale &&
+                    starts_pose_.rotation.m == volume->T_world_object.rotation.m &&
+                    starts_pose_.translation == volume->T_world_object.translation && starts_center_ == center &&
+                    starts_directions_ == options.directions;
+  if (!same) {
+    if (static_cast<int>(dirs_.size()) != options.directions) dirs_ = FibonacciSphere(options.directions);
+    starts_ = ObjectExitDistances(*volume, center, dirs_);
+    starts_mesh_ = volume->mesh;
+    starts_pose_ = volume->T_world_object;
+    starts_scale_ = volume->scale;
+    starts_center_ = center;
+    starts_directions_ = options.directions;
+  }
+  return &starts_;
+}
+
 IncidentLight::Update IncidentLight::Refresh(const SceneField& scene, const SgMixture& environment, const Vec3& center,
-                                             const IncidentLightOptions& options) {
+                                             const IncidentLightOptions& options, const LightObjectVolume* volume) {
   Update update;
-  const bool same_setup =
-      valid_ && directions_ == options.directions && source_ == options.source && lobes_ == options.fit.lobes;
+  // Whether the rays would start elsewhere than last time (the object turned).
+  const bool starts_on = options.start_outside_object && volume != nullptr && volume->mesh != nullptr;
+  const bool same_starts = starts_on ? starts_mesh_ == volume->mesh && starts_scale_ == volume->scale &&
+                                           starts_pose_.rotation.m == volume->T_world_object.rotation.m
+                                     : starts_mesh_ == nullptr;
+  const bool same_setup = valid_ && directions_ == options.directions && source_ == options.source &&
+                          lobes_ == options.fit.lobes && same_starts;
   const bool same_parallax = options.parallax == !distances_.empty() || light_.empty();
   if (same_setup && same_parallax && Length(center - center_) <= options.move_threshold_m) return update;
   update.recomputed = true;
   if (static_cast<int>(dirs_.size()) != options.directions) dirs_ = FibonacciSphere(options.directions);
   auto t0 = std::chrono::steady_clock::now();
-  samples_ = SampleIncidentLight(scene, environment, center, dirs_, options.source, &opacity_, &depth_);
+  const std::vector<float>* starts = Starts(center, options, volume);
+  samples_ = SampleIncidentLight(scene, environment, center, dirs_, options.source, &opacity_, &depth_, starts);
   update.sample_ms = MillisecondsSince(t0);
   double total = 0.0;
   for (const Vec3& l : samples_.radiance) total += LuminanceOf(l);
@@ -224,7 +295,8 @@ IncidentLight::Update IncidentLight::Refresh(const SceneField& scene, const SgMi
 }
 
 const std::vector<double>& IncidentLight::DistancesFor(const SceneField& scene, const SgMixture& light,
-                                                       const Vec3& center, const IncidentLightOptions& options) {
+                                                       const Vec3& center, const IncidentLightOptions& options,
+                                                       const LightObjectVolume* volume) {
   if (!options.parallax || light.empty()) {
     distances_.clear();
     given_valid_ = false;
@@ -243,8 +315,9 @@ const std::vector<double>& IncidentLight::DistancesFor(const SceneField& scene, 
     return distances_;
   if (static_cast<int>(dirs_.size()) != options.directions) dirs_ = FibonacciSphere(options.directions);
   // Only the scene's opacity and depth are needed: the near-field source.
+  const std::vector<float>* starts = Starts(center, options, volume);
   const RadianceSamples near =
-      SampleIncidentLight(scene, {}, center, dirs_, LightSource::kNearFieldOnly, &opacity_, &depth_);
+      SampleIncidentLight(scene, {}, center, dirs_, LightSource::kNearFieldOnly, &opacity_, &depth_, starts);
   distances_ = LobeDistances(light, dirs_, opacity_, depth_, near.radiance);
   given_light_ = light;
   given_center_ = center;

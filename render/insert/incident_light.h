@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "render/insert/scene_field.h"
+#include "render/mesh/mesh.h"
 #include "render/sg/fit.h"
 #include "render/sg/sg.h"
 #include "render/sg/sphere.h"
@@ -44,16 +45,38 @@ struct IncidentLightOptions {
   // ones (walls, the table, the sky) stay as they are, fully re-aimed from
   // twice this sharpness, blended in between.
   double parallax_min_sharpness = 10.0;
+  // Rays leave from where they exit the object's own volume (its mesh, as
+  // posed) rather than from its centre: whatever the scene holds inside the
+  // object (a NeRF's fog or floaters there) is replaced by the object, so it
+  // neither lights it nor hides the light behind it. false: from the centre
+  // (the paper).
+  bool start_outside_object = true;
   // Every problem as "field: what is wrong (what was expected)".
   std::vector<std::string> Validate() const;
 };
 
 // Radiance arriving at `center` from each unit direction (solid angle 4π/N
 // each), per `source`. `opacity` (optional) receives Ô per direction and
-// `depth` (optional) the scene's expected hit distance (0 where Ô = 0).
+// `depth` (optional) the scene's hit distance from the centre (0 where
+// Ô = 0). `start` (optional, one per direction): ray i integrates the scene
+// from max(start[i], box entry) on (ObjectExitDistances).
 RadianceSamples SampleIncidentLight(const SceneField& scene, const SgMixture& environment, const Vec3& center,
                                     const std::vector<Vec3>& directions, LightSource source,
-                                    std::vector<float>* opacity = nullptr, std::vector<float>* depth = nullptr);
+                                    std::vector<float>* opacity = nullptr, std::vector<float>* depth = nullptr,
+                                    const std::vector<float>* start = nullptr);
+
+// The object whose light is taken: its mesh as posed in the world (a loan).
+struct LightObjectVolume {
+  const TriangleMesh* mesh = nullptr;
+  Pose T_world_object;
+  double scale = 1.0;
+};
+
+// Per direction d, the distance t at which the ray center + t·d leaves the
+// object's mesh for the last time (its farthest crossing of a triangle);
+// 0 where it crosses none (e.g. the centre outside the mesh, looking away).
+std::vector<float> ObjectExitDistances(const LightObjectVolume& volume, const Vec3& center,
+                                       const std::vector<Vec3>& directions);
 
 // The light taken at `center` with a distance per lobe: lobe k stands for a
 // source at center + distance[k]·axis_k (infinity: distant light, the
@@ -102,8 +125,10 @@ class IncidentLight {
   // Recomputes the light if the centre moved (or the options changed, or on
   // the first call); warm-starts the fit from the last one. Never throws on
   // scene content: non-finite radiance is replaced by 0.
+  // `volume` (optional): the object itself, whose inside the rays skip
+  // (IncidentLightOptions::start_outside_object); a new pose refits.
   Update Refresh(const SceneField& scene, const SgMixture& environment, const Vec3& center,
-                 const IncidentLightOptions& options);
+                 const IncidentLightOptions& options, const LightObjectVolume* volume = nullptr);
   // Forget the cache (the next Refresh fits from scratch).
   void Reset();
 
@@ -119,9 +144,21 @@ class IncidentLight {
   // distances from it; kept while the centre, the light and the options
   // hold. Empty without parallax.
   const std::vector<double>& DistancesFor(const SceneField& scene, const SgMixture& light, const Vec3& center,
-                                          const IncidentLightOptions& options);
+                                          const IncidentLightOptions& options,
+                                          const LightObjectVolume* volume = nullptr);
 
  private:
+  // The ray starts for `volume` at `center` (empty without one or with
+  // start_outside_object off), cached while the mesh, pose and centre hold.
+  const std::vector<float>* Starts(const Vec3& center, const IncidentLightOptions& options,
+                                   const LightObjectVolume* volume);
+  std::vector<float> starts_;
+  const TriangleMesh* starts_mesh_ = nullptr;
+  Pose starts_pose_;
+  double starts_scale_ = 0.0;
+  Vec3 starts_center_;
+  int starts_directions_ = 0;
+
   bool valid_ = false;
   Vec3 center_;
   int directions_ = 0;

@@ -6,7 +6,33 @@
 
 namespace nerfar {
 
-void NerfScene::RenderRays(const SceneRays& rays, SceneSamples& out) const {
+std::vector<std::string> NerfSceneOptions::Validate() const {
+  std::vector<std::string> problems;
+  const auto check = [&](bool ok, const std::string& what) {
+    if (!ok) problems.push_back(what);
+  };
+  check(render.step_voxels > 0.0f && std::isfinite(render.step_voxels),
+        "nerf.step_voxels: must be a finite number > 0");
+  check(render.min_transmittance >= 0.0f && render.min_transmittance < 1.0f,
+        "nerf.min_transmittance: must be in [0, 1)");
+  check(normal_probe_voxels >= 0.0 && normal_probe_voxels <= 64.0,
+        "normal_probe_voxels: out of range (expected 0 to 64)");
+  if (light_seen_radiance) {
+    check(seen.min_elevation_deg >= -90.0 && seen.min_elevation_deg < seen.max_elevation_deg &&
+              seen.max_elevation_deg <= 90.0,
+          "seen.elevation: expected -90 <= min < max <= 90 degrees");
+    check(seen.views >= 1 && seen.views <= 1024, "seen.views: out of range (expected 1 to 1024)");
+    check(seen.reach_m > 0.0 && std::isfinite(seen.reach_m), "seen.reach_m: must be a finite number > 0");
+    check(seen.min_opacity >= 0.0 && seen.min_opacity <= 1.0, "seen.min_opacity: must be in [0, 1]");
+  }
+  return problems;
+}
+
+void NerfScene::RenderRays(const SceneRays& rays, SceneSamples& out) const { Render(rays, out, false); }
+
+void NerfScene::RenderLightRays(const SceneRays& rays, SceneSamples& out) const { Render(rays, out, true); }
+
+void NerfScene::Render(const SceneRays& rays, SceneSamples& out, bool light) const {
   NERFAR_CHECK_EQ(rays.directions.size(), rays.size());
   const size_t n = rays.size();
   out.Resize(n);
@@ -18,31 +44,67 @@ void NerfScene::RenderRays(const SceneRays& rays, SceneSamples& out) const {
     nerf_rays[i].t_far = std::max(rays.t_near[i], rays.t_far[i]);
   }
   // The callers already split work over threads: render serially here.
+  std::vector<NerfRayResult> results(n);
+  for (size_t i = 0; i < n; ++i) results[i] = field_.RenderRay(nerf_rays[i], options_.render);
+  if (light && options_.light_seen_radiance && n > 0)
+    ApplySeenRadiance(field_, nerf_rays, results, options_.seen, options_.render);
   for (size_t i = 0; i < n; ++i) {
-    const NerfRayResult r = field_.RenderRay(nerf_rays[i], options_);
+    const NerfRayResult& r = results[i];
     out.colour[i] = r.color;
     out.opacity[i] = r.opacity;
-    out.depth[i] = r.depth;
+    // surface_depth is the mean already where the ray stays under 1/2.
+    out.depth[i] = options_.surface_depth && r.opacity >= 0.5f ? r.surface_depth : r.depth;
   }
 }
 
-void NerfScene::Normals(const std::vector<Vec3f>& points, std::vector<Vec3f>& normals) const {
-  normals.assign(points.size(), Vec3f{});
+Vec3f NerfScene::GradientNormal(const Vec3f& p) const {
   // Unit gradients averaged at the point and ±1 voxel along each axis:
   // smooths the trilinear field's piecewise gradient, and normalising each
   // first keeps σ's range (1e-13 to 1e6 per metre) from letting one sample
   // decide alone.
   const float h = field_.voxel_m;
   const Vec3f offsets[7] = {{0, 0, 0}, {h, 0, 0}, {-h, 0, 0}, {0, h, 0}, {0, -h, 0}, {0, 0, h}, {0, 0, -h}};
+  Vec3f g{};
+  for (const Vec3f& o : offsets) {
+    const Vec3f d = field_.DensityGradient(p + o);
+    const float len = Length(d);
+    if (len > 0.0f && std::isfinite(len)) g += d * (1.0f / len);
+  }
+  const float len = Length(g);
+  return len > 0.0f && std::isfinite(len) ? g * (-1.0f / len) : Vec3f{};
+}
+
+void NerfScene::Normals(const std::vector<Vec3f>& points, std::vector<Vec3f>& normals) const {
+  normals.assign(points.size(), Vec3f{});
+  const float h = static_cast<float>(options_.normal_probe_voxels) * field_.voxel_m;
   for (size_t i = 0; i < points.size(); ++i) {
-    Vec3f g{};
-    for (const Vec3f& o : offsets) {
-      const Vec3f d = field_.DensityGradient(points[i] + o);
-      const float len = Length(d);
-      if (len > 0.0f && std::isfinite(len)) g += d * (1.0f / len);
+    const Vec3f n0 = GradientNormal(points[i]);
+    normals[i] = n0;
+    if (!(h > 0.0f) || Dot(n0, n0) < 0.5f) continue;
+    // Tangent basis of the gradient's plane.
+    const Vec3f a = std::abs(n0.x) < 0.9f ? Vec3f{1, 0, 0} : Vec3f{0, 1, 0};
+    const Vec3f t1 = Normalized(Cross(n0, a)), t2 = Cross(n0, t1);
+    // Four rays down along −n0 from 2h above the tangent plane, over 4h:
+    // surfaces tilted up to ~60° from the gradient's plane are found.
+    const Vec3f offsets[4] = {t1 * h, t1 * -h, t2 * h, t2 * -h};
+    Vec3f found[4];
+    bool ok = true;
+    for (int k = 0; k < 4 && ok; ++k) {
+      NerfRay ray;
+      ray.origin = points[i] + offsets[k] + n0 * (2.0f * h);
+      ray.dir = -n0;
+      ray.t_near = 0.0f;
+      ray.t_far = 4.0f * h;
+      const NerfRayResult r = field_.RenderRay(ray, options_.render);
+      ok = r.opacity >= 0.5f && std::isfinite(r.surface_depth);
+      found[k] = ray.origin + ray.dir * r.surface_depth;
     }
-    const float len = Length(g);
-    if (len > 0.0f && std::isfinite(len)) normals[i] = g * (-1.0f / len);
+    if (!ok) continue;  // an edge or a hole nearby: keep the gradient's normal
+    Vec3f n = Cross(found[0] - found[1], found[2] - found[3]);
+    const float len = Length(n);
+    if (!(len > 0.0f) || !std::isfinite(len)) continue;
+    n = n * (1.0f / len);
+    normals[i] = Dot(n, n0) >= 0.0f ? n : -n;
   }
 }
 

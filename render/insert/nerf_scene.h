@@ -1,25 +1,62 @@
 // The HDR NeRF (render/nerf) as the SceneField insertion queries: rays over
-// their given [t_near, t_far] through NerfField::RenderRays, normals as
+// their given [t_near, t_far] through NerfField::RenderRay, normals as
 // −∇σ/|∇σ| from the density gradient (averaged over a small neighbourhood,
 // since one voxel's gradient is noisy).
 #pragma once
 
+#include <string>
+#include <vector>
+
 #include "render/insert/scene_field.h"
+#include "render/lighting/seen_radiance.h"
 #include "render/nerf/nerf_field.h"
 
 namespace nerfar {
 
+struct NerfSceneOptions {
+  NerfRenderOptions render;  // step, early stop of every ray
+  // The depth of a ray that gets at least half opaque is where its
+  // transmittance crosses 1/2 (NerfRayResult::surface_depth) rather than the
+  // opacity-weighted mean: in front of a surface, thin fog pulls the mean
+  // towards the camera and a shadow receiver would float off the surface.
+  // Rays below 1/2 opacity keep the mean. false: always the mean.
+  bool surface_depth = true;
+  // Surface normals from the surface itself rather than the density
+  // gradient alone: around a point, four short rays along the gradient's
+  // normal, offset by this many voxels to either side in its tangent plane,
+  // find where their transmittance crosses 1/2, and the normal is that of
+  // the four points (cross product of the diagonals), as a depth map's
+  // neighbours give it. A trained field's gradient at one point follows its
+  // noise (fog, floaters, the trilinear cells); the surface over a few
+  // voxels does not. 0: the averaged density gradient only.
+  double normal_probe_voxels = 3.0;
+  // Incident-light rays (RenderLightRays) that meet a surface from below the
+  // capture band take the brightest radiance views from the band see near
+  // that point (render/lighting/seen_radiance.h): a lamp's never-photographed
+  // underside is otherwise whatever training left there, usually too dark.
+  // false: the NeRF's own colour.
+  bool light_seen_radiance = true;
+  SeenRadianceOptions seen;  // capture band, views per point, reach
+  // Every problem as "field: what is wrong (what was expected)".
+  std::vector<std::string> Validate() const;
+};
+
 class NerfScene final : public SceneField {
  public:
   // `field` is a loan that must outlive this object.
-  explicit NerfScene(const NerfField& field, NerfRenderOptions options = {}) : field_(field), options_(options) {}
+  explicit NerfScene(const NerfField& field, NerfSceneOptions options = {}) : field_(field), options_(options) {}
   Aabb Box() const override { return field_.aabb; }
   void RenderRays(const SceneRays& rays, SceneSamples& out) const override;
+  void RenderLightRays(const SceneRays& rays, SceneSamples& out) const override;
   void Normals(const std::vector<Vec3f>& points, std::vector<Vec3f>& normals) const override;
+  const NerfSceneOptions& options() const { return options_; }
 
  private:
+  void Render(const SceneRays& rays, SceneSamples& out, bool light) const;
+  // The averaged density-gradient normal at p (zero where undefined).
+  Vec3f GradientNormal(const Vec3f& p) const;
   const NerfField& field_;
-  NerfRenderOptions options_;
+  NerfSceneOptions options_;
 };
 
 }  // namespace nerfar

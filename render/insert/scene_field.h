@@ -39,7 +39,9 @@ struct SceneSamples {
   std::vector<Vec3f> colour;   // Ĉ = Σ T_k α_k c_k over the range (opacity-weighted radiance)
   std::vector<float> opacity;  // Ô = Σ T_k α_k in [0, 1]
   std::vector<float> depth;    // Σ T_k α_k t_k / Ô: expected hit distance along the ray (0 where Ô = 0);
-                               // the paper's unnormalised D̂ is Ô·depth (the NeRF's convention too)
+                               // the paper's unnormalised D̂ is Ô·depth (the NeRF's convention too). A
+                               // field may instead give where the transmittance crosses 1/2 on rays that
+                               // get that opaque (NerfSceneOptions::surface_depth)
 
   void Resize(size_t n);
 };
@@ -52,6 +54,10 @@ class SceneField {
   // Volume renders every ray over its own [t_near, t_far]; out is resized.
   // Must be callable from several threads at once (const, no shared scratch).
   virtual void RenderRays(const SceneRays& rays, SceneSamples& out) const = 0;
+  // The same for rays that gather the light arriving at a virtual object
+  // (incident light): a field may correct radiance towards directions its
+  // captures never saw (a NeRF: nerf_scene.h). Default: RenderRays.
+  virtual void RenderLightRays(const SceneRays& rays, SceneSamples& out) const { RenderRays(rays, out); }
   // Unit outward normal of the scene surface at each point (the direction of
   // −∇σ for a NeRF); the zero vector where it is undefined (empty space).
   virtual void Normals(const std::vector<Vec3f>& points, std::vector<Vec3f>& normals) const = 0;

@@ -4,7 +4,9 @@
 // inside, near and far outside its grid.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstdint>
 
 #include "render/insert/nerf_scene.h"
 #include "render/insert/object_visibility.h"
@@ -57,6 +59,57 @@ TEST(NerfScene, NormalsPointOutOfADenseSlab) {
   EXPECT_GT(normals[1].z, 0.97f);
   // Far above the slab the gradient is zero: no normal.
   EXPECT_EQ(normals[2], Vec3f{});
+}
+
+// A half-space below the tilted plane z = 0.2 + 0.3·(x − 0.2) (σ = 1000/m),
+// its vertices within 1.5 voxels of the plane perturbed by a hash by up to
+// e^{±2} in density: a trained field's noisy surface. Normals at points on
+// the plane against the plane's own normal (−0.3, 0, 1)/|·|.
+TEST(NerfScene, SurfaceProbeNormalsFollowANoisyTiltedSurface) {
+  const Aabb box{{0, 0, 0}, {0.4, 0.4, 0.4}};
+  const double voxel = 0.01;
+  NerfField field = NerfField::Dense(box, voxel, kNerfEmptyDensityRaw, {0, 0, 0});
+  const auto plane = [](double x) { return 0.2 + 0.3 * (x - 0.2); };
+  for (int k = 0; k < field.res[2]; ++k)
+    for (int j = 0; j < field.res[1]; ++j)
+      for (int i = 0; i < field.res[0]; ++i) {
+        const double x = i * voxel, z = k * voxel;
+        const double below = plane(x) - z;  // > 0 inside
+        if (below < -1.5 * voxel) continue;
+        float raw = below > 0 ? std::log(1000.0f) : kNerfEmptyDensityRaw;
+        if (std::abs(below) <= 1.5 * voxel) {
+          const uint32_t hash = (static_cast<uint32_t>(i) * 73856093u) ^ (static_cast<uint32_t>(j) * 19349663u) ^
+                                (static_cast<uint32_t>(k) * 83492791u);
+          const float u = static_cast<float>(hash % 1000u) / 999.0f;  // [0, 1]
+          raw = (below > 0 ? std::log(1000.0f) : std::log(30.0f)) + 4.0f * (u - 0.5f);
+        }
+        field.density[field.Slot(i, j, k)] = raw;
+      }
+  field.UpdateOccupancy(1.0f);
+  const Vec3f truth = Normalized(Vec3f{-0.3f, 0.0f, 1.0f});
+  std::vector<Vec3f> points;
+  for (int a = 0; a < 6; ++a)
+    for (int b = 0; b < 6; ++b) {
+      const float x = 0.12f + 0.031f * a, y = 0.11f + 0.033f * b;
+      points.push_back({x, y, static_cast<float>(plane(x))});
+    }
+  NerfSceneOptions gradient_only;
+  gradient_only.normal_probe_voxels = 0.0;
+  std::vector<Vec3f> probe, gradient;
+  NerfScene(field).Normals(points, probe);
+  NerfScene(field, gradient_only).Normals(points, gradient);
+  double worst_probe = 0, worst_gradient = 0;
+  for (size_t i = 0; i < points.size(); ++i) {
+    worst_probe = std::max(worst_probe, std::acos(std::clamp<double>(Dot(probe[i], truth), -1, 1)));
+    worst_gradient = std::max(worst_gradient, std::acos(std::clamp<double>(Dot(gradient[i], truth), -1, 1)));
+  }
+  // Four surface points 6 voxels apart across: the noise (σ from 135 to
+  // 7400/m) moves where T crosses 1/2 by at most ln 2/135 m ≈ 0.5 voxel, a
+  // tilt of at most atan(0.5·√2 / 6) ≈ 6.7° (measured 7.5° worst: the
+  // trilinear cells add a little); allow 10°.
+  EXPECT_LT(worst_probe, 10.0 * kPi / 180.0) << "gradient normals: worst " << worst_gradient * 180 / kPi << "°";
+  // The single-point gradient follows the noise far more (measured 47°).
+  EXPECT_GT(worst_gradient, 3.0 * worst_probe);
 }
 
 // A small bake of a unit UV sphere, posed at 5 cm radius in the world.
