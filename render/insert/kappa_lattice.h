@@ -27,7 +27,7 @@ constexpr size_t kKappaCacheMaxNodes = size_t(1) << 22;  // ~4 M nodes (~100 MB)
 // and the shared lattice's hash look-up (a cache miss or two) is what
 // dominates κ on a hand-held frame. Holds exactly the lattice's values.
 struct LatticeMemo {
-  static constexpr size_t kMemo = 256;
+  static constexpr size_t kMemo = 1024;
   std::array<uint64_t, kMemo> key{};
   std::array<float, kMemo> value = Empty();
   static std::array<float, kMemo> Empty() {
@@ -35,7 +35,7 @@ struct LatticeMemo {
     v.fill(-1.0f);
     return v;
   }
-  static size_t Slot(uint64_t key) { return (key * 0x9E3779B97F4A7C15ull) >> 56; }
+  static size_t Slot(uint64_t key) { return (key * 0x9E3779B97F4A7C15ull) >> 54; }
 };
 
 // The shared lattice. Each shard holds a read-only snapshot (`frozen`, the

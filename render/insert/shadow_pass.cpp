@@ -1,6 +1,7 @@
 #include "render/insert/shadow_pass.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <limits>
 #include <utility>
@@ -29,6 +30,22 @@ struct ThreadScratch {
   KappaScratch kappa;
   LatticeMemo memo;
 };
+
+// This thread's scratch for pass `pass` (a number new for every κ pass of
+// any inserter): kept across the pass's rows, so that the memo holds the
+// nodes of the rows this thread did before (neighbouring rows share most
+// of their lattice cells), and emptied for a new pass (its lattice may
+// hold other values).
+ThreadScratch& ScratchFor(uint64_t pass) {
+  thread_local ThreadScratch scratch;
+  thread_local uint64_t scratch_pass = 0;
+  if (scratch_pass != pass) {
+    scratch.memo = LatticeMemo{};
+    scratch_pass = pass;
+  }
+  return scratch;
+}
+std::atomic<uint64_t> g_kappa_passes{0};
 
 // rgb[3i + c] *= k[i] for i < n (the same products as one pixel at a time).
 void MultiplyRgb(float* rgb, const float* k, int n) {
@@ -250,6 +267,7 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
       const bool cell_normals = cache != nullptr && receivers.distance == nullptr && options.receiver_normal_per_cell;
       const float reuse_tolerance = static_cast<float>(options.kappa_reuse_tolerance_radii * smallest);
       const KappaContext context{&casters, &spheres, &preps, &lights, reach, one_minus_eps};
+      const uint64_t pass = ++g_kappa_passes;
       // κ at receiver x (normal n): exact, or trilinear in the world lattice.
       const auto receiver_kappa = [&](const Vec3f& x, const Vec3f& n, ThreadScratch& sc, size_t row) -> float {
         if (cache == nullptr) {
@@ -389,7 +407,7 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
       };
       // κ at the receivers find_row found in this row (cols as there).
       const auto kappa_row = [&](size_t row, const std::vector<size_t>& cols) {
-        ThreadScratch scratch;
+        ThreadScratch& scratch = ScratchFor(pass);
         for (size_t q : cols) {
           const size_t node = row * nx + q;
           if (node_state[node] != 1) continue;
@@ -530,7 +548,7 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
         ParallelFor(
             ny,
             [&](size_t r) {
-              ThreadScratch scratch;
+              ThreadScratch& scratch = ScratchFor(pass);
               for (const PlaneNode& p : plane_nodes[r])
                 kappa_grid[r * nx + p.q] =
                     receiver_kappa(p.point, cell_normals ? node_normal[r * nx + p.q] : p.plane->normal, scratch, r);
