@@ -69,13 +69,19 @@ NerfTrainData ReadNerfTrainData(const std::string& dataset_dir) {
 NerfTrainOptions NerfTrainOptions::Preset(const std::string& name) {
   NerfTrainOptions o;
   if (name == "fast") {
-    // 900 steps, the 5 mm level from step 243 (lamps, session 4: 26.33 dB vs bg
-    // at 204 CPU-s; 700 steps from step 245: 25.21 dB at 168 CPU-s).
-    o.steps = 900;
+    // 1100 steps, the 5 mm level from step 242, the log-density's learning rate
+    // doubled (session 5, lamps under load 8-10; docs/BENCHMARKS.md): with 0.1
+    // the density ramps of surfaces stay soft (the table's T = 0.5 point lies
+    // 1-5 cm in front of it). 900 steps at 0.1: 26.31 dB, surface depth 20.0 mm,
+    // 196 CPU-s, 33 samples per rendered ray; 900 at 0.2: 26.48 dB, 14.6 mm,
+    // 128 CPU-s, 25 samples (fewer occupied cells, so cheaper steps); 900 at
+    // 0.4: 26.49 dB, 17.2 mm; 1100 at 0.2: 27.27 dB, 12.4 mm, 161 CPU-s, 24 samples.
+    o.steps = 1100;
     o.rays_per_step = 4096;
     o.coarse_voxel_m = 0.01;
     o.levels = 2;
-    o.last_level_start = 0.27;
+    o.last_level_start = 0.22;
+    o.lr_density = 0.2;
     // Saved at 5/m (measured, full schedule): lamps +0.14 dB, window -0.31 dB;
     // surface depth 22.9 -> 21.2 mm / 8.4 -> 7.1 mm; files 35 -> 21 MB / 34 -> 22 MB.
     // At 2.5 mm (balanced) it costs 0.3 dB for 24 % of the file: not set there.

@@ -61,7 +61,8 @@ struct NerfTrainOptions {
   double last_level_start = 0.4;
   // Sample spacing along training and evaluation rays, in voxels of the current level.
   double step_voxels = 0.5;
-  // Adam learning rates of the raw log-density and of the log-colour coefficients.
+  // Adam learning rates of the raw log-density and of the log-colour coefficients
+  // (the fast preset doubles lr_density: sharper surfaces, see Preset).
   double lr_density = 0.1, lr_color = 0.05;
   // The learning rates decay exponentially to this factor of their start by the last step.
   double lr_final_factor = 0.05;
@@ -80,7 +81,10 @@ struct NerfTrainOptions {
   double foreground_weight = 0.1;
   // Weight (1/m) of the distortion prior on every ray, Σ_ij w_i w_j |t_i - t_j| + Σ_i w_i² δ_i / 3
   // (w_i = T_i α_i, t in metres): it gathers each ray's weights into one short
-  // interval, which removes fog in front of surfaces and sharpens depth.
+  // interval. Off in every preset: it gathers the weights but does not place
+  // them (session 5, lamps fast: 0.03 changes nothing; 0.3 takes 19 -> 14
+  // samples per rendered ray past T = 0.5 but moves surfaces forward, surface
+  // depth 20 -> 24 mm, -0.9 dB). The log-density learning rate sharpened more.
   double distortion_weight = 0.0;
   // Weight of the sparsity prior Σ_i α_i on every ray (α_i the opacity of sample i).
   // Its density gradient λ (1 - α) σ δ vanishes on opaque surfaces (α -> 1) and
