@@ -11,7 +11,8 @@
 // (near field alone; environment fitted ignoring the near field and NeRF
 // visibility, PhySG-like) and for env.exr itself seen through the NeRF (what
 // the NeRF alone limits). $NERFAR_BENCH_ENV_TRADE=1 adds the pixels x rays
-// table on each scene (or "16x64,64x256": those cells only). $NERFAR_BENCH_ENV_SET="key=value;..." overrides
+// table on each scene (or "16x64,64x256": those cells only), and
+// $NERFAR_BENCH_ENV_TRADE_ONLY=1 skips everything else. $NERFAR_BENCH_ENV_SET="key=value;..." overrides
 // options as `nerfar env --set` does (the PhySG-like baseline takes them too).
 #include <algorithm>
 #include <cmath>
@@ -126,23 +127,11 @@ std::map<std::string, std::string> ModelsFromEnvironment() {
   return models;
 }
 
-// One shared scene end to end (see the file comment).
-void SharedScene(const std::string& scenes_dir, const std::string& scene, const std::string& model,
-                 const std::string& preset, std::vector<BenchFigure>& figures) {
+// The estimate, the baselines and the figures at the object centres (see the file comment).
+void MainFigures(const std::filesystem::path& dir, const std::string& scene, const NerfField& field,
+                 EnvEstimateOptions o, const std::string& note, const ImageF& truth_env, const std::vector<Vec3>& upper,
+                 const std::vector<Vec3>& e_true, double true_energy, std::vector<BenchFigure>& figures) {
   namespace fs = std::filesystem;
-  const fs::path dir = fs::path(scenes_dir) / scene;
-  const NerfField field = LoadNerf(model);
-  EnvEstimateOptions o = EnvEstimateOptions::Preset(preset);
-  // $NERFAR_BENCH_ENV_SET: "key=value;key=value" overrides (as `nerfar env --set`).
-  const char* sets = std::getenv("NERFAR_BENCH_ENV_SET");
-  if (sets != nullptr) {
-    std::stringstream in(sets);
-    std::string kv;
-    while (std::getline(in, kv, ';'))
-      if (!kv.empty()) o.Set(kv);
-  }
-  const std::string note =
-      scene + ", " + model + ", preset " + preset + (sets != nullptr && *sets != 0 ? ", " + std::string(sets) : "");
   double t0 = NowSeconds();
   const std::clock_t cpu0 = std::clock();
   EnvEstimateReport report;
@@ -164,19 +153,13 @@ void SharedScene(const std::string& scenes_dir, const std::string& scene, const 
       {"env_" + scene + "_evidence", est.evidence, "", note + "; log-likelihood gain of the environment"});
   figures.push_back({"env_" + scene + "_evidence_needed", est.evidence_needed, "", note + "; BIC penalty"});
 
-  const ImageF truth_env = ReadExrRgb((dir / "env.exr").string());
-  std::vector<Vec3> upper, all = FibonacciSphere(128);
-  for (const Vec3& n : all)
-    if (n.z > 0) upper.push_back(n);
+  const std::vector<Vec3> all = FibonacciSphere(128);
   // The distant light alone (unoccluded) over upper-hemisphere normals.
-  std::vector<Vec3> e_true, e_est, e_physg, e_none(upper.size());
+  std::vector<Vec3> e_est, e_physg, e_none(upper.size());
   for (const Vec3& n : upper) {
-    e_true.push_back(PanoramaIrradiance(truth_env, n));
     e_est.push_back(Irradiance(est.lobes, n));
     e_physg.push_back(Irradiance(physg.lobes, n));
   }
-  double true_energy = 0;
-  for (const Vec3& e : e_true) true_energy += LuminanceOf(e);
   if (true_energy > 0) {
     figures.push_back({"env_" + scene + "_env_rel_rms", RelativeIrradianceRms(e_est, e_true), "",
                        note + "; irradiance of the estimate vs env.exr, 64 upper normals"});
@@ -238,6 +221,36 @@ void SharedScene(const std::string& scenes_dir, const std::string& scene, const 
     figures.push_back(
         {at + "physg_env_to_near", near_sum > 0 ? physg_sum / near_sum : 0.0, "", note + ", PhySG-like E_env/E_nerf"});
   }
+}
+
+// One shared scene end to end (see the file comment).
+void SharedScene(const std::string& scenes_dir, const std::string& scene, const std::string& model,
+                 const std::string& preset, std::vector<BenchFigure>& figures) {
+  namespace fs = std::filesystem;
+  const fs::path dir = fs::path(scenes_dir) / scene;
+  const NerfField field = LoadNerf(model);
+  EnvEstimateOptions o = EnvEstimateOptions::Preset(preset);
+  // $NERFAR_BENCH_ENV_SET: "key=value;key=value" overrides (as `nerfar env --set`).
+  const char* sets = std::getenv("NERFAR_BENCH_ENV_SET");
+  if (sets != nullptr) {
+    std::stringstream in(sets);
+    std::string kv;
+    while (std::getline(in, kv, ';'))
+      if (!kv.empty()) o.Set(kv);
+  }
+  const std::string note =
+      scene + ", " + model + ", preset " + preset + (sets != nullptr && *sets != 0 ? ", " + std::string(sets) : "");
+  const ImageF truth_env = ReadExrRgb((dir / "env.exr").string());
+  std::vector<Vec3> upper, all = FibonacciSphere(128);
+  for (const Vec3& n : all)
+    if (n.z > 0) upper.push_back(n);
+  std::vector<Vec3> e_true;
+  for (const Vec3& n : upper) e_true.push_back(PanoramaIrradiance(truth_env, n));
+  double true_energy = 0;
+  for (const Vec3& e : e_true) true_energy += LuminanceOf(e);
+  const char* trade_only = std::getenv("NERFAR_BENCH_ENV_TRADE_ONLY");
+  if (trade_only == nullptr || std::string(trade_only) != "1")
+    MainFigures(dir, scene, field, o, note, truth_env, upper, e_true, true_energy, figures);
   const char* trade = std::getenv("NERFAR_BENCH_ENV_TRADE");
   if (trade != nullptr) {
     // "1": the cells 16/64 px x 64/256 rays other than the run above (64 x
