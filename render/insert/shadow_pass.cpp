@@ -41,6 +41,7 @@ ThreadScratch& ScratchFor(uint64_t pass) {
   thread_local uint64_t scratch_pass = 0;
   if (scratch_pass != pass) {
     scratch.memo = LatticeMemo{};
+    scratch.kappa.cw_light = nullptr;  // the lights may have changed
     scratch_pass = pass;
   }
   return scratch;

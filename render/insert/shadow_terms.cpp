@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
 
 namespace nerfar {
@@ -15,12 +16,12 @@ namespace nerfar {
 // G(cap centre) × solid angle(cap). Broad lobes take the smaller estimate,
 // sharp ones (√λ·α ≥ 1.5) the half-space one, which is then render/sg's
 // ShadowRatio exactly; in between they blend.
-double ShadowRatioCapped(const SgMixture& cosine_weighted, const Vec3& normal, const std::vector<double>& ssd,
-                         const std::vector<double>& cap_radius) {
+double ShadowRatioCapped(const SgMixture& cosine_weighted, const std::vector<PreparedShadowLobe>& lobes,
+                         const Vec3& normal, const std::vector<double>& ssd, const std::vector<double>& cap_radius) {
   double visible = 0.0, total = 0.0;
   for (size_t k = 0; k < cosine_weighted.size(); ++k) {
     const Sg& sg = cosine_weighted[k];
-    const LobeShadow lobe = ShadowOfLobe(sg, normal, ssd[k]);
+    const LobeShadow lobe = ShadowOfLobePrepared(lobes[k], normal, ssd[k]);
     if (!(lobe.total > 0.0)) continue;
     const double lobe_total = lobe.total;
     double blocked = lobe.total - lobe.visible;
@@ -89,7 +90,16 @@ float KappaAt(const KappaContext& context, const Vec3f& x, const Vec3f& n, Kappa
     for (const Sg& lobe : reaimed) reaimed_axes.push_back(Vec3f(lobe.axis));
   }
   const std::vector<Vec3f>& axes = parallax ? reaimed_axes : p.axes;
-  const SgMixture cw = CosineWeightedLight(parallax ? reaimed : (*context.lights)[owner], Vec3(n));
+  // The cosine-weighted light and its prepared lobes (render/sg): kept
+  // from the last call for the same light and normal (bit for bit).
+  const SgMixture& light = parallax ? reaimed : (*context.lights)[owner];
+  if (parallax || sc.cw_light != &light || std::memcmp(&sc.cw_normal, &n, sizeof n) != 0) {
+    sc.cw = CosineWeightedLight(light, Vec3(n));
+    PrepareShadowLobes(sc.cw, sc.lobes);
+    sc.cw_light = parallax ? nullptr : &light;
+    sc.cw_normal = n;
+  }
+  const SgMixture& cw = sc.cw;
   // Lower bound of S from the bounding spheres: if even that leaves
   // κ ≥ 1 − ε, nothing needs the SSDF.
   sc.s_bound.assign(m, kPi);
@@ -97,7 +107,7 @@ float KappaAt(const KappaContext& context, const Vec3f& x, const Vec3f& n, Kappa
     for (size_t l = 0; l < m; ++l)
       sc.s_bound[l] =
           std::min<double>(sc.s_bound[l], BallSsdLowerBound(spheres[j].center, spheres[j].radius, x, axes[l]));
-  if (ShadowRatio(cw, Vec3(n), sc.s_bound) >= context.one_minus_eps) return 1.0f;
+  if (ShadowRatioPrepared(sc.lobes, Vec3(n), sc.s_bound) >= context.one_minus_eps) return 1.0f;
   if (queried) *queried = true;
   sc.s_exact.assign(m, kPi);
   sc.cap.assign(m, 0.0);
@@ -117,7 +127,7 @@ float KappaAt(const KappaContext& context, const Vec3f& x, const Vec3f& n, Kappa
       }
     }
   }
-  const double k = ShadowRatioCapped(cw, Vec3(n), sc.s_exact, sc.cap);
+  const double k = ShadowRatioCapped(cw, sc.lobes, Vec3(n), sc.s_exact, sc.cap);
   return std::isfinite(k) ? static_cast<float>(std::clamp(k, 0.0, 1.0)) : 1.0f;
 }
 

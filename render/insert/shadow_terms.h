@@ -14,8 +14,9 @@ namespace nerfar {
 
 // κ (paper eqs. 8-9) with the half-space visibility of f_h bounded by the
 // occluder's size (see shadow_terms.cpp). `ssd` and `cap_radius` per lobe.
-double ShadowRatioCapped(const SgMixture& cosine_weighted, const Vec3& normal, const std::vector<double>& ssd,
-                         const std::vector<double>& cap_radius);
+// `lobes`: PrepareShadowLobes(cosine_weighted).
+double ShadowRatioCapped(const SgMixture& cosine_weighted, const std::vector<PreparedShadowLobe>& lobes,
+                         const Vec3& normal, const std::vector<double>& ssd, const std::vector<double>& cap_radius);
 
 // γ_k of every lobe at a surface point with normal n from the union SSD
 // there (paper eq. 10; with `horizon`, relative to the part of the lobe above
@@ -38,6 +39,15 @@ struct KappaContext {
 struct KappaScratch {
   std::vector<double> s_bound, s_exact, cap;
   std::vector<float> ssd;
+  // The cosine-weighted light of the last call and its prepared lobes,
+  // reused while the owner's light (same object, no parallax) and the
+  // normal (bit for bit) repeat, as at the lattice nodes of one normal
+  // cell. cw_light nullptr: nothing kept; reset it whenever the lights
+  // may have changed (a new κ pass).
+  SgMixture cw;
+  std::vector<PreparedShadowLobe> lobes;
+  const SgMixture* cw_light = nullptr;
+  Vec3f cw_normal;
 };
 
 // κ at world point x with unit normal n under the light of the caster

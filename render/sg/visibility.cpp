@@ -329,15 +329,44 @@ SgMixture CosineWeightedLight(const SgMixture& light, const Vec3& normal) {
   return out;
 }
 
+PreparedShadowLobe PrepareShadowLobe(const Sg& sg) {
+  PreparedShadowLobe p;
+  p.axis = sg.axis;
+  p.luminance = LuminanceOf(sg.amplitude);
+  if (!(p.luminance > 0.0)) return p;
+  p.weight = p.luminance * HemisphereIntegral(sg.sharpness);
+  p.row = PrepareGamma(sg.sharpness);
+  return p;
+}
+
+void PrepareShadowLobes(const SgMixture& cosine_weighted, std::vector<PreparedShadowLobe>& out) {
+  out.resize(cosine_weighted.size());
+  for (size_t k = 0; k < cosine_weighted.size(); ++k) out[k] = PrepareShadowLobe(cosine_weighted[k]);
+}
+
+LobeShadow ShadowOfLobePrepared(const PreparedShadowLobe& lobe, const Vec3& normal, double ssd_rad) {
+  if (!(lobe.luminance > 0.0)) return {};
+  const double horizon = std::asin(std::clamp(Dot(lobe.axis, normal), -1.0, 1.0));
+  const double up = GammaPrepared(lobe.row, static_cast<float>(horizon));
+  const double seen = ssd_rad < horizon ? GammaPrepared(lobe.row, static_cast<float>(ssd_rad)) : up;
+  return {lobe.weight * up, lobe.weight * seen};
+}
+
 LobeShadow ShadowOfLobe(const Sg& sg, const Vec3& normal, double ssd_rad) {
-  const double y = LuminanceOf(sg.amplitude);
-  if (!(y > 0.0)) return {};
-  const double horizon = std::asin(std::clamp(Dot(sg.axis, normal), -1.0, 1.0));
-  const double hemisphere = HemisphereIntegral(sg.sharpness);
-  const SgTableRow row = PrepareGamma(sg.sharpness);
-  const double up = GammaPrepared(row, static_cast<float>(horizon));
-  const double seen = ssd_rad < horizon ? GammaPrepared(row, static_cast<float>(ssd_rad)) : up;
-  return {y * hemisphere * up, y * hemisphere * seen};
+  return ShadowOfLobePrepared(PrepareShadowLobe(sg), normal, ssd_rad);
+}
+
+double ShadowRatioPrepared(const std::vector<PreparedShadowLobe>& lobes, const Vec3& normal,
+                           const std::vector<double>& ssd_rad) {
+  NERFAR_CHECK_EQ(lobes.size(), ssd_rad.size());
+  double visible = 0.0, total = 0.0;
+  for (size_t k = 0; k < lobes.size(); ++k) {
+    const LobeShadow lobe = ShadowOfLobePrepared(lobes[k], normal, ssd_rad[k]);
+    total += lobe.total;
+    visible += lobe.visible;
+  }
+  if (!(total > 0.0)) return 1.0;
+  return std::clamp(visible / total, 0.0, 1.0);
 }
 
 double ShadowRatio(const SgMixture& cosine_weighted, const Vec3& normal, const std::vector<double>& ssd_rad) {

@@ -74,4 +74,23 @@ struct LobeShadow {
 };
 LobeShadow ShadowOfLobe(const Sg& cosine_weighted_lobe, const Vec3& normal, double ssd_rad);
 
+// What ShadowOfLobe needs of a lobe that does not depend on the receiver's
+// SSD: its luminance, luminance × hemisphere integral and γ table row
+// (one log per lobe). For callers that take κ of one cosine-weighted light
+// more than once (several SSDs, or receivers sharing a normal):
+// ShadowOfLobePrepared / ShadowRatioPrepared give bit for bit what
+// ShadowOfLobe / ShadowRatio give for the same lobe.
+struct PreparedShadowLobe {
+  Vec3 axis;
+  double luminance = 0;  // Y(μ'_k); <= 0: the lobe adds nothing
+  double weight = 0;     // Y(μ'_k) · f_h(π/2, λ'_k)
+  SgTableRow row;        // PrepareGamma(λ'_k)
+};
+PreparedShadowLobe PrepareShadowLobe(const Sg& cosine_weighted_lobe);
+// Replaces `out` with the prepared lobes of `cosine_weighted` (keeps its storage).
+void PrepareShadowLobes(const SgMixture& cosine_weighted, std::vector<PreparedShadowLobe>& out);
+LobeShadow ShadowOfLobePrepared(const PreparedShadowLobe& lobe, const Vec3& normal, double ssd_rad);
+double ShadowRatioPrepared(const std::vector<PreparedShadowLobe>& lobes, const Vec3& normal,
+                           const std::vector<double>& ssd_rad);
+
 }  // namespace nerfar

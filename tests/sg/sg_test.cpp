@@ -420,6 +420,81 @@ TEST(SgVisibility, ShadowRatioIsOneUnoccludedAndMatchesASphereOccluder) {
   EXPECT_NEAR(ShadowRatio(weighted, n, ssd), occluded / unoccluded, 0.06);
 }
 
+// ShadowOfLobe / ShadowRatio written out from the per-call primitives (eqs.
+// 8-9 per lobe: Y · f_h(π/2) · γ(min(S, e)) over Y · f_h(π/2) · γ(e)), the
+// reference for the prepared path.
+LobeShadow ReferenceLobeShadow(const Sg& sg, const Vec3& n, double ssd) {
+  const double y = LuminanceOf(sg.amplitude);
+  if (!(y > 0.0)) return {};
+  const double horizon = std::asin(std::clamp(Dot(sg.axis, n), -1.0, 1.0));
+  const double hemisphere = HemisphereIntegral(sg.sharpness);
+  const double up = SelfShadowGamma(horizon, sg.sharpness);
+  const double seen = ssd < horizon ? SelfShadowGamma(ssd, sg.sharpness) : up;
+  return {y * hemisphere * up, y * hemisphere * seen};
+}
+
+TEST(SgVisibility, PreparedShadowRatioEqualsThePerCallOneBitForBit) {
+  // Random lights (λ 1e-5..1e5 log-uniform, some dark or zero lobes), random
+  // normals and SSDs (including ±π/2, beyond, and exactly the horizon); the
+  // prepared lobes are reused for several normals and SSD sets, as κ's
+  // bound check and capped ratio do. Bit-identical: the prepared path must
+  // do the same operations in the same order (tolerance 0).
+  std::mt19937 rng(20261122);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  const auto random_unit = [&] {
+    const double z = 2.0 * u(rng) - 1.0, phi = 2.0 * kPi * u(rng), r = std::sqrt(1.0 - z * z);
+    return Vec3(r * std::cos(phi), r * std::sin(phi), z);
+  };
+  int compared = 0, shadowed = 0;
+  for (int trial = 0; trial < 200; ++trial) {
+    SgMixture light;
+    const int lobes = 1 + trial % 12;
+    for (int k = 0; k < lobes; ++k) {
+      const double lambda = std::pow(10.0, -5.0 + 10.0 * u(rng));
+      Vec3 amplitude(50.0 * u(rng), 50.0 * u(rng), 50.0 * u(rng));
+      if (k % 5 == 3) amplitude = Vec3(0, 0, 0);
+      light.push_back({random_unit(), lambda, amplitude});
+    }
+    const Vec3 n0 = random_unit();
+    const SgMixture cw = CosineWeightedLight(light, n0);
+    std::vector<PreparedShadowLobe> prepared;
+    PrepareShadowLobes(cw, prepared);
+    ASSERT_EQ(prepared.size(), cw.size());
+    for (int use = 0; use < 4; ++use) {
+      const Vec3 n = use == 0 ? n0 : random_unit();
+      std::vector<double> ssd(cw.size());
+      for (size_t k = 0; k < cw.size(); ++k) {
+        const double pick = u(rng);
+        const double e = std::asin(std::clamp(Dot(cw[k].axis, n), -1.0, 1.0));
+        ssd[k] = pick < 0.1    ? kHalfPi
+                 : pick < 0.2  ? -kHalfPi
+                 : pick < 0.3  ? e
+                 : pick < 0.35 ? 4.0
+                               : -2.0 + 4.0 * u(rng);
+      }
+      double visible = 0.0, total = 0.0;
+      for (size_t k = 0; k < cw.size(); ++k) {
+        const LobeShadow want = ReferenceLobeShadow(cw[k], n, ssd[k]);
+        const LobeShadow got = ShadowOfLobePrepared(prepared[k], n, ssd[k]);
+        EXPECT_EQ(got.total, want.total) << trial << " " << k;
+        EXPECT_EQ(got.visible, want.visible) << trial << " " << k;
+        const LobeShadow per_call = ShadowOfLobe(cw[k], n, ssd[k]);
+        EXPECT_EQ(per_call.total, want.total) << trial << " " << k;
+        EXPECT_EQ(per_call.visible, want.visible) << trial << " " << k;
+        total += want.total;
+        visible += want.visible;
+      }
+      const double want = total > 0.0 ? std::clamp(visible / total, 0.0, 1.0) : 1.0;
+      EXPECT_EQ(ShadowRatioPrepared(prepared, n, ssd), want) << trial;
+      EXPECT_EQ(ShadowRatio(cw, n, ssd), want) << trial;
+      ++compared;
+      if (want < 0.99) ++shadowed;
+    }
+  }
+  // The draw must exercise shadowed receivers, not only κ = 1.
+  EXPECT_GT(shadowed, compared / 4);
+}
+
 // ---------------------------------------------------------------- shading
 
 TEST(SgShading, SgIntegrandMatchesMonteCarlo) {
