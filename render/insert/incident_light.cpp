@@ -41,6 +41,8 @@ std::vector<std::string> IncidentLightOptions::Validate() const {
     problems.push_back("light_directions: " + std::to_string(directions) + " is out of range (expected 16 to 1048576)");
   if (!(move_threshold_m >= 0.0) || !std::isfinite(move_threshold_m))
     problems.push_back("light_move_threshold_m: must be a finite number >= 0");
+  if (!(start_tolerance_m >= 0.0) || !std::isfinite(start_tolerance_m))
+    problems.push_back("light_start_tolerance_m: must be a finite number >= 0");
   if (!(parallax_min_sharpness > 0.0) || !std::isfinite(parallax_min_sharpness))
     problems.push_back("parallax_min_sharpness: must be a finite number > 0");
   for (const std::string& p : fit.Validate()) problems.push_back("fit." + p);
@@ -157,6 +159,15 @@ constexpr float kSurfaceOpacity = 0.5f;
 double ParallaxWeight(double sharpness, double min_sharpness) {
   return std::clamp((sharpness - min_sharpness) / min_sharpness, 0.0, 1.0);
 }
+// Whether rays starting at `starts` (null: at the centre) sample the scene as
+// the ones starting at `fitted` (empty: at the centre) did, to `tolerance`.
+bool SameStarts(const std::vector<float>* starts, const std::vector<float>& fitted, double tolerance) {
+  if (starts == nullptr) return fitted.empty();
+  if (starts->size() != fitted.size()) return false;
+  for (size_t i = 0; i < fitted.size(); ++i)
+    if (!(std::abs((*starts)[i] - fitted[i]) <= tolerance)) return false;
+  return true;
+}
 }  // namespace
 
 bool LightParallax::Active(const SgMixture& light) const {
@@ -248,11 +259,10 @@ const std::vector<float>* IncidentLight::Starts(const Vec3& center, const Incide
 IncidentLight::Update IncidentLight::Refresh(const SceneField& scene, const SgMixture& environment, const Vec3& center,
                                              const IncidentLightOptions& options, const LightObjectVolume* volume) {
   Update update;
-  // Whether the rays would start elsewhere than last time (the object turned).
-  const bool starts_on = options.start_outside_object && volume != nullptr && volume->mesh != nullptr;
-  const bool same_starts = starts_on ? starts_mesh_ == volume->mesh && starts_scale_ == volume->scale &&
-                                           starts_pose_.rotation.m == volume->T_world_object.rotation.m
-                                     : starts_mesh_ == nullptr;
+  // Whether the rays would start elsewhere than last time (the object turned
+  // into a different shape along some ray).
+  const std::vector<float>* starts = Starts(center, options, volume);
+  const bool same_starts = SameStarts(starts, fitted_starts_, options.start_tolerance_m);
   const bool same_setup = valid_ && directions_ == options.directions && source_ == options.source &&
                           lobes_ == options.fit.lobes && same_starts;
   const bool same_parallax = options.parallax == !distances_.empty() || light_.empty();
@@ -260,7 +270,6 @@ IncidentLight::Update IncidentLight::Refresh(const SceneField& scene, const SgMi
   update.recomputed = true;
   if (static_cast<int>(dirs_.size()) != options.directions) dirs_ = FibonacciSphere(options.directions);
   auto t0 = std::chrono::steady_clock::now();
-  const std::vector<float>* starts = Starts(center, options, volume);
   samples_ = SampleIncidentLight(scene, environment, center, dirs_, options.source, &opacity_, &depth_, starts);
   update.sample_ms = MillisecondsSince(t0);
   double total = 0.0;
@@ -287,6 +296,7 @@ IncidentLight::Update IncidentLight::Refresh(const SceneField& scene, const SgMi
     distances_ = LobeDistances(light_, dirs_, opacity_, depth_, near);
   }
   valid_ = true;
+  fitted_starts_ = starts != nullptr ? *starts : std::vector<float>{};
   center_ = center;
   directions_ = options.directions;
   source_ = options.source;

@@ -51,6 +51,10 @@ struct IncidentLightOptions {
   // neither lights it nor hides the light behind it. false: from the centre
   // (the paper).
   bool start_outside_object = true;
+  // A turned object keeps its light while no ray's start moved farther than
+  // this (a ball turned about its centre: only its facets move). 1 mm is a
+  // fifth of the finest NeRF voxel (5 mm), below what the scene can resolve.
+  double start_tolerance_m = 1e-3;
   // Every problem as "field: what is wrong (what was expected)".
   std::vector<std::string> Validate() const;
 };
@@ -126,7 +130,8 @@ class IncidentLight {
   // the first call); warm-starts the fit from the last one. Never throws on
   // scene content: non-finite radiance is replaced by 0.
   // `volume` (optional): the object itself, whose inside the rays skip
-  // (IncidentLightOptions::start_outside_object); a new pose refits.
+  // (IncidentLightOptions::start_outside_object); a new pose refits when it
+  // moves a ray's start by more than start_tolerance_m.
   Update Refresh(const SceneField& scene, const SgMixture& environment, const Vec3& center,
                  const IncidentLightOptions& options, const LightObjectVolume* volume = nullptr);
   // Forget the cache (the next Refresh fits from scratch).
@@ -158,6 +163,8 @@ class IncidentLight {
   double starts_scale_ = 0.0;
   Vec3 starts_center_;
   int starts_directions_ = 0;
+  // The starts the fitted light was sampled from (empty: from the centre).
+  std::vector<float> fitted_starts_;
 
   bool valid_ = false;
   Vec3 center_;

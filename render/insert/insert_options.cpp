@@ -77,6 +77,7 @@ std::string InsertOptions::ToJson() const {
   j["light_parallax"] = light.parallax;
   j["light_parallax_min_sharpness"] = light.parallax_min_sharpness;
   j["light_start_outside_object"] = light.start_outside_object;
+  j["light_start_tolerance_m"] = light.start_tolerance_m;
   j["sg_lobes"] = light.fit.lobes;
   j["sg_cold_iterations"] = light.fit.cold_iterations;
   j["sg_warm_iterations"] = light.fit.warm_iterations;

@@ -128,5 +128,43 @@ TEST(LightStart, FogInsideTheObjectNeitherLightsNorHidesIt) {
   EXPECT_TRUE(u.recomputed);
 }
 
+TEST(LightStart, ATurnThatLeavesEveryStartInPlaceKeepsTheLight) {
+  const AnalyticScene scene(FogScene(true));
+  const Vec3 center = FogScene(true).medium_center;
+  // A 4 cm ball of 32 × 16 facets around the centre: turned about its
+  // vertical axis, each ray's exit moves only by the facets' sagitta,
+  // r·(1 − cos(π/32))·2 ≈ 0.4 mm at most, under the 1 mm tolerance.
+  const TriangleMesh ball = MakeUvSphere(0.04, 32, 16);
+  LightObjectVolume volume;
+  volume.mesh = &ball;
+  volume.T_world_object.translation = center;
+  const SgMixture env = {Sg{{0.3, 0.2, 1.0}, 4.0, {3.0, 2.5, 2.0}}};
+  IncidentLightOptions options;
+  options.directions = 512;
+  options.fit = SgFitOptions::Preset("fast");
+  IncidentLight light;
+  ASSERT_TRUE(light.Refresh(scene, env, center, options, &volume).recomputed);
+  LightObjectVolume turned = volume;
+  const double a = 0.3;
+  turned.T_world_object.rotation =
+      Mat3::FromColumns({std::cos(a), std::sin(a), 0}, {-std::sin(a), std::cos(a), 0}, {0, 0, 1});
+  // The turn does move the starts (not a no-op test), but by less than 1 mm.
+  const std::vector<Vec3> dirs = FibonacciSphere(options.directions);
+  const std::vector<float> before = ObjectExitDistances(volume, center, dirs);
+  const std::vector<float> after = ObjectExitDistances(turned, center, dirs);
+  float largest = 0.0f;
+  for (size_t i = 0; i < dirs.size(); ++i) largest = std::max(largest, std::abs(after[i] - before[i]));
+  EXPECT_GT(largest, 1e-5f);
+  EXPECT_LT(largest, 1e-3f);
+  EXPECT_FALSE(light.Refresh(scene, env, center, options, &turned).recomputed);
+  // With no tolerance the same turn refits.
+  // (The light is still the one fitted unturned.)
+  options.start_tolerance_m = 0.0;
+  EXPECT_TRUE(light.Refresh(scene, env, center, options, &turned).recomputed);
+  // A negative or non-finite tolerance is reported.
+  options.start_tolerance_m = -1.0;
+  EXPECT_FALSE(options.Validate().empty());
+}
+
 }  // namespace
 }  // namespace nerfar
