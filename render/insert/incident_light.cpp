@@ -112,6 +112,26 @@ RadianceSamples SampleIncidentLight(const SceneField& scene, const SgMixture& en
   return samples;
 }
 
+namespace {
+// Distance t > 0 at which o + t·d crosses triangle (a, b, c), either face
+// (the mesh need not be closed or wound); 0 where it misses (Möller-Trumbore).
+double CrossingDistance(const Vec3& o, const Vec3& d, const Vec3& a, const Vec3& b, const Vec3& c) {
+  const Vec3 e1 = b - a, e2 = c - a;
+  const Vec3 p = Cross(d, e2);
+  const double det = Dot(e1, p);
+  if (std::abs(det) < 1e-300) return 0.0;
+  const double inv = 1.0 / det;
+  const Vec3 q = o - a;
+  const double u = Dot(q, p) * inv;
+  if (u < 0.0 || u > 1.0) return 0.0;
+  const Vec3 r = Cross(q, e1);
+  const double v = Dot(d, r) * inv;
+  if (v < 0.0 || u + v > 1.0) return 0.0;
+  const double t = Dot(e2, r) * inv;
+  return t > 0.0 && std::isfinite(t) ? t : 0.0;
+}
+}  // namespace
+
 std::vector<float> ObjectExitDistances(const LightObjectVolume& volume, const Vec3& center,
                                        const std::vector<Vec3>& directions) {
   std::vector<float> exit(directions.size(), 0.0f);
@@ -124,31 +144,44 @@ std::vector<float> ObjectExitDistances(const LightObjectVolume& volume, const Ve
   for (const auto& tri : mesh.triangles)
     for (uint32_t v : tri)
       if (v >= mesh.positions.size()) return exit;  // a broken mesh skips nothing
-  ParallelFor(
-      directions.size(),
-      [&](size_t i) {
-        const Vec3 d = T_object_world.Rotate(directions[i]);
-        double farthest = 0.0;
-        for (const auto& tri : mesh.triangles) {
-          // Möller-Trumbore, both faces (the mesh need not be closed or wound).
-          const Vec3 a(mesh.positions[tri[0]]), b(mesh.positions[tri[1]]), c(mesh.positions[tri[2]]);
-          const Vec3 e1 = b - a, e2 = c - a;
-          const Vec3 p = Cross(d, e2);
-          const double det = Dot(e1, p);
-          if (std::abs(det) < 1e-300) continue;
-          const double inv = 1.0 / det;
-          const Vec3 q = o - a;
-          const double u = Dot(q, p) * inv;
-          if (u < 0.0 || u > 1.0) continue;
-          const Vec3 r = Cross(q, e1);
-          const double v = Dot(d, r) * inv;
-          if (v < 0.0 || u + v > 1.0) continue;
-          const double t = Dot(e2, r) * inv;
-          if (t > farthest && std::isfinite(t)) farthest = t;
-        }
-        exit[i] = static_cast<float>(farthest * s);
-      },
-      16);
+  // Each triangle is tested only against the directions whose z lies in the
+  // band its bounding cone (seen from o) spans: directions sorted by z, a
+  // band found by bisection. A small triangle meets a few per cent of them.
+  std::vector<Vec3> local(directions.size());
+  std::vector<uint32_t> order(directions.size());
+  std::vector<double> sorted_z(directions.size());
+  for (size_t i = 0; i < directions.size(); ++i) {
+    local[i] = T_object_world.Rotate(directions[i]);
+    order[i] = static_cast<uint32_t>(i);
+  }
+  std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return local[a].z < local[b].z; });
+  for (size_t k = 0; k < order.size(); ++k) sorted_z[k] = local[order[k]].z;
+  std::vector<double> farthest(directions.size(), 0.0);
+  constexpr double kPi = 3.14159265358979323846;
+  constexpr double kSlack = 1e-6;  // rad and z: rounding of the cone and the band, far below a facet
+  for (const auto& tri : mesh.triangles) {
+    const Vec3 a(mesh.positions[tri[0]]), b(mesh.positions[tri[1]]), c(mesh.positions[tri[2]]);
+    double z_low = -2.0, z_high = 2.0;  // every direction, unless the cone is narrow
+    const Vec3 axis = Normalized((a + b + c) / 3.0 - o);
+    double cos_half = 1.0;
+    for (const Vec3& v : {a, b, c}) {
+      const double len = Length(v - o);
+      cos_half = len > 0.0 ? std::min(cos_half, Dot(axis, (v - o) / len)) : -1.0;
+    }
+    if (Length(axis) > 0.5 && cos_half > 0.0) {  // a convex cone under 90°: it holds the whole triangle
+      const double polar = std::acos(std::clamp(axis.z, -1.0, 1.0));
+      const double half = std::acos(std::min(cos_half, 1.0)) + kSlack;
+      z_low = std::cos(std::min(kPi, polar + half)) - kSlack;
+      z_high = std::cos(std::max(0.0, polar - half)) + kSlack;
+    }
+    const size_t first = std::lower_bound(sorted_z.begin(), sorted_z.end(), z_low) - sorted_z.begin();
+    const size_t last = std::upper_bound(sorted_z.begin(), sorted_z.end(), z_high) - sorted_z.begin();
+    for (size_t k = first; k < last; ++k) {
+      const uint32_t i = order[k];
+      farthest[i] = std::max(farthest[i], CrossingDistance(o, local[i], a, b, c));
+    }
+  }
+  for (size_t i = 0; i < directions.size(); ++i) exit[i] = static_cast<float>(farthest[i] * s);
   return exit;
 }
 
