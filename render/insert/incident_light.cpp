@@ -157,7 +157,6 @@ std::vector<float> ObjectExitDistances(const LightObjectVolume& volume, const Ve
   std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return local[a].z < local[b].z; });
   for (size_t k = 0; k < order.size(); ++k) sorted_z[k] = local[order[k]].z;
   std::vector<double> farthest(directions.size(), 0.0);
-  constexpr double kPi = 3.14159265358979323846;
   constexpr double kSlack = 1e-6;  // rad and z: rounding of the cone and the band, far below a facet
   for (const auto& tri : mesh.triangles) {
     const Vec3 a(mesh.positions[tri[0]]), b(mesh.positions[tri[1]]), c(mesh.positions[tri[2]]);

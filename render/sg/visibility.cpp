@@ -370,15 +370,9 @@ double ShadowRatioPrepared(const std::vector<PreparedShadowLobe>& lobes, const V
 }
 
 double ShadowRatio(const SgMixture& cosine_weighted, const Vec3& normal, const std::vector<double>& ssd_rad) {
-  NERFAR_CHECK_EQ(cosine_weighted.size(), ssd_rad.size());
-  double visible = 0.0, total = 0.0;
-  for (size_t k = 0; k < cosine_weighted.size(); ++k) {
-    const LobeShadow lobe = ShadowOfLobe(cosine_weighted[k], normal, ssd_rad[k]);
-    total += lobe.total;
-    visible += lobe.visible;
-  }
-  if (!(total > 0.0)) return 1.0;
-  return std::clamp(visible / total, 0.0, 1.0);
+  std::vector<PreparedShadowLobe> lobes;
+  PrepareShadowLobes(cosine_weighted, lobes);
+  return ShadowRatioPrepared(lobes, normal, ssd_rad);
 }
 
 }  // namespace nerfar
