@@ -291,8 +291,11 @@ int RunInsert(const CommandArgs& args) {
     inputs.push_back(pose_paths[i]);
   }
   SgMixture probe_light;
+  RadianceSamples probe_samples;  // the probe's pixels (down to 128 × 64) for the prefiltered specular term
   if (!light_probe.empty()) {
     const ImageF panorama = ReadExrRgb(light_probe);
+    const bool halve = panorama.width % 128 == 0 && panorama.height % 64 == 0 && panorama.width > 128;
+    probe_samples = SamplesFromEquirect(panorama, halve ? 128 : panorama.width, halve ? 64 : panorama.height);
     const int w = panorama.width % 64 == 0 && panorama.height % 32 == 0 ? 64 : panorama.width;
     const int h = w == 64 ? 32 : panorama.height;
     probe_light = FitSg(SamplesFromEquirect(panorama, w, h), options.light.fit);
@@ -345,7 +348,7 @@ int RunInsert(const CommandArgs& args) {
     o.material = loaded[i].material;
     o.visibility = loaded[i].visibility.get();
     o.light_center = loaded[i].placement.center_world;
-    if (!light_probe.empty()) o.light_override = &probe_light;
+    if (!light_probe.empty()) o.light_override = &probe_light, o.light_samples = &probe_samples;
     if (!probe_lobe_distances[i].empty()) o.light_distances = &probe_lobe_distances[i];
   }
 

@@ -52,6 +52,7 @@ std::vector<std::string> InsertOptions::Validate() const {
         "shadow_reach_radii: out of range (expected 1 to 1000)");
   check(std::isfinite(shadow_epsilon) && shadow_epsilon >= 0 && shadow_epsilon < 1,
         "shadow_epsilon: out of range (expected 0 <= value < 1)");
+  check(specular_levels >= 2 && specular_levels <= 64, "specular_levels: out of range (expected 2 to 64)");
   check(occlusion_step >= 1 && occlusion_step <= 64, "occlusion_step: out of range (expected 1 to 64)");
   check(std::isfinite(occlusion_clear_opacity) && occlusion_clear_opacity >= 0 && occlusion_clear_opacity < 1,
         "occlusion_clear_opacity: out of range (expected 0 <= value < 1)");
@@ -88,6 +89,8 @@ std::string InsertOptions::ToJson() const {
   j["shadow_reach_radii"] = shadow_reach_radii;
   j["shadow_epsilon"] = shadow_epsilon;
   j["self_shadow_per_vertex"] = self_shadow_per_vertex;
+  j["prefiltered_specular"] = prefiltered_specular;
+  j["specular_levels"] = specular_levels;
   j["antialias_edges"] = antialias_edges;
   j["occlusion_step"] = occlusion_step;
   j["occlusion_clear_opacity"] = occlusion_clear_opacity;

@@ -30,6 +30,14 @@ struct InsertOptions {
   // rasteriser's barycentrics; false: one SSDF query per pixel.
   bool self_shadow_per_vertex = true;
 
+  // Specular term from the incident-light samples prefiltered by the GGX
+  // lobe at specular_levels roughness levels (render/sg/prefiltered.h,
+  // split sum; built when the light changes), its self-shadow the SG
+  // specular's ratio with and without γ; false: the SG product integral
+  // (paper eq. 5), which cannot reflect sources sharper than its lobes.
+  bool prefiltered_specular = true;
+  int specular_levels = 9;
+
   // Object edges blended with the background by the fraction of each pixel
   // the objects cover (4×4 sub-samples of the rasteriser), as a camera's
   // pixel integrates its square; false: a pixel is the object or not.

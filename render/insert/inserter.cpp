@@ -18,6 +18,7 @@ namespace nerfar {
 struct LightPrepCache {
   std::vector<double> key;
   std::vector<LightPrep> preps;
+  std::vector<PrefilteredRadiance> specular;  // per object (InsertOptions::prefiltered_specular), same key
 };
 
 ImageF ExpandLayer(const ImageF& layer, const PixelRect& rect, int width, int height, float fill) {
@@ -155,12 +156,23 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
     }
     if (!preps_) preps_ = std::make_unique<LightPrepCache>();
     if (key != preps_->key) {
+      preps_->specular.clear();
       preps_->preps = std::vector<LightPrep>(n_objects);
       preps_->key = std::move(key);
     }
   }
   std::vector<LightPrep>& preps = preps_->preps;
   for (size_t o = 0; o < n_objects; ++o) PrepareLight(used_lights_[o], objects, preps[o], &parallax[o]);
+  // The incident-light samples prefiltered for the specular term, with the preps.
+  std::vector<PrefilteredRadiance>& specular = preps_->specular;
+  if (!options_.prefiltered_specular) specular.clear();
+  if (options_.prefiltered_specular && specular.size() != n_objects) {
+    specular.assign(n_objects, PrefilteredRadiance());
+    for (size_t o = 0; o < n_objects; ++o) {
+      const RadianceSamples* samples = objects[o].light_override ? objects[o].light_samples : &lights_[o].samples();
+      if (samples != nullptr) specular[o] = PrefilteredRadiance(*samples, options_.specular_levels);
+    }
+  }
   // Self-shadow γ per mesh vertex, kept while the objects and the light
   // stand still (it does not depend on the view).
   const bool per_vertex = options_.self_shadow && options_.self_shadow_per_vertex;
@@ -169,7 +181,7 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
     times.gamma_recomputed =
         UpdateVertexGamma(objects, spheres, used_lights_, preps, options_, vertex_gamma_, vertex_normals);
   ShadeObjects(objects, spheres, preps, per_vertex ? &vertex_gamma_ : nullptr, vertex_normals, options_, g, covered,
-               Vec3f(T_world_camera.translation), layers.object);
+               Vec3f(T_world_camera.translation), layers.object, specular);
   times.shade_ms = MsSince(t0);
 
   // 4. Occlusion and composite on object pixels (paper eq. 7 and Fig. "sample").

@@ -45,6 +45,9 @@ struct InsertObject {
   // With light_override: its lobes' distances from the light centre
   // (LightParallax; +infinity = distant); nullptr: taken from the scene.
   const std::vector<double>* light_distances = nullptr;
+  // With light_override: the radiance samples it stands for (e.g. the probe's
+  // pixels), for the prefiltered specular term; nullptr: SG specular.
+  const RadianceSamples* light_samples = nullptr;
   std::optional<Vec3> light_center;  // world point the incident light is taken at (default: bounding-sphere centre)
 };
 

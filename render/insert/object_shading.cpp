@@ -5,12 +5,18 @@
 #include <cmath>
 #include <limits>
 
+#include "calib/core/metrics.h"
 #include "calib/core/parallel.h"
 #include "render/insert/shadow_terms.h"
 
 namespace nerfar {
 
 namespace {
+
+float LuminanceOfPixel(const Vec3f& c) {
+  const float rgb[3] = {c.x, c.y, c.z};
+  return Luminance(rgb, 3);
+}
 
 // Bilinear texture look-up with wrap-around; v = 0 is the top row.
 void SampleMap(const ImageF& map, float u, float v, float* out, int channels) {
@@ -52,7 +58,8 @@ SgMaterial PixelMaterial(const InsertObject& object, const std::array<float, 2>&
 void ShadeObjects(const std::vector<InsertObject>& objects, const std::vector<WorldSphere>& spheres,
                   const std::vector<LightPrep>& preps, const std::vector<VertexGamma>* vertex_gamma,
                   const std::vector<std::vector<Vec3f>>& vertex_normals, const InsertOptions& options,
-                  const ObjectGBuffer& g, const std::vector<uint32_t>& covered, const Vec3f& eye, ImageF& object) {
+                  const ObjectGBuffer& g, const std::vector<uint32_t>& covered, const Vec3f& eye, ImageF& object,
+                  const std::vector<PrefilteredRadiance>& specular) {
   const size_t n_objects = objects.size();
   constexpr size_t kChunk = 256;
   const size_t chunks = (covered.size() + kChunk - 1) / kChunk;
@@ -65,7 +72,7 @@ void ShadeObjects(const std::vector<InsertObject>& objects, const std::vector<Wo
         std::vector<float> ssd, ssd_min;
         std::vector<float> gamma;
         std::vector<SgMaterial> materials;
-        std::vector<Vec3f> normals, views, rgb;
+        std::vector<Vec3f> normals, views, rgb, shadowed, open;
         materials.reserve(end - begin);
         normals.reserve(end - begin);
         views.reserve(end - begin);
@@ -113,9 +120,32 @@ void ShadeObjects(const std::vector<InsertObject>& objects, const std::vector<Wo
             views.push_back(Normalized(eye - g.position[i]));
           }
           rgb.assign(count, Vec3f{});
+          const PrefilteredRadiance* map = size_t(o) < specular.size() && !specular[o].empty() ? &specular[o] : nullptr;
           if (m > 0)
             p.shader->Shade(materials.data(), normals.data(), views.data(), gamma.data(), static_cast<int>(count),
-                            rgb.data());
+                            rgb.data(), map ? SgTerms::kDiffuse : SgTerms::kAll);
+          if (map) {
+            // Self-shadow of the specular term: the SG specular with γ over
+            // the same without (luminance), where any γ is below 1.
+            const bool any_shadow = std::any_of(gamma.begin(), gamma.end(), [](float x) { return x < 1.0f; });
+            if (any_shadow && m > 0) {
+              shadowed.assign(count, Vec3f{});
+              open.assign(count, Vec3f{});
+              p.shader->Shade(materials.data(), normals.data(), views.data(), gamma.data(), static_cast<int>(count),
+                              shadowed.data(), SgTerms::kSpecular);
+              p.shader->Shade(materials.data(), normals.data(), views.data(), nullptr, static_cast<int>(count),
+                              open.data(), SgTerms::kSpecular);
+            }
+            for (size_t k = 0; k < count; ++k) {
+              float visibility = 1.0f;
+              if (any_shadow && m > 0) {
+                const float lum_open = LuminanceOfPixel(open[k]);
+                if (lum_open > 0.0f && std::isfinite(lum_open))
+                  visibility = std::clamp(LuminanceOfPixel(shadowed[k]) / lum_open, 0.0f, 1.0f);
+              }
+              rgb[k] += map->ShadeSpecular(materials[k], normals[k], views[k]) * visibility;
+            }
+          }
           for (size_t k = run; k < run_end; ++k) {
             const size_t px = covered[k];  // same layout as the G-buffer
             const Vec3f value = Finite(rgb[k - run]) ? rgb[k - run] : Vec3f{};

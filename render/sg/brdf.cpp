@@ -97,6 +97,12 @@ Vec3 DisneyBrdf(const SgMaterial& m, const Vec3& n, const Vec3& v, const Vec3& l
   const double nl = Dot(n, l), nv = Dot(n, v);
   if (nl <= 0.0 || nv <= 0.0) return {};
   const Vec3 diffuse = m.base_color * ((1.0 - m.metallic) * kInvPi * BurleyFactor(m.roughness, n, v, l));
+  return diffuse + DisneySpecularBrdf(m, n, v, l);
+}
+
+Vec3 DisneySpecularBrdf(const SgMaterial& m, const Vec3& n, const Vec3& v, const Vec3& l) {
+  const double nl = Dot(n, l), nv = Dot(n, v);
+  if (nl <= 0.0 || nv <= 0.0) return {};
   const Vec3 h = Normalized(l + v);
   const double alpha = Alpha(m.roughness), a2 = alpha * alpha;
   const double nh = Dot(n, h);
@@ -104,7 +110,7 @@ Vec3 DisneyBrdf(const SgMaterial& m, const Vec3& n, const Vec3& v, const Vec3& l
   const double d = a2 / (kPi * denom * denom);
   const double g = SmithG1(alpha, nl) * SmithG1(alpha, nv);
   const Vec3 f = Schlick(F0Of(m), Dot(v, h));
-  return diffuse + f * (d * g / (4.0 * nl * nv));
+  return f * (d * g / (4.0 * nl * nv));
 }
 
 std::array<Sg, kNdfLobes> SpecularLobes(const SgMaterial& m, const Vec3& n, const Vec3& v) {

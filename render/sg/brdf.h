@@ -30,6 +30,9 @@ inline constexpr double kMinAlpha = 0.02 * 0.02;
 // separable Smith shadowing + Schlick Fresnel), f_r(l, v) in 1/sr; 0 when l or
 // v is below the horizon. For tests and error figures, not the live path.
 Vec3 DisneyBrdf(const SgMaterial& material, const Vec3& n, const Vec3& v, const Vec3& l);
+// Its specular part alone (GGX, Smith, Schlick; DisneyBrdf minus Burley's
+// diffuse), 1/sr; 0 below either horizon.
+Vec3 DisneySpecularBrdf(const SgMaterial& material, const Vec3& n, const Vec3& v, const Vec3& l);
 
 // The GGX distribution as two SGs in the half vector (the NDF's core and its
 // tail): D(h) ≈ Σ_j c_j/(πα²) · exp((b_j/α²)(h·n − 1)). GGX is

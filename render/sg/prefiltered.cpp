@@ -1,0 +1,252 @@
+#include "render/sg/prefiltered.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+
+#include "calib/core/parallel.h"
+
+namespace nerfar {
+
+namespace {
+
+constexpr float kPiF = 3.14159265358979323846f;
+
+// Environment-BRDF table: nodes n·v = i/(kTableNv − 1) (0 taken as 1e-4),
+// r = j/(kTableR − 1); each node integrated with kTableSamples GGX
+// importance samples (Hammersley points).
+constexpr int kTableNv = 32, kTableR = 32, kTableSamples = 1024;
+
+double RadicalInverse(uint32_t bits) {
+  bits = (bits << 16u) | (bits >> 16u);
+  bits = ((bits & 0x55555555u) << 1u) | ((bits & 0xAAAAAAAAu) >> 1u);
+  bits = ((bits & 0x33333333u) << 2u) | ((bits & 0xCCCCCCCCu) >> 2u);
+  bits = ((bits & 0x0F0F0F0Fu) << 4u) | ((bits & 0xF0F0F0F0u) >> 4u);
+  bits = ((bits & 0x00FF00FFu) << 8u) | ((bits & 0xFF00FF00u) >> 8u);
+  return static_cast<double>(bits) * 2.3283064365386963e-10;
+}
+
+// A and B at one node: f from DisneySpecularBrdf with F0 = 1 (red) and
+// F0 = 0 (green), so red = A + B, green = B; h drawn from D(h)(n·h), whose
+// density in l is D(h)(n·h)/(4 v·h).
+EnvironmentBrdfTerms IntegrateEnvironmentBrdf(double nv, double roughness) {
+  SgMaterial m;
+  m.base_color = Vec3(1, 0, 0);
+  m.metallic = 1.0;  // F0 = base colour
+  m.roughness = roughness;
+  const double alpha = std::max(roughness * roughness, kMinAlpha), a2 = alpha * alpha;
+  const Vec3 n(0, 0, 1), v(std::sqrt(std::max(0.0, 1.0 - nv * nv)), 0, nv);
+  double red = 0, green = 0;
+  for (int s = 0; s < kTableSamples; ++s) {
+    const double u1 = (s + 0.5) / kTableSamples, u2 = RadicalInverse(static_cast<uint32_t>(s));
+    const double cos_h = std::sqrt((1.0 - u1) / (1.0 + (a2 - 1.0) * u1));
+    const double sin_h = std::sqrt(std::max(0.0, 1.0 - cos_h * cos_h)), phi = 2.0 * kPi * u2;
+    const Vec3 h(sin_h * std::cos(phi), sin_h * std::sin(phi), cos_h);
+    const double vh = Dot(v, h);
+    if (vh <= 0.0) continue;
+    const Vec3 l = h * (2.0 * vh) - v;
+    const double nl = Dot(n, l);
+    if (nl <= 0.0) continue;
+    const double denom = cos_h * cos_h * (a2 - 1.0) + 1.0;
+    const double pdf = a2 / (kPi * denom * denom) * cos_h / (4.0 * vh);
+    const Vec3 f = DisneySpecularBrdf(m, n, v, l);
+    red += f.x * nl / pdf;
+    green += f.y * nl / pdf;
+  }
+  red /= kTableSamples, green /= kTableSamples;
+  return {static_cast<float>(red - green), static_cast<float>(green)};
+}
+
+const std::vector<EnvironmentBrdfTerms>& EnvironmentBrdfTable() {
+  static const std::vector<EnvironmentBrdfTerms> table = [] {
+    std::vector<EnvironmentBrdfTerms> t(size_t(kTableNv) * kTableR);
+    ParallelFor(
+        t.size(),
+        [&](size_t k) {
+          const int i = static_cast<int>(k % kTableNv), j = static_cast<int>(k / kTableNv);
+          t[k] = IntegrateEnvironmentBrdf(std::max(1e-4, double(i) / (kTableNv - 1)), double(j) / (kTableR - 1));
+        },
+        16);
+    return t;
+  }();
+  return table;
+}
+
+// Panorama coordinates of a unit direction (sphere.h's convention), float.
+void Coordinates(const Vec3f& d, float* u, float* v) {
+  const float z = std::clamp(d.z, -1.0f, 1.0f);
+  *v = std::acos(z) / kPiF;
+  float uu = 0.5f * (1.0f - std::atan2(d.y, d.x) / kPiF);
+  if (!(uu >= 0.0f)) uu = 0.0f;  // NaN guard
+  *u = uu - std::floor(uu);
+}
+
+}  // namespace
+
+EnvironmentBrdfTerms EnvironmentBrdf(float n_dot_v, float roughness) {
+  const std::vector<EnvironmentBrdfTerms>& t = EnvironmentBrdfTable();
+  const float x = std::clamp(n_dot_v, 0.0f, 1.0f) * (kTableNv - 1),
+              y = std::clamp(roughness, 0.0f, 1.0f) * (kTableR - 1);
+  const int i = std::min(kTableNv - 2, static_cast<int>(x)), j = std::min(kTableR - 2, static_cast<int>(y));
+  const float fx = x - i, fy = y - j;
+  const auto at = [&](int a, int b) { return t[size_t(b) * kTableNv + a]; };
+  const EnvironmentBrdfTerms p = at(i, j), q = at(i + 1, j), r = at(i, j + 1), s = at(i + 1, j + 1);
+  const auto mix = [&](float a, float b, float c, float d) {
+    return (1 - fy) * ((1 - fx) * a + fx * b) + fy * ((1 - fx) * c + fx * d);
+  };
+  return {mix(p.scale, q.scale, r.scale, s.scale), mix(p.bias, q.bias, r.bias, s.bias)};
+}
+
+Vec3 ShadeSamplesBruteForce(const RadianceSamples& samples, const SgMaterial& material, const Vec3& n, const Vec3& v,
+                            bool specular_only) {
+  Vec3 sum;
+  for (size_t i = 0; i < samples.size(); ++i) {
+    const Vec3& l = samples.directions[i];
+    const double nl = Dot(n, l);
+    if (nl <= 0.0) continue;
+    const Vec3 f = specular_only ? DisneySpecularBrdf(material, n, v, l) : DisneyBrdf(material, n, v, l);
+    sum += f * samples.radiance[i] * (nl * samples.solid_angles[i]);
+  }
+  return sum;
+}
+
+PrefilteredRadiance::PrefilteredRadiance(const RadianceSamples& samples, int levels) {
+  const size_t count = samples.size();
+  if (count == 0 || levels < 2 || samples.radiance.size() != count || samples.solid_angles.size() != count) return;
+  // Samples bucketed over a (θ, φ) grid (counting sort), structure of arrays.
+  constexpr int kRows = 32, kCols = 64;
+  std::vector<int> bucket(count), start(kRows * kCols + 1, 0);
+  double total_solid_angle = 0;
+  for (size_t i = 0; i < count; ++i) {
+    float u, v;
+    Coordinates(Vec3f(samples.directions[i]), &u, &v);
+    const int r = std::min(kRows - 1, static_cast<int>(v * kRows)),
+              c = std::min(kCols - 1, static_cast<int>(u * kCols));
+    bucket[i] = r * kCols + c;
+    ++start[bucket[i] + 1];
+    const double w = samples.solid_angles[i];
+    if (std::isfinite(w) && w > 0) total_solid_angle += w;
+  }
+  for (int b = 0; b < kRows * kCols; ++b) start[b + 1] += start[b];
+  std::vector<float> x(count), y(count), z(count), lr(count), lg(count), lb(count), omega(count);
+  {
+    std::vector<int> fill(start.begin(), start.end() - 1);
+    for (size_t i = 0; i < count; ++i) {
+      const int k = fill[bucket[i]]++;
+      const Vec3f d = Normalized(Vec3f(samples.directions[i]));
+      const Vec3& L = samples.radiance[i];
+      const double w = samples.solid_angles[i];
+      const bool ok = std::isfinite(L.x) && std::isfinite(L.y) && std::isfinite(L.z) && L.x >= 0 && L.y >= 0 &&
+                      L.z >= 0 && std::isfinite(w) && w > 0 && std::isfinite(d.x);
+      x[k] = ok ? d.x : 0.0f, y[k] = ok ? d.y : 0.0f, z[k] = ok ? d.z : 1.0f;
+      lr[k] = ok ? static_cast<float>(L.x) : 0.0f;
+      lg[k] = ok ? static_cast<float>(L.y) : 0.0f;
+      lb[k] = ok ? static_cast<float>(L.z) : 0.0f;
+      omega[k] = ok ? static_cast<float>(w) : 0.0f;
+    }
+  }
+  // The samples' mean spacing and the finest map they can fill.
+  const double spacing = std::sqrt(std::max(total_solid_angle, 1e-12) / static_cast<double>(count));
+  const int finest = std::max(8, static_cast<int>(std::ceil(kPi / spacing)));
+  levels_.resize(levels);
+  for (int k = 0; k < levels; ++k) {
+    const double r = double(k) / (levels - 1);
+    const double alpha_brdf = std::max(r * r, kMinAlpha);
+    const double alpha = std::sqrt(alpha_brdf * alpha_brdf + 0.25 * spacing * spacing);
+    const float a2 = static_cast<float>(alpha * alpha);
+    Level& level = levels_[k];
+    level.height = std::clamp(static_cast<int>(std::ceil(kPi / alpha)), 8, finest);
+    level.width = 2 * level.height;
+    level.rgb.assign(size_t(level.width) * level.height * 3, 0.0f);
+    // Support: angle between R and l up to 2 atan(6α) (θ_h up to atan(6α)).
+    const double reach = std::min(kPi, 2.0 * std::atan(6.0 * alpha));
+    const float cos_reach = static_cast<float>(std::cos(reach));
+    ParallelFor(
+        static_cast<size_t>(level.height),
+        [&](size_t row) {
+          const double theta = kPi * (row + 0.5) / level.height;
+          const double lo = theta - reach, hi = theta + reach;
+          const int r0 = std::max(0, static_cast<int>(std::floor(lo / kPi * kRows)));
+          const int r1 = std::min(kRows - 1, static_cast<int>(std::floor(hi / kPi * kRows)));
+          // Columns within reach: all near a pole, else |Δφ| ≤ asin(sin reach / sin θ) plus a bucket.
+          int half_cols = kCols;
+          if (lo > 0 && hi < kPi && reach < 0.5 * kPi) {
+            const double dphi = std::asin(std::min(1.0, std::sin(reach) / std::sin(theta)));
+            half_cols = static_cast<int>(std::ceil(dphi / (2.0 * kPi) * kCols)) + 1;
+          }
+          for (int col = 0; col < level.width; ++col) {
+            const double u = (col + 0.5) / level.width;
+            const Vec3f R(EquirectDirection(u, (row + 0.5) / level.height));
+            const int c_mid = std::min(kCols - 1, static_cast<int>(u * kCols));
+            const int c0 = half_cols >= kCols / 2 ? 0 : c_mid - half_cols;
+            const int c1 = half_cols >= kCols / 2 ? kCols - 1 : c_mid + half_cols;
+            float sw = 0, sr = 0, sg = 0, sb = 0;
+            for (int br = r0; br <= r1; ++br)
+              for (int bc = c0; bc <= c1; ++bc) {
+                const int b = br * kCols + ((bc % kCols) + kCols) % kCols;
+                for (int i = start[b]; i < start[b + 1]; ++i) {
+                  const float c = R.x * x[i] + R.y * y[i] + R.z * z[i];
+                  if (c < cos_reach || c <= 0.0f) continue;
+                  // D(h) up to constants: 1/((n·h)²(α² − 1) + 1)², (n·h)² = (1 + c)/2.
+                  const float denom = 0.5f * (1.0f + c) * (a2 - 1.0f) + 1.0f;
+                  const float w = omega[i] * c / (denom * denom);
+                  sw += w, sr += w * lr[i], sg += w * lg[i], sb += w * lb[i];
+                }
+              }
+            float* out = &level.rgb[(row * level.width + col) * 3];
+            if (sw > 0) out[0] = sr / sw, out[1] = sg / sw, out[2] = sb / sw;
+          }
+        },
+        1);
+  }
+}
+
+Vec3f PrefilteredRadiance::Sample(const Level& level, float u, float v) const {
+  const float fx = u * level.width - 0.5f, fy = std::clamp(v * level.height - 0.5f, 0.0f, level.height - 1.0f);
+  const int x0 = static_cast<int>(std::floor(fx)), y0 = std::min(level.height - 2, static_cast<int>(fy));
+  const float ax = fx - x0, ay = std::clamp(fy - y0, 0.0f, 1.0f);
+  const int xa = (x0 + level.width) % level.width, xb = (x0 + 1 + level.width) % level.width;
+  const float* p00 = &level.rgb[(size_t(y0) * level.width + xa) * 3];
+  const float* p01 = &level.rgb[(size_t(y0) * level.width + xb) * 3];
+  const float* p10 = &level.rgb[(size_t(y0 + 1) * level.width + xa) * 3];
+  const float* p11 = &level.rgb[(size_t(y0 + 1) * level.width + xb) * 3];
+  float out[3];
+  for (int c = 0; c < 3; ++c)
+    out[c] = (1 - ay) * ((1 - ax) * p00[c] + ax * p01[c]) + ay * ((1 - ax) * p10[c] + ax * p11[c]);
+  return {out[0], out[1], out[2]};
+}
+
+Vec3f PrefilteredRadiance::Lookup(const Vec3f& d, float roughness) const {
+  if (levels_.empty()) return {};
+  float u, v;
+  Coordinates(d, &u, &v);
+  const float x = std::clamp(std::isfinite(roughness) ? roughness : 1.0f, 0.0f, 1.0f) * (levels_.size() - 1);
+  const int k = std::min(static_cast<int>(levels_.size()) - 2, static_cast<int>(x));
+  const float t = x - k;
+  const Vec3f a = Sample(levels_[k], u, v);
+  if (t <= 0.0f) return a;
+  return a * (1.0f - t) + Sample(levels_[k + 1], u, v) * t;
+}
+
+Vec3f PrefilteredRadiance::ShadeSpecular(const SgMaterial& m, const Vec3f& n, const Vec3f& v) const {
+  const float nv = Dot(n, v);
+  if (!(nv > 0.0f) || levels_.empty()) return {};
+  const Vec3f r = n * (2.0f * nv) - v;
+  const float rough = static_cast<float>(m.roughness);
+  // The lobe's dominant direction: from R towards n as α grows (at α = 1
+  // it is n: the rough lobe is weighted by n·l more than it is centred on
+  // R); s(α) = (1 − α)(√(1 − α) + α), a published fit to the GGX lobe's
+  // peak. Against brute force over a lamp-lit panorama (shading_test) it
+  // halves the error at r = 1 and changes it by ±0.04 below r = 0.5.
+  const float alpha = std::max(rough * rough, static_cast<float>(kMinAlpha));
+  const float smooth = 1.0f - std::min(alpha, 1.0f), s = smooth * (std::sqrt(smooth) + alpha);
+  const Vec3f L = Lookup(Normalized(n * (1.0f - s) + r * s), rough);
+  const EnvironmentBrdfTerms e = EnvironmentBrdf(nv, rough);
+  const float metal = static_cast<float>(m.metallic), d0 = static_cast<float>(kDielectricF0);
+  const float f0r = d0 + (static_cast<float>(m.base_color.x) - d0) * metal;
+  const float f0g = d0 + (static_cast<float>(m.base_color.y) - d0) * metal;
+  const float f0b = d0 + (static_cast<float>(m.base_color.z) - d0) * metal;
+  return {L.x * (f0r * e.scale + e.bias), L.y * (f0g * e.scale + e.bias), L.z * (f0b * e.scale + e.bias)};
+}
+
+}  // namespace nerfar

@@ -1,0 +1,68 @@
+// Specular shading from the incident-light samples themselves (split sum):
+// the radiance prefiltered by the GGX lobe at a few roughness levels (maps
+// over the sphere, built once per light) times an environment-BRDF term
+// F0·A(n·v, r) + B(n·v, r) that holds the BRDF's integral under white light.
+// An SG light of a few dozen lobes cannot carry reflections of compact
+// sources sharper than its lobes; the samples can, up to their spacing.
+// Directions are world unit vectors (sphere.h's panorama convention for the
+// maps' layout); radiance linear RGB; materials as in brdf.h.
+#pragma once
+
+#include <vector>
+
+#include "render/sg/brdf.h"
+#include "render/sg/sphere.h"
+
+namespace nerfar {
+
+// Brute-force outgoing radiance Σ_i f(l_i, v) L_i max(n·l_i, 0) Δω_i over
+// the samples, with f the whole BRDF or its specular part only. The
+// reference the prefiltered shading is tested against (slow: every sample
+// per call).
+Vec3 ShadeSamplesBruteForce(const RadianceSamples& samples, const SgMaterial& material, const Vec3& n, const Vec3& v,
+                            bool specular_only);
+
+// The split-sum environment BRDF: ∫ f_spec(l, v) max(n·l, 0) dω under unit
+// radiance = F0·A + B (Schlick: F = F0 + (1 − F0)(1 − v·h)⁵), tabulated over
+// n·v and roughness by importance-sampled integration once per process and
+// read bilinearly (table accuracy in tests/insert/shading_test.cpp).
+struct EnvironmentBrdfTerms {
+  float scale = 0;  // A: multiplies F0
+  float bias = 0;   // B: added (per channel, times 1)
+};
+EnvironmentBrdfTerms EnvironmentBrdf(float n_dot_v, float roughness);
+
+// GGX-prefiltered radiance at `levels` roughness levels r_k = k/(levels − 1):
+// map k holds, per direction R, Σ_i w_i L_i / Σ_i w_i with
+// w_i = D_α(h_i)·max(R·l_i, 0)·Δω_i, h_i the half vector of R and l_i (the
+// lobe with n = v = R). The filter's α is widened to √(α² + (Δ/2)²), Δ the
+// samples' mean spacing (√ of their mean solid angle): a map cannot hold a
+// reflection finer than the samples it is made of. Each level is a panorama
+// whose texels are about α wide (at most the samples' resolution, at least
+// 16 × 8); the GGX tail beyond tan θ_h = 6α (under 3 % of the lobe's
+// projected energy) is left out of the sums.
+class PrefilteredRadiance {
+ public:
+  PrefilteredRadiance() = default;
+  // Runs over ParallelFor. Samples with a non-finite or negative value or
+  // solid angle count as black; no samples or levels < 2: empty().
+  PrefilteredRadiance(const RadianceSamples& samples, int levels);
+  bool empty() const { return levels_.empty(); }
+  int level_count() const { return static_cast<int>(levels_.size()); }
+  // Prefiltered radiance around unit direction d for roughness r in [0, 1]:
+  // bilinear in each map, linear between the two nearest levels.
+  Vec3f Lookup(const Vec3f& d, float roughness) const;
+  // The specular radiance of a pixel: Lookup(mirror of v about n) times the
+  // environment BRDF with F0 = mix(0.02, a, m); 0 viewed from behind.
+  Vec3f ShadeSpecular(const SgMaterial& material, const Vec3f& n, const Vec3f& v) const;
+
+ private:
+  struct Level {
+    int width = 0, height = 0;
+    std::vector<float> rgb;  // row-major, 3 floats per texel
+  };
+  Vec3f Sample(const Level& level, float u, float v) const;
+  std::vector<Level> levels_;
+};
+
+}  // namespace nerfar
