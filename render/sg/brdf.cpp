@@ -315,7 +315,9 @@ struct GatherScalar {
   }
 };
 
-template <bool kDiffuse, bool kSpecular, class Gather>
+// kVisibility (with kSpecular): sr sums Σ γ Y(μ) ⟨G, spec⟩ and sg the same
+// with γ = 1 (Y: luminance), sb is 0.
+template <bool kDiffuse, bool kSpecular, class Gather, bool kVisibility = false>
 [[gnu::always_inline]] inline void ShadeBlockBody(const LobeArrays& a, const PixelBlock& b, BlockSums* out) {
   constexpr int kLast = kIrradianceTableColumns - 1;
   constexpr float kTwoPiF = 6.28318530717958647692f;
@@ -360,7 +362,18 @@ template <bool kDiffuse, bool kSpecular, class Gather>
         db[i] += mb * weight;
       }
     }
-    if constexpr (kSpecular) {
+    if constexpr (kSpecular && kVisibility) {
+      const float y = 0.2126f * mr + 0.7152f * mg + 0.0722f * mb;
+#pragma omp simd
+      for (int i = 0; i < kPixelLanes; ++i) {
+        const float dx = px - b.sx[i], dy = py - b.sy[i], dz = pz - b.sz[i];
+        const float d2 = dx * dx + dy * dy + dz * dz, ps = 1.0f - 0.5f * d2;
+        const float open =
+            y * (c0 * UnitInnerProductF(lambda, b.sl0[i], d2, ps) + c1 * UnitInnerProductF(lambda, b.sl1[i], d2, ps));
+        sr[i] += g[i] * open;
+        sg[i] += open;
+      }
+    } else if constexpr (kSpecular) {
 #pragma omp simd
       for (int i = 0; i < kPixelLanes; ++i) {
         const float dx = px - b.sx[i], dy = py - b.sy[i], dz = pz - b.sz[i];
@@ -376,12 +389,14 @@ template <bool kDiffuse, bool kSpecular, class Gather>
 }
 
 void ShadeLobesBaseline(const LobeArrays& a, const PixelTerms& t, float* out) { ShadeLobesBody(a, t, out); }
-// parts: 1 diffuse, 2 specular, 3 both (SgShader::Shade's `terms` and the materials).
+// parts: 1 diffuse, 2 specular, 3 both (SgShader::Shade's `terms` and the
+// materials), 4 the specular's visibility sums.
 template <class Gather>
 [[gnu::always_inline]] inline void ShadeBlockParts(const LobeArrays& a, const PixelBlock& b, int parts,
                                                    BlockSums* out) {
   if (parts == 1) return ShadeBlockBody<true, false, Gather>(a, b, out);
   if (parts == 2) return ShadeBlockBody<false, true, Gather>(a, b, out);
+  if (parts == 4) return ShadeBlockBody<false, true, Gather, true>(a, b, out);
   ShadeBlockBody<true, true, Gather>(a, b, out);
 }
 void ShadeBlockBaseline(const LobeArrays& a, const PixelBlock& b, int parts, BlockSums* out) {
@@ -528,12 +543,18 @@ void SgShader::Shade(const SgMaterial* materials, const Vec3f* normals, const Ve
       ks[0][i] = view.amp_r, ks[1][i] = view.amp_g, ks[2][i] = view.amp_b;
     }
     // Metals have no diffuse term: a block of metals skips that loop.
-    const int parts = (terms != SgTerms::kSpecular && diffuse ? 1 : 0) | (terms != SgTerms::kDiffuse ? 2 : 0);
+    const int parts = terms == SgTerms::kSpecularVisibility
+                          ? 4
+                          : (terms != SgTerms::kSpecular && diffuse ? 1 : 0) | (terms != SgTerms::kDiffuse ? 2 : 0);
     if (parts == 0) {
       std::fill(out + begin, out + begin + lanes, Vec3f());
       continue;
     }
     kKernels.block(arrays, block, parts, &sums);
+    if (parts == 4) {
+      for (int i = 0; i < lanes; ++i) out[begin + i] = Vec3f(sums.sr[i], sums.sg[i], 0.0f);
+      continue;
+    }
     for (int i = 0; i < lanes; ++i)
       out[begin + i] =
           Vec3f(kd[0][i] * sums.dr[i] + ks[0][i] * sums.sr[i], kd[1][i] * sums.dg[i] + ks[1][i] * sums.sg[i],

@@ -73,7 +73,10 @@ Vec3 ShadeSg(const SgMixture& light, const SgMaterial& material, const Vec3& n, 
 // cost" counts their FLOPs and instructions.
 inline constexpr int kSgLanes = 16;
 // Which part of eq. 5 SgShader::Shade (many pixels) returns.
-enum class SgTerms { kAll, kDiffuse, kSpecular };
+// kSpecularVisibility: not radiance but the specular's self-shadow sums,
+// x = Σ_k γ_k Y(μ_k) Σ_j c_j⟨G_k, S_j⟩ and y = the same with every γ = 1 (Y
+// luminance); x/y is the fraction of the SG specular that γ lets through.
+enum class SgTerms { kAll, kDiffuse, kSpecular, kSpecularVisibility };
 class SgShader {
  public:
   explicit SgShader(const SgMixture& light);
