@@ -85,6 +85,7 @@ struct StageMedians {
   // pixels passed by the multiply.
   double handheld_receivers_ms = 0, handheld_lookup_ms = 0, handheld_multiply_ms = 0, handheld_occlusion = 0;
   double handheld_receivers = 0, handheld_lookups = 0, handheld_multiplied = 0;
+  double handheld_hidden = 0;  // κ grid nodes under the object that no background pixel needs
   double handheld_evaluated = 0, handheld_raster = 0, handheld_shade = 0;  // new lattice nodes; raster, shade ms
   double handheld_kappa_marched_all = 0, handheld_frame_marched_all = 0, handheld_marched_all = 0;
   // κ of the preset against exact receivers: worst frame's Σ|Δκ| / Σ(1 − κ), worst pixel |Δκ|.
@@ -172,7 +173,7 @@ void TimeHandHeld(const NerfScene& scene, const SgMixture& environment, const In
   const ImageF background(camera.width, camera.height, 3, 0.3f);
   std::vector<double> kappa, frame_ms, n_marched, n_reused, kappa_all, frame_all, n_marched_all;
   std::vector<double> part_receivers, part_lookup, part_multiply, part_occlusion, n_receivers, n_lookups, n_multiplied;
-  std::vector<double> n_evaluated, part_raster, part_shade;
+  std::vector<double> n_evaluated, part_raster, part_shade, n_hidden;
   // NERFAR_BENCH_INSERT_HANDHELD_ONLY=1 (for profiling): the preset's
   // hand-held frames alone, no reference renders (error rows stay 0).
   const char* only_env = std::getenv("NERFAR_BENCH_INSERT_HANDHELD_ONLY");
@@ -194,6 +195,7 @@ void TimeHandHeld(const NerfScene& scene, const SgMixture& environment, const In
       n_lookups.push_back(double(ta.kappa_lookups));
       n_multiplied.push_back(double(ta.kappa_multiplied));
       n_evaluated.push_back(double(ta.kappa_evaluated));
+      n_hidden.push_back(double(ta.kappa_hidden));
       part_raster.push_back(ta.raster_ms);
       part_shade.push_back(ta.shade_ms);
     }
@@ -239,6 +241,7 @@ void TimeHandHeld(const NerfScene& scene, const SgMixture& environment, const In
   m.handheld_lookups = MedianOf(n_lookups);
   m.handheld_multiplied = MedianOf(n_multiplied);
   m.handheld_evaluated = MedianOf(n_evaluated);
+  m.handheld_hidden = MedianOf(n_hidden);
   m.handheld_raster = MedianOf(part_raster);
   m.handheld_shade = MedianOf(part_shade);
   m.handheld_frame = MedianOf(frame_ms);
@@ -435,6 +438,12 @@ std::vector<BenchFigure> BenchInsert(const BenchOptions& options) {
     // NERFAR_BENCH_INSERT_PARALLAX=0: near-light parallax off (to attribute its cost).
     const char* parallax_env = std::getenv("NERFAR_BENCH_INSERT_PARALLAX");
     if (parallax_env != nullptr && std::string(parallax_env) == "0") insert_options.light.parallax = false;
+    // NERFAR_BENCH_INSERT_OFF="snap,skip_covered" (either): κ's ε snap /
+    // the skipped nodes under the object off (to attribute their savings).
+    const char* off_env = std::getenv("NERFAR_BENCH_INSERT_OFF");
+    const std::string off = off_env ? off_env : "";
+    if (off.find("snap") != std::string::npos) insert_options.shadow_epsilon_snap = false;
+    if (off.find("skip_covered") != std::string::npos) insert_options.kappa_skip_covered = false;
     const StageMedians m = TimePreset(scene, environment, object, camera, T_world_camera, insert_options, repeats);
     const std::string note = std::string(preset) + ", " + size + ", object " +
                              std::to_string(int(std::round(m.coverage * 100))) + "% of the frame";
@@ -468,6 +477,8 @@ std::vector<BenchFigure> BenchInsert(const BenchOptions& options) {
     figures.push_back({p + "handheld_lookups", m.handheld_lookups, "", hh + ", shared-lattice look-ups"});
     figures.push_back({p + "handheld_multiplied_px", m.handheld_multiplied, "px", hh + ", pixels the multiply passed"});
     figures.push_back({p + "handheld_evaluated", m.handheld_evaluated, "", hh + ", lattice nodes evaluated (new)"});
+    figures.push_back(
+        {p + "handheld_hidden", m.handheld_hidden, "", hh + ", κ grid nodes under the object not needed (skipped)"});
     figures.push_back({p + "handheld_raster_ms", m.handheld_raster, "ms", hh + ", raster"});
     figures.push_back({p + "handheld_shade_ms", m.handheld_shade, "ms", hh + ", shade + self-shadow"});
     figures.push_back({p + "handheld_reused", m.handheld_reused, "rays", hh + ", options of the preset"});

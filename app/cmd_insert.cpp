@@ -119,6 +119,7 @@ int RunInsert(const CommandArgs& args) {
   int light_directions = -1, sg_lobes = -1, kappa_step = -1, occlusion_step = -1;
   double kappa_cache = -1, receiver_reuse = -1;
   bool no_cell_normals = false, no_parallax = false;
+  bool no_kappa_snap = false, kappa_under_objects = false;
   double parallax_min_sharpness = -1;
   bool gamma_per_pixel = false;
   double shadow_reach = -1, self_shadow_offset = -1, receiver_min_opacity = -1;
@@ -174,6 +175,9 @@ int RunInsert(const CommandArgs& args) {
   parser.Option("--normal-probe-voxels", &normal_probe_voxels, "V",
                 "NeRF receiver normals from the surface found V voxels to each side (default 3; 0: density "
                 "gradient only)");
+  parser.Flag("--no-kappa-snap", &no_kappa_snap, "keep κ in [1 - ε, 1) as computed (default: taken as 1)");
+  parser.Flag("--kappa-under-objects", &kappa_under_objects,
+              "κ also at grid nodes only the objects' pixels cover (default: skipped)");
   parser.Flag("--no-cell-normals", &no_cell_normals,
               "a NeRF normal per κ receiver, not one per κ lattice cell shared by all views");
   parser.Flag("--gamma-per-pixel", &gamma_per_pixel, "self-shadow γ by an SSDF query per pixel, not per mesh vertex");
@@ -227,6 +231,8 @@ int RunInsert(const CommandArgs& args) {
   if (receiver_reuse == 0) options.kappa_receiver_reuse = false;
   if (receiver_reuse != -1 && receiver_reuse != 0) options.kappa_reuse_tolerance_radii = receiver_reuse;  // validated
   if (no_cell_normals) options.receiver_normal_per_cell = false;
+  if (no_kappa_snap) options.shadow_epsilon_snap = false;
+  if (kappa_under_objects) options.kappa_skip_covered = false;
   if (no_parallax) options.light.parallax = false;
   if (light_from_centre) options.light.start_outside_object = false;
   NerfSceneOptions nerf_options;

@@ -88,6 +88,8 @@ std::string InsertOptions::ToJson() const {
   j["shadows"] = shadows;
   j["shadow_reach_radii"] = shadow_reach_radii;
   j["shadow_epsilon"] = shadow_epsilon;
+  j["shadow_epsilon_snap"] = shadow_epsilon_snap;
+  j["kappa_skip_covered"] = kappa_skip_covered;
   j["self_shadow_per_vertex"] = self_shadow_per_vertex;
   j["prefiltered_specular"] = prefiltered_specular;
   j["specular_levels"] = specular_levels;

@@ -55,7 +55,20 @@ struct InsertOptions {
   // Receivers whose κ, bounded from below through each object's bounding
   // sphere, cannot fall under 1 − shadow_epsilon keep κ = 1 (no SSDF query).
   double shadow_epsilon = 2e-3;
+  // κ found at or above 1 − shadow_epsilon (by the SSDF, or interpolated
+  // between lattice nodes) is taken as 1, as where the bound above clears
+  // it: the same rule whichever decided, and the background is multiplied
+  // only where κ < 1 − ε (the bound's sphere is loose for broad lobes, so
+  // receivers across the whole reach had κ a hair under 1); false: κ kept
+  // as computed.
+  bool shadow_epsilon_snap = true;
   int kappa_step = 2;  // κ at every kappa_step-th pixel, bilinear in between (1: every pixel)
+  // κ grid nodes whose surrounding grid cells hold only object pixels (no
+  // background pixel is multiplied by them) are neither found nor
+  // evaluated, and hold κ = 1 in the κ layer (only cells wholly under the
+  // objects read them). The composite is unchanged; false: κ at every node,
+  // under the objects too.
+  bool kappa_skip_covered = true;
   // κ first at every kappa_coarse_factor-th node of that grid; a coarse cell
   // whose corners differ by more than kappa_refine_delta gets all its nodes,
   // the others are interpolated (1: every node of the grid).

@@ -70,6 +70,7 @@ struct InsertTimings {
   size_t kappa_receivers = 0;     // receivers whose κ was taken (grid nodes found or placed on a plane)
   size_t kappa_lookups = 0;       // shared-lattice look-ups (past each thread's memo)
   size_t kappa_multiplied = 0;    // pixels the κ multiply passed (grid cells not all κ = 1)
+  size_t kappa_hidden = 0;        // κ grid nodes under the objects that no background pixel needs (kappa_skip_covered)
   bool gamma_recomputed = false;  // the per-vertex self-shadow cache was (re)built this frame
 };
 

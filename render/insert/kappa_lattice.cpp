@@ -32,12 +32,6 @@ Vec3f CellNormal(uint32_t cell) {
   return Normalized(n);
 }
 
-uint64_t LatticeKey(int64_t i, int64_t j, int64_t k, uint32_t cell) {
-  constexpr int64_t kOffset = int64_t(1) << 17, kMask = (int64_t(1) << 18) - 1;
-  return (uint64_t((i + kOffset) & kMask) << 46) | (uint64_t((j + kOffset) & kMask) << 28) |
-         (uint64_t((k + kOffset) & kMask) << 10) | cell;
-}
-
 bool KappaLattice::Find(uint64_t node, float* value) {
   Shard& s = shards_[ShardOf(node)];
   const auto it = s.frozen.find(node);  // read-only during the frame: no lock

@@ -19,7 +19,11 @@ uint32_t NormalCell(const Vec3f& n);
 Vec3f CellNormal(uint32_t cell);  // the cell's central unit normal
 
 // Lattice node (i, j, k) (18 bits each, offset) and normal cell (10 bits).
-uint64_t LatticeKey(int64_t i, int64_t j, int64_t k, uint32_t cell);
+inline uint64_t LatticeKey(int64_t i, int64_t j, int64_t k, uint32_t cell) {
+  constexpr int64_t kOffset = int64_t(1) << 17, kMask = (int64_t(1) << 18) - 1;
+  return (uint64_t((i + kOffset) & kMask) << 46) | (uint64_t((j + kOffset) & kMask) << 28) |
+         (uint64_t((k + kOffset) & kMask) << 10) | cell;
+}
 constexpr size_t kKappaCacheMaxNodes = size_t(1) << 22;  // ~4 M nodes (~100 MB): cleared beyond
 
 // The lattice nodes one thread looked up last (direct-mapped by key; value

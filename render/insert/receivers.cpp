@@ -6,6 +6,7 @@
 #include <limits>
 #include <optional>
 
+#include "calib/core/parallel.h"
 #include "render/insert/insert_common.h"
 #include "render/insert/inserter.h"
 #include "render/insert/kappa_lattice.h"
@@ -162,7 +163,21 @@ void CellNormals::Resolve(double spacing, std::vector<CellCandidate>& candidates
   }
   if (!(spacing > 0)) return;
   const auto index = [spacing](float v) { return int64_t(std::floor(v / spacing)); };
+  // Candidates in cells that have a normal take it (read-only look-ups,
+  // in parallel); the rest below.
   std::vector<uint64_t> keys(candidates.size());
+  std::vector<uint8_t> known(candidates.size(), 0);
+  ParallelFor(
+      candidates.size(),
+      [&](size_t c) {
+        const Vec3f& p = candidates[c].point;
+        keys[c] = LatticeKey(index(p.x), index(p.y), index(p.z), 0);
+        const auto it = normals_.find(keys[c]);
+        if (it == normals_.end()) return;
+        candidates[c].normal = it->second;
+        known[c] = 1;
+      },
+      512);
   // The usable candidates in cells without a normal yet, sorted by cell and
   // then by their values (a strict total order up to equal values): the sum
   // below runs in the same order whatever order they came in.
@@ -172,9 +187,8 @@ void CellNormals::Resolve(double spacing, std::vector<CellCandidate>& candidates
   };
   std::vector<Fresh> fresh;
   for (size_t c = 0; c < candidates.size(); ++c) {
+    if (known[c]) continue;
     const CellCandidate& cand = candidates[c];
-    keys[c] = LatticeKey(index(cand.point.x), index(cand.point.y), index(cand.point.z), 0);
-    if (normals_.count(keys[c])) continue;
     const Vec3f n = cand.normal;
     if (!Finite(n) || !(Dot(n, n) >= 0.25f)) continue;
     const Vec3f u = Normalized(n);
@@ -196,6 +210,7 @@ void CellNormals::Resolve(double spacing, std::vector<CellCandidate>& candidates
     begin = end;
   }
   for (size_t c = 0; c < candidates.size(); ++c) {
+    if (known[c]) continue;
     const auto it = normals_.find(keys[c]);
     if (it != normals_.end()) candidates[c].normal = it->second;
   }

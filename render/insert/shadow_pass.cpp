@@ -67,6 +67,20 @@ void MultiplyRgb(float* rgb, const float* k, int n) {
   }
 }
 
+// out[i] = min(1, a + slope·i) for i < n (the same values as one at a time).
+void FillRamp(float* out, float a, float slope, int n) {
+  int i = 0;
+#ifdef __SSE2__
+  const __m128 va = _mm_set1_ps(a), vs = _mm_set1_ps(slope), one = _mm_set1_ps(1.0f), four = _mm_set1_ps(4.0f);
+  __m128 vi = _mm_setr_ps(0.0f, 1.0f, 2.0f, 3.0f);
+  for (; i + 4 <= n; i += 4) {
+    _mm_storeu_ps(out + i, _mm_min_ps(_mm_add_ps(va, _mm_mul_ps(vs, vi)), one));  // v < 1 ? v : 1
+    vi = _mm_add_ps(vi, four);
+  }
+#endif
+  for (; i < n; ++i) out[i] = std::min(1.0f, a + slope * float(i));
+}
+
 // κ over `rect` from the grid (nodes at columns xs, rows ys; values in
 // `grid`, row-major) into `layer` (over rect, 1 where the grid's cell holds
 // 1 at all four nodes), and `frame` multiplied by it where no object of `g`
@@ -75,6 +89,22 @@ void MultiplyKappa(const std::vector<int>& xs, const std::vector<int>& ys, const
                    const PixelRect& rect, const ObjectGBuffer& g, ImageF& layer, ImageF& frame,
                    std::vector<size_t>& passed) {
   const size_t nx = xs.size(), ny = ys.size();
+  const size_t cells = nx >= 2 ? nx - 1 : 1;
+  // Per pair of grid rows, the cells not all κ = 1 (the rows of pixels
+  // between them pass only these).
+  std::vector<std::vector<uint32_t>> open(ny >= 2 ? ny - 1 : 1);
+  ParallelFor(
+      open.size(),
+      [&](size_t iy) {
+        const float* g0 = &grid[iy * nx];
+        const float* g1 = &grid[(ny >= 2 ? iy + 1 : iy) * nx];
+        for (size_t ix = 0; ix < cells; ++ix) {
+          const size_t ix1 = nx >= 2 ? ix + 1 : ix;
+          if (!(g0[ix] >= 1.0f && g0[ix1] >= 1.0f && g1[ix] >= 1.0f && g1[ix1] >= 1.0f))
+            open[iy].push_back(static_cast<uint32_t>(ix));
+        }
+      },
+      16);
   ParallelFor(
       static_cast<size_t>(rect.height()),
       [&](size_t r) {
@@ -97,16 +127,14 @@ void MultiplyKappa(const std::vector<int>& xs, const std::vector<int>& ys, const
           ids = &g.object[g.Index(g.rect.x0, y)];
         }
         // The layer first, cell by cell; the passed cells merged into runs.
-        const size_t cells = nx >= 2 ? nx - 1 : 1;
         runs.clear();
-        for (size_t ix = 0; ix < cells; ++ix) {
+        for (const uint32_t ix : open[iy]) {
           const size_t ix1 = nx >= 2 ? ix + 1 : ix;
-          if (g0[ix] >= 1.0f && g0[ix1] >= 1.0f && g1[ix] >= 1.0f && g1[ix1] >= 1.0f) continue;
           const float a = g0[ix] + wy * (g1[ix] - g0[ix]), b = g0[ix1] + wy * (g1[ix1] - g0[ix1]);
           const int x_begin = nx >= 2 ? xs[ix] : rect.x0;
           const int x_end = nx >= 2 && ix + 2 < nx ? xs[ix1] : rect.x1;
           const float slope = nx >= 2 ? (b - a) / float(xs[ix1] - xs[ix]) : 0.0f;
-          for (int x = x_begin; x < x_end; ++x) out_row[x - rect.x0] = std::min(1.0f, a + slope * float(x - x_begin));
+          FillRamp(out_row + (x_begin - rect.x0), a, slope, x_end - x_begin);
           passed[r] += static_cast<size_t>(x_end - x_begin);
           if (!runs.empty() && runs.back().second == x_begin)
             runs.back().second = x_end;
@@ -129,6 +157,42 @@ void MultiplyKappa(const std::vector<int>& xs, const std::vector<int>& ys, const
         }
       },
       4);
+}
+
+// Grid nodes (columns xs, rows ys) whose κ no background pixel takes: every
+// pixel of the grid cells around the node (closed pixel ranges, as the
+// bilinear multiply reads them) is an object's.
+std::vector<uint8_t> HiddenNodes(const std::vector<int>& xs, const std::vector<int>& ys, const ObjectGBuffer& g) {
+  const size_t nx = xs.size(), ny = ys.size();
+  std::vector<uint8_t> hidden(nx * ny, 0);
+  if (g.covered == 0 || nx < 2 || ny < 2) return hidden;
+  const size_t cx = nx - 1;
+  std::vector<uint8_t> covered(cx * (ny - 1), 0);
+  ParallelFor(
+      ny - 1,
+      [&](size_t iy) {
+        const int y0 = ys[iy], y1 = ys[iy + 1];
+        if (y0 < g.rect.y0 || y1 >= g.rect.y1) return;
+        for (size_t ix = 0; ix < cx; ++ix) {
+          const int x0 = xs[ix], x1 = xs[ix + 1];
+          if (x0 < g.rect.x0 || x1 >= g.rect.x1) continue;
+          bool all = true;
+          for (int y = y0; all && y <= y1; ++y) {
+            const int32_t* ids = &g.object[g.Index(x0, y)];
+            for (int x = 0; all && x <= x1 - x0; ++x) all = ids[x] >= 0;
+          }
+          covered[iy * cx + ix] = all ? 1 : 0;
+        }
+      },
+      8);
+  for (size_t r = 0; r < ny; ++r)
+    for (size_t q = 0; q < nx; ++q) {
+      bool all = true;
+      for (size_t iy = r > 0 ? r - 1 : 0; all && iy <= std::min(r, ny - 2); ++iy)
+        for (size_t ix = q > 0 ? q - 1 : 0; all && ix <= std::min(q, nx - 2); ++ix) all = covered[iy * cx + ix] != 0;
+      hidden[r * nx + q] = all ? 1 : 0;
+    }
+  return hidden;
 }
 
 }  // namespace
@@ -171,7 +235,9 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
                                  double(options.kappa_coarse_factor),
                                  options.kappa_refine_delta,
                                  options.kappa_plane_upsampling ? 1.0 : 0.0,
-                                 options.receiver_min_opacity};
+                                 options.receiver_min_opacity,
+                                 options.shadow_epsilon_snap ? 1.0 : 0.0,
+                                 options.kappa_skip_covered ? 1.0 : 0.0};
       for (size_t j : casters) AppendObjectKey(objects[j], key);
       for (const SgMixture& light : lights) AppendLightKey(light, key);
       // Near lobes re-aimed at each receiver change κ as much as the light does.
@@ -270,7 +336,7 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
       const KappaContext context{&casters, &spheres, &preps, &lights, reach, one_minus_eps};
       const uint64_t pass = ++g_kappa_passes;
       // κ at receiver x (normal n): exact, or trilinear in the world lattice.
-      const auto receiver_kappa = [&](const Vec3f& x, const Vec3f& n, ThreadScratch& sc, size_t row) -> float {
+      const auto exact_or_lattice_kappa = [&](const Vec3f& x, const Vec3f& n, ThreadScratch& sc, size_t row) -> float {
         if (cache == nullptr) {
           bool queried = false;
           const float k = KappaAt(context, x, n, sc.kappa, &queried);
@@ -282,7 +348,6 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
         // No bound test here: nodes that the bound clears hold κ = 1.
         // Trilinear over the lattice nodes around x, for x's normal cell.
         const uint32_t cell = NormalCell(n);
-        const Vec3f n_cell = CellNormal(cell);
         const double fx = x.x / spacing, fy = x.y / spacing, fz = x.z / spacing;
         const double bx = std::floor(fx), by = std::floor(fy), bz = std::floor(fz);
         const double wx = fx - bx, wy = fy - by, wz = fz - bz;
@@ -303,7 +368,7 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
           } else if (++looked_up_per_row[row], !cache->lattice.Find(key, &value)) {
             bool queried = false;
             const Vec3f node(Vec3(double(i), double(j), double(k)) * spacing);
-            value = KappaAt(context, node, n_cell, sc.kappa, &queried);
+            value = KappaAt(context, node, CellNormal(cell), sc.kappa, &queried);
             cache->lattice.Insert(key, value);
             if (value < one_minus_eps) cache->lattice.GrowShadow(node);
             ++evaluated_per_row[row];
@@ -314,6 +379,12 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
           sum += weight * value;
         }
         return total > 0.0 ? static_cast<float>(std::clamp(sum / total, 0.0, 1.0)) : 1.0f;
+      };
+      // With shadow_epsilon_snap, κ ≥ 1 − ε is 1 (the bound's rule).
+      const bool snap = options.shadow_epsilon_snap;
+      const auto snapped = [&](float k) { return snap && double(k) >= one_minus_eps ? 1.0f : k; };
+      const auto receiver_kappa = [&](const Vec3f& x, const Vec3f& n, ThreadScratch& sc, size_t row) -> float {
+        return snapped(exact_or_lattice_kappa(x, n, sc, row));
       };
       // What the receiver pass found at each grid node (for the upsampling).
       std::vector<Vec3f> node_point(nx * ny), node_normal(nx * ny);
@@ -438,13 +509,26 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
       std::vector<uint8_t> is_coarse_row(ny, 0);
       for (size_t r : cy) is_coarse_row[r] = 1;
       auto t_stage = InsertClock::now();
+      // Nodes no background pixel needs (kappa_skip_covered): neither found
+      // nor evaluated, except coarse nodes of a coarse grid (their cells'
+      // refinement compares them).
+      const std::vector<uint8_t> hidden =
+          options.kappa_skip_covered ? HiddenNodes(xs, ys, g) : std::vector<uint8_t>(nx * ny, 0);
+      std::vector<std::vector<size_t>> coarse_cols(cy.size());
+      for (size_t i = 0; i < cy.size(); ++i)
+        for (size_t q : cx)
+          if (factor > 1 || !hidden[cy[i] * nx + q]) coarse_cols[i].push_back(q);
+      for (size_t r = 0; r < ny; ++r)
+        for (size_t q = 0; q < nx; ++q) times.kappa_hidden += hidden[r * nx + q];
+      find_ms += MsSince(t_stage);
+      t_stage = InsertClock::now();
       ParallelFor(
-          cy.size(), [&](size_t i) { find_row(cy[i], cx); }, 1);
+          cy.size(), [&](size_t i) { find_row(cy[i], coarse_cols[i]); }, 1);
       resolve_cell_normals();
       find_ms += MsSince(t_stage);
       t_stage = InsertClock::now();
       ParallelFor(
-          cy.size(), [&](size_t i) { kappa_row(cy[i], cx); }, 1);
+          cy.size(), [&](size_t i) { kappa_row(cy[i], coarse_cols[i]); }, 1);
       kappa_ms += MsSince(t_stage);
       if (factor > 1) {
         // Nodes that need their own κ: those of cells with differing corners.
@@ -456,7 +540,7 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
             const float c = kappa_grid[cy[j + 1] * nx + cx[i]], d = kappa_grid[cy[j + 1] * nx + cx[i + 1]];
             if (std::max({a, b, c, d}) - std::min({a, b, c, d}) <= delta) continue;
             for (size_t r = cy[j]; r <= cy[j + 1]; ++r)
-              for (size_t q = cx[i]; q <= cx[i + 1]; ++q) need[r * nx + q] = 1;
+              for (size_t q = cx[i]; q <= cx[i + 1]; ++q) need[r * nx + q] = !hidden[r * nx + q];
           }
         std::vector<uint8_t> is_coarse_col(nx, 0);
         for (size_t q : cx) is_coarse_col[q] = 1;
@@ -569,6 +653,9 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
             1);
         kappa_ms += MsSince(t_stage);
       }
+      // Nodes no background pixel reads hold 1 (κ is not applied there).
+      for (size_t i = 0; i < nx * ny; ++i)
+        if (hidden[i]) kappa_grid[i] = 1.0f;
       times.kappa_receivers_ms = find_ms;
       times.kappa_lookup_ms = kappa_ms;
       for (size_t q : looked_up_per_row) times.kappa_lookups += q;

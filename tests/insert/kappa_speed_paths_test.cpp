@@ -1,0 +1,163 @@
+// render/insert: κ's work-saving paths against the plain ones —
+// nodes under the objects skipped (kappa_skip_covered) against κ at every
+// node, κ ≥ 1 − ε taken as 1 (shadow_epsilon_snap) against κ as computed,
+// and the background multiplied by exactly the κ layer (the vectorised
+// ramp and multiply) on a frame whose width is no multiple of 4.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "render/insert/inserter.h"
+#include "tests/insert/insert_fixtures.h"
+#include "tests/insert/kappa_compare.h"
+#include "tests/insert/test_camera.h"
+
+namespace nerfar {
+namespace {
+
+using testing::OneLobe;
+using testing::PlainTable;
+using testing::SphereObject;
+
+// A ball resting on the table, seen from above at a slant, under a sharp
+// slanted lobe and a broad sky: its shadow runs from under the ball (hidden
+// by it) out into the open.
+struct ShadowScene {
+  AnalyticScene scene{PlainTable()};
+  SphereObject object{{0.0, 0.0, 0.05}, 0.05};
+  CameraIntrinsics camera = testing::TestCamera(150, 110);  // 150: no multiple of 4
+  Pose cam = LookAt({0.22, -0.2, 0.3}, {0.0, 0.0, 0.02});
+  SgMixture light;
+  ShadowScene() {
+    light = OneLobe({0.5, 0.2, 1.0}, 30.0, 6.0);
+    light.push_back(OneLobe({0, 0, 1}, 1.0, 0.4)[0]);
+  }
+  // One frame from a fresh inserter over a background that varies per pixel.
+  InsertTimings Render(const InsertOptions& options, ImageF& frame, InsertLayers& layers) const {
+    frame = Background();
+    return Inserter(scene, {}, options).Render(camera, cam, {object.Object(&light)}, frame, &layers);
+  }
+  ImageF Background() const {
+    ImageF b(camera.width, camera.height, 3);
+    for (size_t i = 0; i < b.pixels.size(); ++i) b.pixels[i] = 0.2f + 0.6f * float((i * 7919) % 101) / 101.0f;
+    return b;
+  }
+};
+
+// The skipped nodes are exactly those no background pixel reads: the
+// composite is the same bit for bit, whatever the grid (coarse-to-fine or
+// every node, lattice or exact κ), and fewer receivers were taken.
+TEST(KappaSpeedPaths, NodesUnderTheObjectSkippedLeaveTheCompositeUnchanged) {
+  const ShadowScene s;
+  struct Variant {
+    const char* name;
+    int step, coarse;
+    double spacing;
+  };
+  for (const Variant v : {Variant{"coarse-to-fine, lattice", 2, 4, 0.1}, Variant{"every node, lattice", 1, 1, 0.1},
+                          Variant{"coarse-to-fine, exact", 3, 2, 0.0}}) {
+    InsertOptions plain;
+    plain.kappa_step = v.step;
+    plain.kappa_coarse_factor = v.coarse;
+    plain.kappa_cache_spacing_radii = v.spacing;
+    plain.kappa_skip_covered = false;
+    InsertOptions fast = plain;
+    fast.kappa_skip_covered = true;
+    ImageF fa, fb;
+    InsertLayers la, lb;
+    const InsertTimings ta = s.Render(plain, fa, la), tb = s.Render(fast, fb, lb);
+    ASSERT_GT(la.gbuffer.covered, 500u) << v.name;
+    EXPECT_EQ(ta.kappa_hidden, 0u) << v.name;
+    EXPECT_GT(tb.kappa_hidden, 20u) << v.name;  // the ball hides many nodes
+    // Fewer κ taken (receivers with the lattice, exact κ without).
+    if (v.spacing > 0)
+      EXPECT_LT(tb.kappa_receivers, ta.kappa_receivers) << v.name;
+    else
+      EXPECT_LT(tb.kappa_evaluated, ta.kappa_evaluated) << v.name;
+    // The shadow is there (reaching out of the hidden part), and the frames agree exactly.
+    double shadow = 0;
+    for (float k : la.kappa.pixels) shadow += 1.0 - k;
+    ASSERT_GT(shadow, 50.0) << v.name;
+    size_t differ = 0;
+    for (size_t i = 0; i < fa.pixels.size(); ++i) differ += fa.pixels[i] != fb.pixels[i];
+    EXPECT_EQ(differ, 0u) << v.name;
+    // Outside the objects' pixels the κ layers agree too.
+    const ObjectGBuffer& g = la.gbuffer;
+    for (int y = la.kappa_rect.y0; y < la.kappa_rect.y1; ++y)
+      for (int x = la.kappa_rect.x0; x < la.kappa_rect.x1; ++x) {
+        if (g.rect.Contains(x, y) && g.object[g.Index(x, y)] >= 0) continue;
+        const int u = x - la.kappa_rect.x0, w = y - la.kappa_rect.y0;
+        ASSERT_EQ(la.kappa.at(u, w), lb.kappa.at(u, w)) << v.name << " at " << x << "," << y;
+      }
+  }
+}
+
+// Snapping moves each node's κ by at most ε (κ in [1 − ε, 1) becomes 1), so
+// on a grid without coarse-to-fine every pixel (bilinear between nodes)
+// moves by at most ε; with coarse-to-fine a refinement decision can flip,
+// moving a cell by up to about kappa_refine_delta: the summed change stays
+// a small part of the shadow. Snapped, fewer pixels are multiplied.
+TEST(KappaSpeedPaths, EpsilonSnapMovesKappaByAtMostEpsilon) {
+  const ShadowScene s;
+  for (const int coarse : {1, 4}) {
+    InsertOptions plain;
+    plain.kappa_coarse_factor = coarse;
+    plain.shadow_epsilon = 5e-3;  // the fast preset's
+    plain.shadow_epsilon_snap = false;
+    InsertOptions snap = plain;
+    snap.shadow_epsilon_snap = true;
+    ImageF fa, fb;
+    InsertLayers la, lb;
+    const InsertTimings ta = s.Render(plain, fa, la), tb = s.Render(snap, fb, lb);
+    ASSERT_EQ(la.kappa_rect.area(), lb.kappa_rect.area());
+    const testing::KappaDifference d = testing::CompareKappa(lb.kappa, la.kappa);
+    ASSERT_GT(d.shadow, 50.0);
+    size_t tail = 0;  // pixels in (1 − ε, 1) before
+    for (float k : la.kappa.pixels) tail += k < 1.0f && k > 1.0f - float(plain.shadow_epsilon);
+    EXPECT_GT(tail, 0u) << "the sky lobe leaves a faint tail to snap";
+    if (coarse == 1) {
+      // ε plus float rounding of the bilinear blend.
+      EXPECT_LE(d.max, plain.shadow_epsilon + 1e-6);
+    } else {
+      EXPECT_LT(d.max, plain.shadow_epsilon + plain.kappa_refine_delta + 1e-6);
+      // The tail under ε is spread over the whole reach: measured 0.027 of
+      // this close view's shadow mass (mostly where κ > 0.99, outside the
+      // shadow-error metric's region, which takes κ < 0.9 and 5 px round it).
+      EXPECT_LT(d.Relative(), 0.05);
+    }
+    EXPECT_LT(tb.kappa_multiplied, ta.kappa_multiplied);
+    // Snapped κ below 1 is below 1 − ε at every node; the layer has no
+    // values in (1 − ε, 1) beyond the blends next to snapped nodes.
+    for (float k : lb.kappa.pixels) ASSERT_TRUE(k >= 0.0f && k <= 1.0f);
+  }
+}
+
+// Outside the objects' pixels the frame is exactly background × κ layer
+// (the ramp and the multiply run 4 pixels per step, then one at a time).
+TEST(KappaSpeedPaths, BackgroundIsMultipliedByExactlyTheLayer) {
+  const ShadowScene s;
+  for (const int step : {1, 3, 4}) {
+    InsertOptions options;
+    options.kappa_step = step;
+    options.antialias_edges = false;  // edge pixels would blend the object in
+    ImageF frame;
+    InsertLayers layers;
+    s.Render(options, frame, layers);
+    const ImageF background = s.Background();
+    const ImageF kappa = ExpandLayer(layers.kappa, layers.kappa_rect, s.camera.width, s.camera.height, 1.0f);
+    const ObjectGBuffer& g = layers.gbuffer;
+    size_t shadowed = 0;
+    for (int y = 0; y < s.camera.height; ++y)
+      for (int x = 0; x < s.camera.width; ++x) {
+        if (g.rect.Contains(x, y) && g.object[g.Index(x, y)] >= 0) continue;
+        const float k = kappa.at(x, y);
+        shadowed += k < 0.99f;
+        for (int c = 0; c < 3; ++c)
+          ASSERT_EQ(frame.at(x, y, c), background.at(x, y, c) * k) << "step " << step << " at " << x << "," << y;
+      }
+    EXPECT_GT(shadowed, 100u) << "step " << step;
+  }
+}
+
+}  // namespace
+}  // namespace nerfar
