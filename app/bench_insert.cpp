@@ -444,6 +444,29 @@ std::vector<BenchFigure> BenchInsert(const BenchOptions& options) {
     const std::string off = off_env ? off_env : "";
     if (off.find("snap") != std::string::npos) insert_options.shadow_epsilon_snap = false;
     if (off.find("skip_covered") != std::string::npos) insert_options.kappa_skip_covered = false;
+    // NERFAR_BENCH_INSERT_KNOBS="kappa_step=4,shadow_reach_radii=8,...": κ
+    // knobs set over the preset (to attribute one preset's cost against
+    // another's): kappa_step, kappa_coarse_factor, shadow_reach_radii,
+    // shadow_epsilon, kappa_cache_spacing_radii, occlusion_step, parallax.
+    if (const char* knobs = std::getenv("NERFAR_BENCH_INSERT_KNOBS")) {
+      std::string list = knobs;
+      for (size_t begin = 0; begin < list.size();) {
+        const size_t end = std::min(list.find(',', begin), list.size());
+        const std::string item = list.substr(begin, end - begin);
+        begin = end + 1;
+        const size_t eq = item.find('=');
+        if (eq == std::string::npos) continue;
+        const std::string name = item.substr(0, eq);
+        const double v = std::atof(item.c_str() + eq + 1);
+        if (name == "kappa_step") insert_options.kappa_step = int(v);
+        if (name == "kappa_coarse_factor") insert_options.kappa_coarse_factor = int(v);
+        if (name == "shadow_reach_radii") insert_options.shadow_reach_radii = v;
+        if (name == "shadow_epsilon") insert_options.shadow_epsilon = v;
+        if (name == "kappa_cache_spacing_radii") insert_options.kappa_cache_spacing_radii = v;
+        if (name == "occlusion_step") insert_options.occlusion_step = int(v);
+        if (name == "parallax") insert_options.light.parallax = v != 0;
+      }
+    }
     const StageMedians m = TimePreset(scene, environment, object, camera, T_world_camera, insert_options, repeats);
     const std::string note = std::string(preset) + ", " + size + ", object " +
                              std::to_string(int(std::round(m.coverage * 100))) + "% of the frame";
