@@ -67,11 +67,6 @@ void ShadeObjects(const std::vector<InsertObject>& objects, const std::vector<Wo
         std::vector<float> gamma;
         std::vector<SgMaterial> materials;
         std::vector<Vec3f> normals, views, rgb, shadowed;
-        // The pixels with some γ < 1 and their inputs, for the specular's visibility.
-        std::vector<size_t> shadow_px;
-        std::vector<SgMaterial> s_materials;
-        std::vector<Vec3f> s_normals, s_views;
-        std::vector<float> s_gamma;
         materials.reserve(end - begin);
         normals.reserve(end - begin);
         views.reserve(end - begin);
@@ -120,39 +115,23 @@ void ShadeObjects(const std::vector<InsertObject>& objects, const std::vector<Wo
           }
           rgb.assign(count, Vec3f{});
           const PrefilteredRadiance* map = size_t(o) < specular.size() && !specular[o].empty() ? &specular[o] : nullptr;
-          if (m > 0)
+          // With a map, the specular's self-shadow is the SG specular's
+          // luminance with γ over that without, summed in the diffuse pass
+          // (the same lobe loop) when any γ of the run is below 1.
+          const bool any_shadow = map && std::any_of(gamma.begin(), gamma.end(), [](float x) { return x < 1.0f; });
+          if (m > 0 && any_shadow) {
+            shadowed.assign(count, Vec3f{});
+            p.shader->Shade(materials.data(), normals.data(), views.data(), gamma.data(), static_cast<int>(count),
+                            rgb.data(), SgTerms::kDiffuseAndVisibility, shadowed.data());
+          } else if (m > 0) {
             p.shader->Shade(materials.data(), normals.data(), views.data(), gamma.data(), static_cast<int>(count),
                             rgb.data(), map ? SgTerms::kDiffuse : SgTerms::kAll);
+          }
           if (map) {
-            // Self-shadow of the specular term: the SG specular's luminance
-            // with γ over that without, on the pixels with any γ below 1.
-            shadow_px.clear();
-            for (size_t k = 0; k < count && m > 0; ++k) {
-              const float* gp = gamma.data() + k * m;
-              if (std::any_of(gp, gp + m, [](float x) { return x < 1.0f; })) shadow_px.push_back(k);
-            }
-            if (!shadow_px.empty()) {
-              const size_t n_shadow = shadow_px.size();
-              s_materials.resize(n_shadow);
-              s_normals.resize(n_shadow);
-              s_views.resize(n_shadow);
-              s_gamma.resize(n_shadow * m);
-              for (size_t q = 0; q < n_shadow; ++q) {
-                const size_t k = shadow_px[q];
-                s_materials[q] = materials[k], s_normals[q] = normals[k], s_views[q] = views[k];
-                std::copy(gamma.begin() + k * m, gamma.begin() + (k + 1) * m, s_gamma.begin() + q * m);
-              }
-              shadowed.assign(n_shadow, Vec3f{});
-              p.shader->Shade(s_materials.data(), s_normals.data(), s_views.data(), s_gamma.data(),
-                              static_cast<int>(n_shadow), shadowed.data(), SgTerms::kSpecularVisibility);
-            }
-            size_t next = 0;  // index into shadow_px
             for (size_t k = 0; k < count; ++k) {
               float visibility = 1.0f;
-              if (next < shadow_px.size() && shadow_px[next] == k) {
-                const Vec3f& sums = shadowed[next++];
-                if (sums.y > 0.0f && std::isfinite(sums.y)) visibility = std::clamp(sums.x / sums.y, 0.0f, 1.0f);
-              }
+              if (m > 0 && any_shadow && shadowed[k].y > 0.0f && std::isfinite(shadowed[k].y))
+                visibility = std::clamp(shadowed[k].x / shadowed[k].y, 0.0f, 1.0f);
               rgb[k] += map->ShadeSpecular(materials[k], normals[k], views[k]) * visibility;
             }
           }

@@ -390,13 +390,14 @@ template <bool kDiffuse, bool kSpecular, class Gather, bool kVisibility = false>
 
 void ShadeLobesBaseline(const LobeArrays& a, const PixelTerms& t, float* out) { ShadeLobesBody(a, t, out); }
 // parts: 1 diffuse, 2 specular, 3 both (SgShader::Shade's `terms` and the
-// materials), 4 the specular's visibility sums.
+// materials), 4 the specular's visibility sums, 5 diffuse and those sums.
 template <class Gather>
 [[gnu::always_inline]] inline void ShadeBlockParts(const LobeArrays& a, const PixelBlock& b, int parts,
                                                    BlockSums* out) {
   if (parts == 1) return ShadeBlockBody<true, false, Gather>(a, b, out);
   if (parts == 2) return ShadeBlockBody<false, true, Gather>(a, b, out);
   if (parts == 4) return ShadeBlockBody<false, true, Gather, true>(a, b, out);
+  if (parts == 5) return ShadeBlockBody<true, true, Gather, true>(a, b, out);
   ShadeBlockBody<true, true, Gather>(a, b, out);
 }
 void ShadeBlockBaseline(const LobeArrays& a, const PixelBlock& b, int parts, BlockSums* out) {
@@ -498,7 +499,8 @@ Vec3f SgShader::Shade(const SgMaterial& m, const Vec3f& n, const Vec3f& v, const
 }
 
 void SgShader::Shade(const SgMaterial* materials, const Vec3f* normals, const Vec3f* views, const float* gamma,
-                     int count, Vec3f* out, SgTerms terms) const {
+                     int count, Vec3f* out, SgTerms terms, Vec3f* visibility) const {
+  NERFAR_CHECK(terms != SgTerms::kDiffuseAndVisibility || visibility != nullptr);
   // Lobes are the loop here, not lanes: no padding needed.
   const LobeArrays arrays{px_, py_, pz_, lambda_, mr_, mg_, mb_, inv_width_, scale_, slope_, rows_.data(), count_};
   PixelBlock block;
@@ -543,16 +545,24 @@ void SgShader::Shade(const SgMaterial* materials, const Vec3f* normals, const Ve
       ks[0][i] = view.amp_r, ks[1][i] = view.amp_g, ks[2][i] = view.amp_b;
     }
     // Metals have no diffuse term: a block of metals skips that loop.
-    const int parts = terms == SgTerms::kSpecularVisibility
-                          ? 4
+    const int parts = terms == SgTerms::kSpecularVisibility ? 4
+                      : terms == SgTerms::kDiffuseAndVisibility
+                          ? (diffuse ? 5 : 4)
                           : (terms != SgTerms::kSpecular && diffuse ? 1 : 0) | (terms != SgTerms::kDiffuse ? 2 : 0);
     if (parts == 0) {
       std::fill(out + begin, out + begin + lanes, Vec3f());
       continue;
     }
     kKernels.block(arrays, block, parts, &sums);
-    if (parts == 4) {
+    if (terms == SgTerms::kSpecularVisibility) {
       for (int i = 0; i < lanes; ++i) out[begin + i] = Vec3f(sums.sr[i], sums.sg[i], 0.0f);
+      continue;
+    }
+    if (terms == SgTerms::kDiffuseAndVisibility) {
+      for (int i = 0; i < lanes; ++i) {
+        visibility[begin + i] = Vec3f(sums.sr[i], sums.sg[i], 0.0f);
+        out[begin + i] = Vec3f(kd[0][i] * sums.dr[i], kd[1][i] * sums.dg[i], kd[2][i] * sums.db[i]);
+      }
       continue;
     }
     for (int i = 0; i < lanes; ++i)

@@ -76,7 +76,9 @@ inline constexpr int kSgLanes = 16;
 // kSpecularVisibility: not radiance but the specular's self-shadow sums,
 // x = Σ_k γ_k Y(μ_k) Σ_j c_j⟨G_k, S_j⟩ and y = the same with every γ = 1 (Y
 // luminance); x/y is the fraction of the SG specular that γ lets through.
-enum class SgTerms { kAll, kDiffuse, kSpecular, kSpecularVisibility };
+// kDiffuseAndVisibility: the diffuse radiance in `out` and those sums in
+// `visibility`, in one pass over the lobes.
+enum class SgTerms { kAll, kDiffuse, kSpecular, kSpecularVisibility, kDiffuseAndVisibility };
 class SgShader {
  public:
   explicit SgShader(const SgMixture& light);
@@ -92,8 +94,9 @@ class SgShader {
   // terms: both, or one of the two parts (their sum is the whole): kDiffuse
   // is (1 − m) a/π Σ_k μ_k γ_k E_k Burley_k, which depends on v only through
   // Burley's retro-reflection factor; kSpecular is the rest (all of v).
+  // visibility: count entries, written only with kDiffuseAndVisibility.
   void Shade(const SgMaterial* materials, const Vec3f* normals, const Vec3f* views, const float* gamma, int count,
-             Vec3f* out, SgTerms terms = SgTerms::kAll) const;
+             Vec3f* out, SgTerms terms = SgTerms::kAll, Vec3f* visibility = nullptr) const;
 
  private:
   int count_ = 0;

@@ -218,6 +218,15 @@ TEST(PrefilteredSpecular, VisibilityRatioMatchesPerLobeReference) {
       shader.Shade(&m, &n, &v, gamma.data(), 1, &sums, SgTerms::kSpecularVisibility);
       ASSERT_GT(sums.y, 0.0f);
       EXPECT_NEAR(sums.x / sums.y, shadowed / open, 1e-3) << "r " << roughness;
+      // The fused pass: the same sums, and the diffuse of kDiffuse (same
+      // arithmetic per lobe, so equal to float rounding).
+      SgMaterial dielectric = m;
+      dielectric.metallic = 0.0;
+      Vec3f diffuse, fused, fused_sums;
+      shader.Shade(&dielectric, &n, &v, gamma.data(), 1, &diffuse, SgTerms::kDiffuse);
+      shader.Shade(&dielectric, &n, &v, gamma.data(), 1, &fused, SgTerms::kDiffuseAndVisibility, &fused_sums);
+      EXPECT_NEAR(fused.y, diffuse.y, 1e-5f * (1.0f + diffuse.y));
+      EXPECT_NEAR(fused_sums.x / fused_sums.y, sums.x / sums.y, 1e-5f);
       ++checked;
     }
   }
