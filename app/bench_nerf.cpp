@@ -3,8 +3,8 @@
 // and reports training time, psnr_tm of the test views against the low-noise
 // insert/bg_XXX.exr, depth error on surfaces, model size, and the query
 // throughput (density and radiance samples/s, 1280x720 and 320x180 colour+depth
-// frames at quality full and live, with the mean samples per ray of the 720p
-// frame) on 1 thread and on
+// frames at quality full and live - from the compact render copy, and live from the
+// float arrays too - with the mean samples per ray of the 720p frame) on 1 thread and on
 // all threads. --quick: a 20-step run on one scene.
 // $NERFAR_BENCH_NERF_MODELS="lamps=A.nerf,window=B.nerf": no training; the
 // given saved models are scored and timed instead.
@@ -69,6 +69,12 @@ void Throughput(const NerfField& field, const std::string& dataset, const std::s
       const double live_ms = MedianMilliseconds([&] { RenderView(field, cam, pose, live); }, 3, 0.5);
       figures.push_back({"frame_" + std::to_string(w) + "x" + std::to_string(h) + "_live_ms", live_ms, "ms",
                          cond + ", quality live (step 2 voxels, min transmittance 3e-2)"});
+      // The same from the float arrays (no render copy), for comparison.
+      NerfRenderOptions live_float = live;
+      live_float.use_render_copy = false;
+      const double float_ms = MedianMilliseconds([&] { RenderView(field, cam, pose, live_float); }, 3, 0.5);
+      figures.push_back({"frame_" + std::to_string(w) + "x" + std::to_string(h) + "_live_float_ms", float_ms, "ms",
+                         cond + ", quality live, float arrays (no render copy)"});
     }
   }
   for (const std::string quality : {"full", "live"}) {
@@ -106,7 +112,8 @@ std::vector<BenchFigure> BenchNerf(const BenchOptions& options) {
       const size_t eq = item.find('=');
       if (eq == std::string::npos) throw InputError("NERFAR_BENCH_NERF_MODELS: '" + item + "' (expected SCENE=FILE)");
       const std::string scene = item.substr(0, eq), path = item.substr(eq + 1), dir = options.scenes_dir + "/" + scene;
-      const NerfField field = LoadNerf(path);
+      NerfField field = LoadNerf(path);
+      field.UpdateRenderCopy();  // what nerfar render reads (NerfRenderCopy)
       const std::string tag = scene + " " + std::filesystem::path(path).filename().string();
       const NerfEvaluation eval = EvaluateNerf(field, dir, NerfEvalOptions{});
       figures.push_back({"psnr_tm_reference_db", eval.mean_psnr_reference, "dB", tag + ", 8 test views vs insert/bg"});
@@ -126,7 +133,8 @@ std::vector<BenchFigure> BenchNerf(const BenchOptions& options) {
       o.eval_views = 0;
       NerfTrainer trainer(data, o);
       while (!trainer.Done()) trainer.Step();
-      const NerfField field = trainer.FinalField();
+      NerfField field = trainer.FinalField();
+      field.UpdateRenderCopy();
       const std::string path = tmp + "/" + scene + "_" + preset + ".nerf";
       SaveNerf(path, field);
       const std::string tag = scene + " " + preset;

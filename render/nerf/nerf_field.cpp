@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <sstream>
 
 #include "calib/core/error.h"
@@ -105,6 +106,7 @@ void NerfField::UpdateOccupancy(float sigma_threshold) {
 
 void NerfField::UpdateSkipGrid() {
   skip = NerfSkipGrid{};
+  ClearRenderCopy();  // it holds only the bricks occupied when it was built
   if (empty() || occupancy.size() != BrickCount() || brick_coords.size() != 3 * BrickCount()) return;
   const int cells[3] = {res[0] - 1, res[1] - 1, res[2] - 1};
   for (int shift : {4, 3, 2}) {
@@ -139,6 +141,91 @@ void NerfField::UpdateSkipGrid() {
   }
   skip.source = occupancy.data();
   skip.source_size = occupancy.size();
+}
+
+namespace {
+
+// The values of vertex (i,j,k) in render-copy lane order with the density in lane 3 (lane 7, its
+// high byte, 0); an unallocated vertex or one outside the grid has the empty density and colour 0,
+// as the float path reads it.
+void VertexLanes(const NerfField& f, int i, int j, int k, float lanes[NerfRenderCopy::kLanes]) {
+  const int32_t s = f.Slot(i, j, k);
+  for (int m = 0; m < NerfRenderCopy::kLanes; ++m) lanes[m] = 0.0f;
+  if (s < 0) {
+    lanes[3] = kNerfEmptyDensityRaw;
+    return;
+  }
+  lanes[3] = f.density[size_t(s)];
+  const float* q = &f.color[size_t(s) * kNerfColorCoeffs];
+  for (int ch = 0; ch < 3; ++ch)
+    for (int c = 0; c < 4; ++c) lanes[4 * c + ch] = q[4 * ch + c];  // a, bx, by, bz of channel ch
+}
+
+}  // namespace
+
+void NerfField::UpdateRenderCopy() {
+  using C = NerfRenderCopy;
+  constexpr int kVertices = C::kSide * C::kSide * C::kSide;
+  ClearRenderCopy();
+  if (empty() || occupancy.size() != BrickCount() || brick_coords.size() != 3 * BrickCount() ||
+      density.size() != BrickCount() * kNerfBrickSlots || color.size() != density.size() * kNerfColorCoeffs)
+    return;
+  C c;
+  c.block.assign(BrickCount(), -1);
+  std::vector<int32_t> bricks_of_block;
+  for (size_t b = 0; b < BrickCount(); ++b)
+    if (occupancy[b] != 0) {
+      c.block[b] = int32_t(bricks_of_block.size());
+      bricks_of_block.push_back(int32_t(b));
+    }
+  const size_t blocks = bricks_of_block.size();
+  c.bytes.assign(std::max<size_t>(blocks, 1) * C::kBlockBytes + 64, 0);
+  c.first = (64 - reinterpret_cast<uintptr_t>(c.bytes.data()) % 64) % 64;
+  ParallelFor(
+      blocks,
+      [&](size_t block) {
+        const int32_t b = bricks_of_block[block];
+        const int bx = brick_coords[3 * size_t(b)] * 4, by = brick_coords[3 * size_t(b) + 1] * 4,
+                  bz = brick_coords[3 * size_t(b) + 2] * 4;
+        float values[kVertices][C::kLanes];
+        for (int k = 0; k < C::kSide; ++k)
+          for (int j = 0; j < C::kSide; ++j)
+            for (int i = 0; i < C::kSide; ++i)
+              VertexLanes(*this, bx + i, by + j, bz + k, values[(k * C::kSide + j) * C::kSide + i]);
+        uint8_t* out = c.bytes.data() + c.first + block * C::kBlockBytes;
+        float scale[C::kLanes] = {}, offset[C::kLanes] = {}, inv[C::kLanes] = {};
+        for (int m = 0; m < C::kLanes; ++m) {
+          if (m == 7 || m == 11 || m == 15) continue;  // the density's high byte; unused
+          float lo = values[0][m], hi = lo;
+          for (int v = 1; v < kVertices; ++v) lo = std::min(lo, values[v][m]), hi = std::max(hi, values[v][m]);
+          const float levels = m == 3 ? 65535.0f : 255.0f;
+          offset[m] = lo;
+          scale[m] = (hi - lo) / levels;
+          inv[m] = scale[m] > 0.0f ? 1.0f / scale[m] : 0.0f;
+        }
+        for (int v = 0; v < kVertices; ++v) {
+          uint8_t* q = out + C::kHeaderBytes + size_t(v) * C::kLanes;
+          for (int m = 0; m < C::kLanes; ++m) {
+            if (m == 7 || m == 11 || m == 15) continue;
+            const long code = std::lrint((values[v][m] - offset[m]) * inv[m]);
+            if (m == 3) {
+              const long d = std::clamp(code, 0L, 65535L);
+              q[3] = uint8_t(d & 255), q[7] = uint8_t(d >> 8);
+            } else {
+              q[m] = uint8_t(std::clamp(code, 0L, 255L));
+            }
+          }
+        }
+        scale[7] = 256.0f * scale[3];  // d = d_lo + 256·d_hi
+        std::memcpy(out, scale, sizeof(scale));
+        std::memcpy(out + sizeof(scale), offset, sizeof(offset));
+      },
+      64);
+  c.density_source = density.data(), c.density_size = density.size();
+  c.color_source = color.data(), c.color_size = color.size();
+  c.occupancy_source = occupancy.data(), c.occupancy_size = occupancy.size();
+  c.table_source = brick_table.data(), c.table_size = brick_table.size();
+  render_copy = std::move(c);
 }
 
 double NerfField::OccupiedFraction() const {
@@ -261,7 +348,7 @@ namespace {
 struct RenderCell {
   int i = -1, j = -1, k = -1;
   int32_t slot[8];
-  float s[8];
+  float s[8] = {};
   bool has_color = false;
   float log_color[3][8];
 
@@ -302,6 +389,24 @@ inline void PrefetchCell(const NerfField& f, const Vec3f& g) {
     const float* c = &f.color[(size_t(s) + size_t(n)) * kNerfColorCoeffs];
     __builtin_prefetch(c);
     __builtin_prefetch(c + 2 * kNerfColorCoeffs - 1);
+  }
+}
+
+// PrefetchCell for the render copy: the 4 corner rows (2 vertices, 32 bytes each) of the cell holding g.
+inline void PrefetchCopyCell(const NerfField& f, const Vec3f& g) {
+  if (!(g.x >= 0.0f && g.y >= 0.0f && g.z >= 0.0f)) return;
+  const int i = std::min(int(g.x), f.res[0] - 2), j = std::min(int(g.y), f.res[1] - 2),
+            k = std::min(int(g.z), f.res[2] - 2);
+  const int32_t b = f.brick_table[(size_t(k >> 2) * f.bricks[1] + size_t(j >> 2)) * f.bricks[0] + size_t(i >> 2)];
+  if (b < 0) return;
+  const int32_t block = f.render_copy.block[size_t(b)];
+  if (block < 0) return;
+  const uint8_t* v = f.render_copy.Vertex(block, i & 3, j & 3, k & 3);
+  constexpr int L = NerfRenderCopy::kLanes, S = NerfRenderCopy::kSide;
+  __builtin_prefetch(f.render_copy.Header(block));
+  for (int row : {0, S, S * S, S * S + S}) {
+    __builtin_prefetch(v + row * L);
+    __builtin_prefetch(v + row * L + 2 * L - 1);
   }
 }
 
@@ -351,6 +456,13 @@ NerfRayResult NerfField::RenderRay(const NerfRay& ray, const NerfRenderOptions& 
   nerf_detail::RaySteps::Sample s;
   float transmittance = 1.0f, depth_sum = 0.0f;
   RenderCell cell;
+  // With a current render copy, cells of bricks that have a block are read from it (copy_v0: the
+  // lanes of the current cell's corner 0, null when the cell is read from the float arrays).
+  const bool use_copy = options.use_render_copy && RenderCopyCurrent();
+  const nerf_detail::CopyRay copy_ray(ray.dir);
+  nerf_detail::CopyBlock copy_block;
+  int32_t copy_block_index = -1;  // the block copy_block was set for
+  const uint8_t* copy_v0 = nullptr;
   // The brick of the current cell once it is known to hold occupied cells.
   int bi = -1, bj = -1, bk = -1;
   int32_t brick = -1;
@@ -360,7 +472,8 @@ NerfRayResult NerfField::RenderRay(const NerfRay& ray, const NerfRenderOptions& 
     if (s.i != cell.i || s.j != cell.j || s.k != cell.k) {
       if ((s.i >> 2) != bi || (s.j >> 2) != bj || (s.k >> 2) != bk) {
         int empty_shift = -1;  // the largest empty block holding the sample
-        if (coarse)
+        // The finest level (bricks) first: in occupied space it is the only test that fails.
+        if (coarse && !skip.levels.back().Occupied(s.i, s.j, s.k))
           for (const NerfSkipGrid::Level& level : skip.levels)
             if (!level.Occupied(s.i, s.j, s.k)) {
               empty_shift = level.shift;
@@ -385,22 +498,47 @@ NerfRayResult NerfField::RenderRay(const NerfRay& ray, const NerfRenderOptions& 
         n = steps.SkipBlock(n, 0, s);
         continue;
       }
-      cell.Load(*this, s.i, s.j, s.k, brick);
+      const int32_t block = use_copy ? render_copy.block[size_t(brick)] : -1;
+      if (block >= 0) {
+        cell.i = s.i, cell.j = s.j, cell.k = s.k;
+        if (block != copy_block_index) copy_block.Set(render_copy.Header(block), copy_ray), copy_block_index = block;
+        copy_v0 = render_copy.Vertex(block, s.i & 3, s.j & 3, s.k & 3);
+      } else {
+        cell.Load(*this, s.i, s.j, s.k, brick);
+        copy_v0 = nullptr;
+      }
     }
     ++n;
     ++result.samples;
     const float t = s.t, dt = s.dt;
-    if (options.prefetch) PrefetchCell(*this, steps.Grid(t + step));
+    if (options.prefetch) {
+      if (use_copy)
+        PrefetchCopyCell(*this, steps.Grid(t + step));
+      else
+        PrefetchCell(*this, steps.Grid(t + step));
+    }
     const float fx = s.g.x - float(s.i), fy = s.g.y - float(s.j), fz = s.g.z - float(s.k);
-    const float sigma = std::exp(Trilinear(cell.s, fx, fy, fz));
+    // Radiance (r, g, b) and σ: from the copy all four at once (one 4-wide exp), else from the floats.
+    float value[4];
+    if (copy_v0 != nullptr) {
+      nerf_detail::CopyCellValues(copy_block, copy_v0, fx, fy, fz, value);
+      for (int ch = 0; ch < 3; ++ch) value[ch] = std::clamp(value[ch], kNerfLogColorMin, kNerfLogColorMax);
+      value[3] = std::clamp(value[3], kNerfDensityRawMin, kNerfDensityRawMax);
+      nerf_detail::Exp4(value);
+    } else {
+      value[3] = std::exp(Trilinear(cell.s, fx, fy, fz));
+    }
+    const float sigma = value[3];
     const float alpha = -std::expm1(-sigma * dt);
     if (alpha < options.min_alpha) continue;
     ++result.color_samples;
-    if (!cell.has_color) cell.LoadColor(*this, ray.dir);
+    if (copy_v0 == nullptr) {
+      if (!cell.has_color) cell.LoadColor(*this, ray.dir);
+      for (int ch = 0; ch < 3; ++ch)
+        value[ch] = std::exp(std::clamp(Trilinear(cell.log_color[ch], fx, fy, fz), kNerfLogColorMin, kNerfLogColorMax));
+    }
     const float w = transmittance * alpha;
-    for (int ch = 0; ch < 3; ++ch)
-      result.color[ch] +=
-          w * std::exp(std::clamp(Trilinear(cell.log_color[ch], fx, fy, fz), kNerfLogColorMin, kNerfLogColorMax));
+    for (int ch = 0; ch < 3; ++ch) result.color[ch] += w * value[ch];
     depth_sum += w * t;
     const float next = transmittance * (1.0f - alpha);
     if (transmittance > 0.5f && next <= 0.5f) {

@@ -1,0 +1,262 @@
+// Tests of the NeRF renderer's compact render copy (NerfRenderCopy, NerfField::UpdateRenderCopy):
+// its values against the exact float field within the quantisation bound, rendering from it against
+// the plain float march and against an analytic slab, that a changed field never renders stale
+// copy data, and the 4-wide exp against std::exp.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <random>
+
+#include "render/nerf/nerf_field.h"
+#include "render/nerf/nerf_internal.h"
+
+namespace nerfar {
+namespace {
+
+// Ranges of the random test field: raw log-density in [-3, 5], colour bases in [-2, 2], slopes in
+// [-0.5, 0.5]. A block at the grid's far faces also holds vertices outside the grid (density -30),
+// so a block's density range is at most 35 and its colour ranges at most 4 (bases) and 1 (slopes).
+constexpr float kDensityLo = -3.0f, kDensityHi = 5.0f, kBaseRange = 2.0f, kSlopeRange = 0.5f;
+constexpr float kBlockDensityRange = kDensityHi - kNerfEmptyDensityRaw;
+
+// A 1 m box at voxel 0.1 m (11 vertices and 3 bricks per axis: bricks cut cells and the last brick is
+// partial), every vertex random, every cell occupied.
+NerfField RandomField(uint32_t seed) {
+  NerfField f = NerfField::Dense({Vec3(0, 0, 0), Vec3(1, 1, 1)}, 0.1, 0.0f, Vec3f(0, 0, 0));
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> density(kDensityLo, kDensityHi), base(-kBaseRange, kBaseRange),
+      slope(-kSlopeRange, kSlopeRange);
+  for (float& d : f.density) d = density(rng);
+  for (size_t n = 0; n < f.color.size(); ++n) f.color[n] = n % 4 == 0 ? base(rng) : slope(rng);
+  f.UpdateOccupancy(1e-6f);
+  return f;
+}
+
+Vec3f RandomDirection(std::mt19937& rng) {
+  std::normal_distribution<float> g;
+  for (;;) {
+    const Vec3f d(g(rng), g(rng), g(rng));
+    if (Length(d) > 1e-3f) return Normalized(d);
+  }
+}
+
+// Rays from outside the box through random points of it, clipped to the box.
+std::vector<NerfRay> RandomRays(const NerfField& f, size_t count, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u(0.05f, 0.95f);
+  std::vector<NerfRay> rays;
+  while (rays.size() < count) {
+    const Vec3f target(u(rng), u(rng), u(rng)), dir = RandomDirection(rng);
+    NerfRay r;
+    r.origin = target - dir * 2.0f;
+    r.dir = dir;
+    if (IntersectAabb(f.aabb, r.origin, r.dir, r.t_near, r.t_far)) rays.push_back(r);
+  }
+  return rays;
+}
+
+NerfRenderOptions FloatArrays(NerfRenderOptions o = {}) {
+  o.use_render_copy = false;
+  return o;
+}
+
+TEST(NerfRenderCopy, ValuesLieWithinTheQuantisationBoundOfTheExactField) {
+  NerfField f = RandomField(1);
+  f.UpdateRenderCopy();
+  ASSERT_TRUE(f.RenderCopyCurrent());
+  std::mt19937 rng(2);
+  std::uniform_real_distribution<float> u(0.0f, 10.0f);  // grid coordinates over the whole grid
+  double max_density_error = 0, max_color_error = 0;
+  for (int n = 0; n < 20000; ++n) {
+    const Vec3f g(u(rng), u(rng), u(rng)), dir = RandomDirection(rng);
+    nerf_detail::Corners c;
+    ASSERT_TRUE(nerf_detail::LocateGrid(f, g, c));
+    float q[kNerfColorCoeffs];
+    nerf_detail::ColorCoeffs(f, c, q);
+    float raw = 0, log_color[3];
+    ASSERT_TRUE(nerf_detail::CopyPointValues(f, g, dir, raw, log_color));
+    // Each vertex value is off by at most half a step: range/131070 for the density (16 bits),
+    // range/510 for each colour coefficient (8 bits); trilinear weights sum to 1, so the
+    // interpolated log colour a + b·d is off by at most (base range + slope range·(|dx|+|dy|+|dz|))/510.
+    // 1e-5: float rounding of the sums (values of magnitude <= 35).
+    const double density_bound = kBlockDensityRange / 131070.0 + 1e-5;
+    const double color_bound =
+        (2 * kBaseRange + 2 * kSlopeRange * (std::abs(dir.x) + std::abs(dir.y) + std::abs(dir.z))) / 510.0 + 1e-5;
+    const double density_error = std::abs(raw - nerf_detail::RawDensity(f, c));
+    EXPECT_LE(density_error, density_bound) << "at " << g.x << " " << g.y << " " << g.z;
+    max_density_error = std::max(max_density_error, density_error);
+    for (int ch = 0; ch < 3; ++ch) {
+      const float* a = q + 4 * ch;
+      const double exact = a[0] + a[1] * dir.x + a[2] * dir.y + a[3] * dir.z;
+      const double error = std::abs(log_color[ch] - exact);
+      EXPECT_LE(error, color_bound) << "channel " << ch;
+      max_color_error = std::max(max_color_error, error);
+    }
+  }
+  // The copy is a quantisation, not a copy of the floats: errors exist but stay below the bounds.
+  EXPECT_GT(max_color_error, 1e-4);
+  EXPECT_GT(max_density_error, 1e-7);
+}
+
+TEST(NerfRenderCopy, RendersLikeThePlainFloatMarch) {
+  NerfField f = RandomField(3);
+  // Faint random fog (σ = e^-9 .. e^-1 / m) around a dense random ball (e^-1 .. e^7 within 0.3 m of the
+  // centre), so that rays end in all states: clear, half and opaque.
+  for (size_t b = 0; b < f.BrickCount(); ++b)
+    for (int v = 0; v < kNerfBrickSlots; ++v) {
+      const Vec3f p =
+          Vec3f(float(f.brick_coords[3 * b] * 4 + (v & 3)), float(f.brick_coords[3 * b + 1] * 4 + (v >> 2 & 3)),
+                float(f.brick_coords[3 * b + 2] * 4 + (v >> 4))) *
+          f.voxel_m;
+      f.density[b * kNerfBrickSlots + size_t(v)] += Length(p - Vec3f(0.5f, 0.5f, 0.5f)) < 0.3f ? 2.0f : -6.0f;
+    }
+  f.UpdateOccupancy(1e-6f);
+  f.UpdateRenderCopy();
+  const std::vector<NerfRay> rays = RandomRays(f, 3000, 4);
+  for (const char* quality : {"full", "live"}) {
+    const NerfRenderOptions o = NerfRenderOptions::Preset(quality);
+    int opaque = 0, clear = 0;
+    for (const NerfRay& ray : rays) {
+      const NerfRayResult a = f.RenderRay(ray, o), b = f.RenderRay(ray, FloatArrays(o));
+      // The same samples are taken (the copy changes values, not the march).
+      ASSERT_EQ(a.samples, b.samples);
+      // Log colour off by <= 1.5e-2 (bound of the test above at |d|_1 <= sqrt 3) -> radiance by <= 1.6 %;
+      // log-density off by <= 3.5e-4 (range now <= 43) -> each α by <= 0.04 %, so weights (and opacity) move by < 0.1 %
+      // of their sum. 2 % relative (+1e-6 absolute for dark rays) holds both.
+      for (int ch = 0; ch < 3; ++ch) EXPECT_NEAR(a.color[ch], b.color[ch], 0.02f * b.color[ch] + 1e-6f) << quality;
+      EXPECT_NEAR(a.opacity, b.opacity, 1e-3f) << quality;
+      // Depths: the termination distribution moves by < 0.1 % of its weight; over a ray of at most
+      // sqrt(3) m that is < 2 mm, and far less in practice.
+      EXPECT_NEAR(a.depth, b.depth, 2e-3f) << quality;
+      EXPECT_NEAR(a.surface_depth, b.surface_depth, 2e-3f) << quality;
+      opaque += b.opacity > 0.9f;
+      clear += b.opacity < 0.1f;
+    }
+    EXPECT_GT(opaque, 50) << "the test rays include opaque ones";
+    EXPECT_GT(clear, 50) << "and nearly transparent ones";
+    std::printf("%s: %d opaque, %d clear of %zu rays\n", quality, opaque, clear, rays.size());
+  }
+}
+
+TEST(NerfRenderCopy, ConstantSlabIsAnalytic) {
+  // A constant field is exact in the copy (each lane's range is empty: scale 0, offset = the value),
+  // except the far faces' blocks, whose out-of-grid vertices are never a corner of a grid cell.
+  const float sigma = 3.0f;
+  NerfField f = NerfField::Dense({Vec3(0, 0, 0), Vec3(1, 1, 1)}, 0.05, std::log(sigma), Vec3f(0.5f, -1.0f, 2.0f));
+  f.UpdateOccupancy(1e-3f);
+  f.UpdateRenderCopy();
+  ASSERT_TRUE(f.RenderCopyCurrent());
+  for (float length : {0.1f, 0.37f, 0.8f}) {
+    NerfRay r;
+    r.origin = Vec3f(-1.0f, 0.3f, 0.6f);
+    r.dir = Vec3f(1.0f, 0.0f, 0.0f);
+    r.t_near = 1.1f;
+    r.t_far = 1.1f + length;
+    const NerfRayResult res = f.RenderRay(r, {});
+    // Opacity 1 - exp(-σL); colour exp(log_c)·opacity. 1e-4: the density's 16-bit step in the far
+    // blocks (range 30 + ln 3 over 65535 levels -> 2.5e-4 in log σ) and float sums over <= 32 samples.
+    const float opacity = 1.0f - std::exp(-sigma * length);
+    EXPECT_NEAR(res.opacity, opacity, 1e-4f) << length;
+    EXPECT_NEAR(res.color.x, std::exp(0.5f) * opacity, 2e-4f) << length;
+    EXPECT_NEAR(res.color.y, std::exp(-1.0f) * opacity, 1e-4f) << length;
+    EXPECT_NEAR(res.color.z, std::exp(2.0f) * opacity, 1e-3f) << length;
+  }
+}
+
+// Renders every ray both ways and returns whether all results are bit-identical.
+bool SameAsFloatArrays(const NerfField& f, const std::vector<NerfRay>& rays) {
+  for (const NerfRay& ray : rays) {
+    const NerfRayResult a = f.RenderRay(ray, {}), b = f.RenderRay(ray, FloatArrays());
+    if (a.color.x != b.color.x || a.color.y != b.color.y || a.color.z != b.color.z || a.opacity != b.opacity ||
+        a.depth != b.depth || a.surface_depth != b.surface_depth)
+      return false;
+  }
+  return true;
+}
+
+TEST(NerfRenderCopy, AChangedFieldNeverRendersStaleCopyData) {
+  NerfField f = RandomField(5);
+  const std::vector<NerfRay> rays = RandomRays(f, 300, 6);
+  EXPECT_TRUE(SameAsFloatArrays(f, rays)) << "no copy until UpdateRenderCopy";
+  f.UpdateRenderCopy();
+  ASSERT_TRUE(f.RenderCopyCurrent());
+  ASSERT_FALSE(SameAsFloatArrays(f, rays)) << "the copy is read (it quantises)";
+
+  // A copied field owns new arrays: it renders from its floats, also after edits.
+  NerfField g = f;
+  EXPECT_FALSE(g.RenderCopyCurrent());
+  for (float& c : g.color) c += 0.25f;
+  EXPECT_TRUE(SameAsFloatArrays(g, rays));
+
+  // Re-thresholding the occupancy (in place, same array) drops the copy.
+  NerfField h = f;
+  h.UpdateRenderCopy();
+  ASSERT_TRUE(h.RenderCopyCurrent());
+  h.UpdateOccupancy(0.5f);
+  EXPECT_FALSE(h.RenderCopyCurrent());
+  EXPECT_TRUE(SameAsFloatArrays(h, rays));
+
+  // A new brick resizes the arrays: the copy no longer matches.
+  NerfField grown = NerfField::Dense({Vec3(0, 0, 0), Vec3(1, 1, 1)}, 0.1, 0.0f, Vec3f(0, 0, 0));
+  std::fill(grown.brick_table.begin(), grown.brick_table.end(), -1);  // no bricks: start again sparse
+  grown.brick_coords.clear(), grown.density.clear(), grown.color.clear(), grown.occupancy.clear();
+  grown.AllocateBrick(1, 1, 1);
+  grown.occupancy[0] = ~uint64_t{0};
+  grown.UpdateSkipGrid();
+  grown.UpdateRenderCopy();
+  ASSERT_TRUE(grown.RenderCopyCurrent());
+  const size_t before = grown.density.size();
+  grown.AllocateBrick(0, 0, 0);
+  ASSERT_NE(grown.density.size(), before);
+  EXPECT_FALSE(grown.RenderCopyCurrent());
+
+  // An in-place edit followed by UpdateRenderCopy (the documented rule) renders the new values: the
+  // colour bases +1 multiply radiance by e, within the copy's 2 % of the float march.
+  for (size_t n = 0; n < f.color.size(); n += 4) f.color[n] += 1.0f;
+  f.UpdateRenderCopy();
+  for (const NerfRay& ray : rays) {
+    const NerfRayResult a = f.RenderRay(ray, {}), b = f.RenderRay(ray, FloatArrays());
+    for (int ch = 0; ch < 3; ++ch) EXPECT_NEAR(a.color[ch], b.color[ch], 0.02f * b.color[ch] + 1e-6f);
+  }
+  // And ClearRenderCopy returns to the floats.
+  f.ClearRenderCopy();
+  EXPECT_TRUE(SameAsFloatArrays(f, rays));
+}
+
+TEST(NerfRenderCopy, RenderViewUsesTheCopyAndMatchesTheFloatArrays) {
+  NerfField f = RandomField(7);
+  for (float& d : f.density) d -= 1.0f;
+  f.UpdateOccupancy(1e-6f);
+  f.UpdateRenderCopy();
+  CameraIntrinsics camera;
+  camera.width = 40, camera.height = 30, camera.fx = camera.fy = 40, camera.cx = 20, camera.cy = 15;
+  const Pose pose = LookAt({2.0, -1.5, 1.2}, {0.5, 0.5, 0.5});
+  const NerfImages a = RenderView(f, camera, pose, {}), b = RenderView(f, camera, pose, FloatArrays());
+  size_t differ = 0;
+  for (size_t n = 0; n < a.color.pixels.size(); ++n) {
+    EXPECT_NEAR(a.color.pixels[n], b.color.pixels[n], 0.02f * b.color.pixels[n] + 1e-6f);  // as per ray above
+    differ += a.color.pixels[n] != b.color.pixels[n];
+  }
+  EXPECT_GT(differ, 0u) << "RenderView reads the copy";
+  for (size_t n = 0; n < a.opacity.pixels.size(); ++n) EXPECT_NEAR(a.opacity.pixels[n], b.opacity.pixels[n], 1e-3f);
+}
+
+TEST(NerfRenderCopy, Exp4MatchesStdExp) {
+  std::mt19937 rng(8);
+  std::uniform_real_distribution<float> u(-80.0f, 80.0f);
+  double worst = 0;
+  for (int n = 0; n < 100000; ++n) {
+    float v[4];
+    for (float& x : v) x = u(rng);
+    const float in[4] = {v[0], v[1], v[2], v[3]};
+    nerf_detail::Exp4(v);
+    for (int m = 0; m < 4; ++m) worst = std::max(worst, std::abs(double(v[m]) / std::exp(double(in[m])) - 1.0));
+  }
+  // The polynomial's error (2e-7) plus float rounding of its steps: below 4 float ulps (4.8e-7).
+  EXPECT_LT(worst, 4.8e-7);
+}
+
+}  // namespace
+}  // namespace nerfar
