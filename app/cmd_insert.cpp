@@ -183,6 +183,9 @@ int RunInsert(const CommandArgs& args) {
   parser.Flag("--gamma-per-pixel", &gamma_per_pixel, "self-shadow γ by an SSDF query per pixel, not per mesh vertex");
   parser.Flag("--no-self-shadow", &no_self_shadow, "objects do not shadow themselves or each other");
   parser.Flag("--no-shadows", &no_shadows, "no shadows on the scene (κ = 1)");
+  bool sg_specular = false;
+  parser.Flag("--sg-specular", &sg_specular,
+              "specular from the SG light (paper eq. 5) instead of the prefiltered incident-light samples");
   parser.Flag("--paper-gamma", &paper_gamma,
               "self-shadow γ = f_h(S)/f_h(π/2) as in the paper (default: horizon-relative)");
   parser.Option("--light-probe", &light_probe, "FILE", "light every object with this panorama fitted with SGs instead");
@@ -248,6 +251,7 @@ int RunInsert(const CommandArgs& args) {
   if (no_self_shadow) options.self_shadow = false;
   if (no_shadows) options.shadows = false;
   if (paper_gamma) options.self_shadow_horizon = false;
+  if (sg_specular) options.prefiltered_specular = false;
   {
     Problems p("nerfar insert options");
     for (const std::string& s : options.Validate()) p.Add("", s);

@@ -18,6 +18,10 @@ InsertOptions InsertOptions::Preset(const std::string& name) {
     o.occlusion_step = 4;
     o.kappa_cache_spacing_radii = 0.15;
     o.antialias_edges = false;  // the coverage sub-samples double the raster time
+    // The prefiltered specular costs ~1.5× the SG shading (bench insert,
+    // monkey: look-up per pixel beside the SG diffuse + visibility pass):
+    // fast keeps the SG specular to stay within the 6 ms shade budget.
+    o.prefiltered_specular = false;
     // Re-aiming near lobes prepares the SSDF query per κ evaluation: ~2-3×
     // the κ work of a frame whose object or light changed (lamps, balanced).
     o.light.parallax = false;

@@ -217,14 +217,17 @@ PrefilteredRadiance::PrefilteredRadiance(const RadianceSamples& samples, int lev
 }
 
 Vec3f PrefilteredRadiance::Sample(const Level& level, float u, float v) const {
+  // u in [0, 1), v in [0, 1]: x0 in [−1, width − 1], wrapped without a division.
   const float fx = u * level.width - 0.5f, fy = std::clamp(v * level.height - 0.5f, 0.0f, level.height - 1.0f);
-  const int x0 = static_cast<int>(std::floor(fx)), y0 = std::min(level.height - 2, static_cast<int>(fy));
-  const float ax = fx - x0, ay = std::clamp(fy - y0, 0.0f, 1.0f);
-  const int xa = (x0 + level.width) % level.width, xb = (x0 + 1 + level.width) % level.width;
-  const float* p00 = &level.rgb[(size_t(y0) * level.width + xa) * 3];
-  const float* p01 = &level.rgb[(size_t(y0) * level.width + xb) * 3];
-  const float* p10 = &level.rgb[(size_t(y0 + 1) * level.width + xa) * 3];
-  const float* p11 = &level.rgb[(size_t(y0 + 1) * level.width + xb) * 3];
+  const int x0 = fx < 0.0f ? -1 : static_cast<int>(fx), y0 = std::min(level.height - 2, static_cast<int>(fy));
+  const float ax = fx - static_cast<float>(x0), ay = std::min(fy - static_cast<float>(y0), 1.0f);
+  const int xa = x0 < 0 ? level.width - 1 : x0, xb = x0 + 1 >= level.width ? 0 : x0 + 1;
+  const float* row0 = &level.rgb[size_t(y0) * level.width * 3];
+  const float* row1 = row0 + size_t(level.width) * 3;
+  const float* p00 = row0 + xa * 3;
+  const float* p01 = row0 + xb * 3;
+  const float* p10 = row1 + xa * 3;
+  const float* p11 = row1 + xb * 3;
   float out[3];
   for (int c = 0; c < 3; ++c)
     out[c] = (1 - ay) * ((1 - ax) * p00[c] + ax * p01[c]) + ay * ((1 - ax) * p10[c] + ax * p11[c]);
