@@ -447,7 +447,8 @@ std::vector<BenchFigure> BenchInsert(const BenchOptions& options) {
     // NERFAR_BENCH_INSERT_KNOBS="kappa_step=4,shadow_reach_radii=8,...": κ
     // knobs set over the preset (to attribute one preset's cost against
     // another's): kappa_step, kappa_coarse_factor, shadow_reach_radii,
-    // shadow_epsilon, kappa_cache_spacing_radii, occlusion_step, parallax.
+    // shadow_epsilon, kappa_cache_spacing_radii, occlusion_step, parallax,
+    // kappa_refine_delta.
     if (const char* knobs = std::getenv("NERFAR_BENCH_INSERT_KNOBS")) {
       std::string list = knobs;
       for (size_t begin = 0; begin < list.size();) {
@@ -460,6 +461,7 @@ std::vector<BenchFigure> BenchInsert(const BenchOptions& options) {
         const double v = std::atof(item.c_str() + eq + 1);
         if (name == "kappa_step") insert_options.kappa_step = int(v);
         if (name == "kappa_coarse_factor") insert_options.kappa_coarse_factor = int(v);
+        if (name == "kappa_refine_delta") insert_options.kappa_refine_delta = v;
         if (name == "shadow_reach_radii") insert_options.shadow_reach_radii = v;
         if (name == "shadow_epsilon") insert_options.shadow_epsilon = v;
         if (name == "kappa_cache_spacing_radii") insert_options.kappa_cache_spacing_radii = v;

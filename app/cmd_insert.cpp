@@ -118,6 +118,7 @@ int RunInsert(const CommandArgs& args) {
   std::vector<std::string> object_paths, pose_paths, mesh_paths, material_paths;
   int light_directions = -1, sg_lobes = -1, kappa_step = -1, occlusion_step = -1;
   double kappa_cache = -1, receiver_reuse = -1;
+  double kappa_refine_delta = -1;
   bool no_cell_normals = false, no_parallax = false;
   bool no_kappa_snap = false, kappa_under_objects = false;
   double parallax_min_sharpness = -1;
@@ -146,6 +147,8 @@ int RunInsert(const CommandArgs& args) {
   parser.Option("--light-directions", &light_directions, "N", "rays from the object centre (balanced: 1024)");
   parser.Option("--sg-lobes", &sg_lobes, "M", "SG lobes of the incident light (balanced: 32)");
   parser.Option("--kappa-step", &kappa_step, "S", "κ every S pixels, interpolated between (balanced: 2)");
+  parser.Option("--kappa-refine-delta", &kappa_refine_delta, "D",
+                "coarse κ cells whose corners differ by more than D get every node (balanced: 0.02, fast: 0.04)");
   parser.Option("--shadow-reach", &shadow_reach, "R", "κ within R bounding radii of an object (balanced: 12)");
   parser.Option("--self-shadow-offset", &self_shadow_offset, "R",
                 "self-shadow SSDF queried R bounding radii off the surface (balanced: 0.01)");
@@ -229,6 +232,7 @@ int RunInsert(const CommandArgs& args) {
   if (light_directions != -1) options.light.directions = light_directions;
   if (sg_lobes != -1) options.light.fit.lobes = sg_lobes;
   if (kappa_step != -1) options.kappa_step = kappa_step;
+  if (kappa_refine_delta != -1) options.kappa_refine_delta = kappa_refine_delta;  // validated
   if (occlusion_step != -1) options.occlusion_step = occlusion_step;
   if (kappa_cache >= 0) options.kappa_cache_spacing_radii = kappa_cache;
   if (receiver_reuse == 0) options.kappa_receiver_reuse = false;

@@ -17,6 +17,11 @@ InsertOptions InsertOptions::Preset(const std::string& name) {
     o.kappa_step = 4;
     o.occlusion_step = 4;
     o.kappa_cache_spacing_radii = 0.15;
+    // Coarse κ cells refined only where corners differ by > 0.04: hand-held
+    // receivers 14.6 K -> 10.2 K, marches 540 -> 357 (bench insert); κ vs
+    // the bench's true geometry 0.112 -> 0.092, GT-input shadow error
+    // +0.001..+0.014 (docs/BENCHMARKS.md, insert Speed, session 6).
+    o.kappa_refine_delta = 0.04;
     o.antialias_edges = false;  // the coverage sub-samples double the raster time
     // The prefiltered specular costs ~1.5× the SG shading (bench insert,
     // monkey: look-up per pixel beside the SG diffuse + visibility pass):
