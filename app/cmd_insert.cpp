@@ -122,6 +122,7 @@ int RunInsert(const CommandArgs& args) {
   bool no_cell_normals = false, no_parallax = false;
   bool no_kappa_snap = false, kappa_under_objects = false;
   double parallax_min_sharpness = -1;
+  int light_refine_rays = -1;
   bool gamma_per_pixel = false;
   double shadow_reach = -1, self_shadow_offset = -1, receiver_min_opacity = -1;
   bool no_self_shadow = false, no_shadows = false, paper_gamma = false, truth_geometry = false;
@@ -165,6 +166,9 @@ int RunInsert(const CommandArgs& args) {
                 "0.02; 0: every receiver marched)");
   parser.Flag("--no-parallax", &no_parallax,
               "the light is the same at every shadow receiver, as taken at the object centre (no lobe distances)");
+  parser.Option("--light-refine-rays", &light_refine_rays, "K",
+                "rays averaged over each incident-light direction where the light changes fast (balanced, accurate: "
+                "16; fast: 0 = off)");
   parser.Option("--parallax-min-sharpness", &parallax_min_sharpness, "L",
                 "lobes at least this sharp are re-aimed from each receiver as compact sources (default 10)");
   parser.Flag("--light-from-centre", &light_from_centre,
@@ -203,6 +207,8 @@ int RunInsert(const CommandArgs& args) {
   parser.Epilog(
       "outputs: OUT/<name>.exr and .png, OUT/<name>_object.exr, _alpha.exr, _kappa.exr, OUT/probe.exr\n"
       "(probe_<i>.exr for further objects), OUT/timings.json, OUT/options.json [, OUT/report.json]\n"
+      "with --truth also OUT/probe_samples.exr (the light's rays before the SG fit), OUT/probe_opacity.exr\n"
+      "(R: the scene's opacity from the centre, G: opacity x hit distance) and the light per region of the sphere\n"
       "example:\n"
       "  nerfar insert --nerf lamps.nerf --object monkey.ssdf --pose "
       "../shared/scenes/lamps/insert/monkey_diffuse/pose.json \\\n"
@@ -247,6 +253,7 @@ int RunInsert(const CommandArgs& args) {
   if (expected_depth) nerf_options.surface_depth = false;
   if (normal_probe_voxels != -1) nerf_options.normal_probe_voxels = normal_probe_voxels;
   if (parallax_min_sharpness != -1) options.light.parallax_min_sharpness = parallax_min_sharpness;
+  if (light_refine_rays != -1) options.light.refine_rays = light_refine_rays;
   if (gamma_per_pixel) options.self_shadow_per_vertex = false;
   if (shadow_reach != -1) options.shadow_reach_radii = shadow_reach;
   if (self_shadow_offset != -1) options.self_shadow_offset_radii = self_shadow_offset;
@@ -489,6 +496,54 @@ int RunInsert(const CommandArgs& args) {
       const double lighting = LightingError(inserter.Light(0), ReadExrRgb(true_probe.string()));
       report["lighting_error"] = lighting;
       std::printf("lighting error (relative RMS irradiance, 64 normals): %.3f\n", lighting);
+      // Where the light differs: the raw samples (before the SG fit) as OUT/probe_samples.exr and their
+      // lighting error, and the luminance flux per region of the sphere of the truth, the fit and the samples.
+      const ImageF truth_probe = ReadExrRgb(true_probe.string());
+      const ImageF fitted = RenderEquirect(inserter.Light(0), truth_probe.width, truth_probe.height);
+      ImageF raw, opacity, opacity_depth;
+      const ImageF ones(truth_probe.width, truth_probe.height, 3, 1.0f);
+      if (inserter.LightCache(0).valid() && inserter.LightCache(0).samples().size() > 0) {
+        raw = SamplesPanorama(inserter.LightCache(0).samples(), truth_probe.width, truth_probe.height);
+        WriteExrRgb((fs::path(output) / "probe_samples.exr").string(), raw, ExrPixelType::kFloat);
+        report["lighting_error_samples"] = LightingError(raw, truth_probe);
+        report["light_refined_directions"] = inserter.LightCache(0).refined();
+        std::printf("lighting error of the raw samples (before the SG fit): %.3f\n",
+                    report["lighting_error_samples"].get<double>());
+        // The scene seen from the centre, OUT/probe_opacity.exr: R = opacity Ô (where the NeRF hides the
+        // environment), G = Ô × hit distance (m), B = 0.
+        const IncidentLight& cache = inserter.LightCache(0);
+        RadianceSamples o = cache.samples(), od = cache.samples();
+        for (size_t k = 0; k < o.size() && k < cache.opacity().size() && k < cache.depth().size(); ++k) {
+          o.radiance[k] = Vec3{1.0, 1.0, 1.0} * double(cache.opacity()[k]);
+          od.radiance[k] = Vec3{1.0, 1.0, 1.0} * double(cache.opacity()[k]) * double(cache.depth()[k]);
+        }
+        opacity = SamplesPanorama(o, truth_probe.width, truth_probe.height);
+        opacity_depth = SamplesPanorama(od, truth_probe.width, truth_probe.height);
+        ImageF layers = opacity;
+        for (size_t k = 0; k < layers.PixelCount(); ++k) {
+          layers.pixels[3 * k + 1] = opacity_depth.pixels[3 * k];
+          layers.pixels[3 * k + 2] = 0.0f;
+        }
+        WriteExrRgb((fs::path(output) / "probe_opacity.exr").string(), layers, ExrPixelType::kFloat);
+      }
+      Json regions = Json::array();
+      std::printf("light flux per region (Y x sr): %-42s %9s %9s %9s %9s %9s\n", "region", "truth", "fitted", "samples",
+                  "opacity", "depth_m");
+      for (const SphereRegion& region : LightReportRegions(truth_probe)) {
+        const double t = RegionFlux(truth_probe, region), f = RegionFlux(fitted, region);
+        const double r = raw.empty() ? NAN : RegionFlux(raw, region);
+        const double o = opacity.empty() ? NAN : RegionFlux(opacity, region) / RegionFlux(ones, region);
+        const double depth = opacity.empty() ? NAN : RegionFlux(opacity_depth, region) / RegionFlux(opacity, region);
+        regions.push_back({{"region", region.name},
+                           {"truth", t},
+                           {"fitted", f},
+                           {"samples", raw.empty() ? Json() : Json(r)},
+                           {"mean_opacity", opacity.empty() ? Json() : Json(o)},
+                           {"mean_depth_m", std::isfinite(depth) ? Json(depth) : Json()}});
+        std::printf("light flux per region (Y x sr): %-42s %9.4f %9.4f %9.4f %9.3f %9.3f\n", region.name.c_str(), t, f,
+                    r, o, depth);
+      }
+      report["light_flux_per_region"] = regions;
     }
     std::printf("mean object psnr_tm %.2f dB, mean shadow error %.3f\n", mean(psnrs), mean(shadow_errors));
     WriteJsonFile((fs::path(output) / "report.json").string(), report);

@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <tuple>
 
 #include "calib/core/error.h"
 #include "calib/core/parallel.h"
@@ -43,16 +44,78 @@ std::vector<std::string> IncidentLightOptions::Validate() const {
     problems.push_back("light_move_threshold_m: must be a finite number >= 0");
   if (!(start_tolerance_m >= 0.0) || !std::isfinite(start_tolerance_m))
     problems.push_back("light_start_tolerance_m: must be a finite number >= 0");
+  if (refine_rays < 0 || refine_rays > 1024)
+    problems.push_back("light_refine_rays: " + std::to_string(refine_rays) + " is out of range (expected 0 to 1024)");
+  if (!(refine_contrast > 1.0) || !std::isfinite(refine_contrast))
+    problems.push_back("light_refine_contrast: must be a finite number > 1");
   if (!(parallax_min_sharpness > 0.0) || !std::isfinite(parallax_min_sharpness))
     problems.push_back("parallax_min_sharpness: must be a finite number > 0");
   for (const std::string& p : fit.Validate()) problems.push_back("fit." + p);
   return problems;
 }
 
+namespace {
+// Renders the light rays center + t·d over [max(box entry, start), box exit]
+// in chunks over the threads (one batch per chunk: RenderLightRays is const
+// and shares no scratch).
+SceneSamples RenderFromCenter(const SceneField& scene, const Vec3& center, const std::vector<Vec3>& directions,
+                              const std::vector<float>& starts) {
+  const size_t n = directions.size();
+  constexpr size_t kChunk = 128;
+  const size_t chunks = (n + kChunk - 1) / kChunk;
+  SceneSamples field;
+  field.Resize(n);
+  const Aabb box = scene.Box();
+  ParallelFor(
+      chunks,
+      [&](size_t c) {
+        SceneRays rays;
+        SceneSamples out;
+        const size_t begin = c * kChunk, end = std::min(n, begin + kChunk);
+        rays.Reserve(end - begin);
+        for (size_t i = begin; i < end; ++i) {
+          const auto range = IntersectBox(box, center, directions[i]);
+          float t0 = range ? static_cast<float>(range->first) : 0.0f;
+          const float t1 = range ? static_cast<float>(range->second) : 0.0f;
+          if (i < starts.size() && std::isfinite(starts[i])) t0 = std::max(t0, starts[i]);
+          rays.Add(Vec3f(center), Vec3f(directions[i]), std::min(t0, t1), t1);
+        }
+        scene.RenderLightRays(rays, out);
+        for (size_t i = begin; i < end; ++i) {
+          field.colour[i] = out.colour[i - begin];
+          field.opacity[i] = out.opacity[i - begin];
+          field.depth[i] = out.depth[i - begin];
+        }
+      },
+      1);
+  return field;
+}
+
+// Ĉ + (1 − Ô)·L_env (per source), non-finite or negative parts as 0.
+Vec3 BlendLight(const Vec3f& colour, float opacity, const SgMixture& environment, const Vec3& direction,
+                LightSource source, float* clamped_opacity) {
+  Vec3 near{};
+  float o = 0.0f;
+  if (source != LightSource::kEnvironmentOnly) {
+    near = Vec3(colour);
+    o = std::clamp(opacity, 0.0f, 1.0f);
+    if (!std::isfinite(o)) o = 0.0f;
+  }
+  Vec3 env{};
+  if (source != LightSource::kNearFieldOnly && !environment.empty()) env = Evaluate(environment, direction) * (1.0 - o);
+  Vec3 l = near + env;
+  for (int c = 0; c < 3; ++c)
+    if (!std::isfinite(l[c]) || l[c] < 0.0) l[c] = 0.0;
+  if (clamped_opacity) *clamped_opacity = o;
+  return l;
+}
+}  // namespace
+
 RadianceSamples SampleIncidentLight(const SceneField& scene, const SgMixture& environment, const Vec3& center,
                                     const std::vector<Vec3>& directions, LightSource source,
                                     std::vector<float>* opacity, std::vector<float>* depth,
-                                    const std::vector<float>* start) {
+                                    const std::vector<float>* start, int refine_rays, double refine_contrast,
+                                    size_t* refined) {
   const size_t n = directions.size();
   RadianceSamples samples;
   samples.directions = directions;
@@ -60,55 +123,83 @@ RadianceSamples SampleIncidentLight(const SceneField& scene, const SgMixture& en
   samples.solid_angles.assign(n, n > 0 ? 4.0 * kPi / static_cast<double>(n) : 0.0);
   if (opacity) opacity->assign(n, 0.0f);
   if (depth) depth->assign(n, 0.0f);
+  if (refined) *refined = 0;
+  const std::vector<float> no_starts;
+  const std::vector<float>& starts = start ? *start : no_starts;
   SceneSamples field;
-  if (source != LightSource::kEnvironmentOnly) {
-    // One batch per chunk so that threads share no scratch (RenderRays is const).
-    constexpr size_t kChunk = 128;
-    const size_t chunks = (n + kChunk - 1) / kChunk;
-    field.Resize(n);
-    const Aabb box = scene.Box();
-    ParallelFor(
-        chunks,
-        [&](size_t c) {
-          SceneRays rays;
-          SceneSamples out;
-          const size_t begin = c * kChunk, end = std::min(n, begin + kChunk);
-          rays.Reserve(end - begin);
-          for (size_t i = begin; i < end; ++i) {
-            const auto range = IntersectBox(box, center, directions[i]);
-            float t0 = range ? static_cast<float>(range->first) : 0.0f;
-            const float t1 = range ? static_cast<float>(range->second) : 0.0f;
-            if (start && i < start->size() && std::isfinite((*start)[i])) t0 = std::max(t0, (*start)[i]);
-            rays.Add(Vec3f(center), Vec3f(directions[i]), std::min(t0, t1), t1);
-          }
-          scene.RenderLightRays(rays, out);
-          for (size_t i = begin; i < end; ++i) {
-            field.colour[i] = out.colour[i - begin];
-            field.opacity[i] = out.opacity[i - begin];
-            field.depth[i] = out.depth[i - begin];
-          }
-        },
-        1);
-  }
+  if (source != LightSource::kEnvironmentOnly) field = RenderFromCenter(scene, center, directions, starts);
+  std::vector<float> o(n, 0.0f);
   for (size_t i = 0; i < n; ++i) {
-    Vec3 near{};
-    float o = 0.0f;
-    if (source != LightSource::kEnvironmentOnly) {
-      near = Vec3(field.colour[i]);
-      o = std::clamp(field.opacity[i], 0.0f, 1.0f);
-      if (!std::isfinite(o)) o = 0.0f;
-    }
-    Vec3 env{};
-    if (source != LightSource::kNearFieldOnly && !environment.empty())
-      env = Evaluate(environment, directions[i]) * (1.0 - o);
-    Vec3 l = near + env;
-    for (int c = 0; c < 3; ++c)
-      if (!std::isfinite(l[c]) || l[c] < 0.0) l[c] = 0.0;
-    samples.radiance[i] = l;
-    if (opacity) (*opacity)[i] = o;
+    samples.radiance[i] = source != LightSource::kEnvironmentOnly
+                              ? BlendLight(field.colour[i], field.opacity[i], environment, directions[i], source, &o[i])
+                              : BlendLight({}, 0.0f, environment, directions[i], source, &o[i]);
     if (depth && source != LightSource::kEnvironmentOnly && std::isfinite(field.depth[i]) && field.depth[i] > 0.0f)
       (*depth)[i] = field.depth[i];
   }
+  // Cells where the light changes faster than the directions resolve.
+  if (refine_rays > 0 && n >= 16 && source != LightSource::kEnvironmentOnly) {
+    std::vector<double> y(n);
+    double mean = 0.0;
+    for (size_t i = 0; i < n; ++i) mean += (y[i] = LuminanceOf(samples.radiance[i])) / static_cast<double>(n);
+    // Neighbours: within 1.8 spacings of an even set (spacing √(4π/N)),
+    // found in the z band of that width (directions sorted by z).
+    const double spacing = std::sqrt(4.0 * kPi / static_cast<double>(n));
+    const double reach = 1.8 * spacing, cos_reach = std::cos(reach);
+    std::vector<uint32_t> order(n);
+    for (size_t i = 0; i < n; ++i) order[i] = static_cast<uint32_t>(i);
+    std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return directions[a].z < directions[b].z; });
+    std::vector<double> sorted_z(n);
+    for (size_t k = 0; k < n; ++k) sorted_z[k] = directions[order[k]].z;
+    std::vector<uint32_t> marked;
+    for (size_t i = 0; i < n; ++i) {
+      const double z = directions[i].z;
+      const size_t first = std::lower_bound(sorted_z.begin(), sorted_z.end(), z - reach) - sorted_z.begin();
+      const size_t last = std::upper_bound(sorted_z.begin(), sorted_z.end(), z + reach) - sorted_z.begin();
+      bool mark = false;
+      for (size_t k = first; k < last && !mark; ++k) {
+        const uint32_t j = order[k];
+        if (j == i || Dot(directions[i], directions[j]) < cos_reach) continue;
+        const double hi = std::max(y[i], y[j]), lo = std::min(y[i], y[j]);
+        mark = hi > mean && hi > refine_contrast * lo;
+      }
+      if (mark) marked.push_back(static_cast<uint32_t>(i));
+    }
+    // Sub-rays over each marked cell: a Vogel disc of the cell's equal-area
+    // radius 2/√N in the tangent plane, turned per cell (no pattern shared
+    // by neighbouring cells).
+    const double radius = 2.0 / std::sqrt(static_cast<double>(n));
+    const double golden = kPi * (3.0 - std::sqrt(5.0));
+    const size_t k_rays = static_cast<size_t>(refine_rays);
+    std::vector<Vec3> sub(marked.size() * k_rays);
+    std::vector<float> sub_starts(sub.size());
+    for (size_t m = 0; m < marked.size(); ++m) {
+      const Vec3& d = directions[marked[m]];
+      const Vec3 a = std::abs(d.x) < 0.9 ? Vec3{1, 0, 0} : Vec3{0, 1, 0};
+      const Vec3 t1 = Normalized(Cross(d, a)), t2 = Cross(d, t1);
+      const double turn = golden * 0.618 * static_cast<double>(marked[m]);
+      for (size_t k = 0; k < k_rays; ++k) {
+        const double r = radius * std::sqrt((k + 0.5) / static_cast<double>(k_rays));
+        const double phi = turn + golden * static_cast<double>(k);
+        sub[m * k_rays + k] = Normalized(d + (t1 * std::cos(phi) + t2 * std::sin(phi)) * r);
+        sub_starts[m * k_rays + k] = marked[m] < starts.size() ? starts[marked[m]] : 0.0f;
+      }
+    }
+    const SceneSamples sub_field = RenderFromCenter(scene, center, sub, sub_starts);
+    for (size_t m = 0; m < marked.size(); ++m) {
+      Vec3 sum{};
+      double sum_o = 0.0;
+      for (size_t k = 0; k < k_rays; ++k) {
+        const size_t s = m * k_rays + k;
+        float ok = 0.0f;
+        sum += BlendLight(sub_field.colour[s], sub_field.opacity[s], environment, sub[s], source, &ok);
+        sum_o += ok;
+      }
+      samples.radiance[marked[m]] = sum / static_cast<double>(k_rays);
+      o[marked[m]] = static_cast<float>(sum_o / static_cast<double>(k_rays));
+    }
+    if (refined) *refined = marked.size();
+  }
+  if (opacity) *opacity = o;
   return samples;
 }
 
@@ -296,13 +387,15 @@ IncidentLight::Update IncidentLight::Refresh(const SceneField& scene, const SgMi
   const std::vector<float>* starts = Starts(center, options, volume);
   const bool same_starts = SameStarts(starts, fitted_starts_, options.start_tolerance_m);
   const bool same_setup = valid_ && directions_ == options.directions && source_ == options.source &&
-                          lobes_ == options.fit.lobes && same_starts;
+                          lobes_ == options.fit.lobes && same_starts && refine_rays_ == options.refine_rays &&
+                          refine_contrast_ == options.refine_contrast;
   const bool same_parallax = options.parallax == !distances_.empty() || light_.empty();
   if (same_setup && same_parallax && Length(center - center_) <= options.move_threshold_m) return update;
   update.recomputed = true;
   if (static_cast<int>(dirs_.size()) != options.directions) dirs_ = FibonacciSphere(options.directions);
   auto t0 = std::chrono::steady_clock::now();
-  samples_ = SampleIncidentLight(scene, environment, center, dirs_, options.source, &opacity_, &depth_, starts);
+  samples_ = SampleIncidentLight(scene, environment, center, dirs_, options.source, &opacity_, &depth_, starts,
+                                 options.refine_rays, options.refine_contrast, &refined_);
   update.sample_ms = MillisecondsSince(t0);
   double total = 0.0;
   for (const Vec3& l : samples_.radiance) total += LuminanceOf(l);
@@ -333,6 +426,8 @@ IncidentLight::Update IncidentLight::Refresh(const SceneField& scene, const SgMi
   directions_ = options.directions;
   source_ = options.source;
   lobes_ = options.fit.lobes;
+  refine_rays_ = options.refine_rays;
+  refine_contrast_ = options.refine_contrast;
   return update;
 }
 
@@ -367,6 +462,146 @@ const std::vector<double>& IncidentLight::DistancesFor(const SceneField& scene, 
   given_valid_ = true;
   valid_ = false;  // the fitted light (Refresh) no longer matches distances_
   return distances_;
+}
+
+ImageF SamplesPanorama(const RadianceSamples& samples, int width, int height) {
+  ImageF out(std::max(width, 0), std::max(height, 0), 3);
+  const size_t n = std::min(samples.directions.size(), samples.radiance.size());
+  if (n == 0 || out.empty()) return out;
+  // Samples sorted by z: the nearest one to a pixel lies within the z band
+  // of a few sample spacings (even point sets), searched first; the whole
+  // set where that band holds none.
+  std::vector<uint32_t> order(n);
+  for (size_t i = 0; i < n; ++i) order[i] = static_cast<uint32_t>(i);
+  std::sort(order.begin(), order.end(),
+            [&](uint32_t a, uint32_t b) { return samples.directions[a].z < samples.directions[b].z; });
+  std::vector<double> sorted_z(n);
+  for (size_t k = 0; k < n; ++k) sorted_z[k] = samples.directions[order[k]].z;
+  const double band = std::min(2.0, 4.0 * std::sqrt(4.0 * kPi / static_cast<double>(n)));
+  ParallelFor(
+      static_cast<size_t>(out.height),
+      [&](size_t row) {
+        for (int x = 0; x < out.width; ++x) {
+          const Vec3 d = EquirectDirection((x + 0.5) / out.width, (row + 0.5) / out.height);
+          const auto nearest = [&](size_t first, size_t last) {
+            double best = -2.0;
+            size_t best_i = SIZE_MAX;
+            for (size_t k = first; k < last; ++k) {
+              const double c = Dot(d, samples.directions[order[k]]);
+              if (c > best) best = c, best_i = order[k];
+            }
+            return std::make_pair(best, best_i);
+          };
+          const size_t first = std::lower_bound(sorted_z.begin(), sorted_z.end(), d.z - band) - sorted_z.begin();
+          const size_t last = std::upper_bound(sorted_z.begin(), sorted_z.end(), d.z + band) - sorted_z.begin();
+          auto [cos_best, i] = nearest(first, last);
+          // The band holds every direction within acos(1 − band) ≥ band of d:
+          // a nearer sample outside it is impossible once one is that close.
+          if (i == SIZE_MAX || cos_best < 1.0 - band) std::tie(cos_best, i) = nearest(0, n);
+          for (int c = 0; c < 3; ++c) out.at(x, static_cast<int>(row), c) = static_cast<float>(samples.radiance[i][c]);
+        }
+      },
+      4);
+  return out;
+}
+
+bool SphereRegion::Contains(const Vec3& d) const {
+  const double elevation = std::asin(std::clamp(d.z, -1.0, 1.0)) * 180.0 / kPi;
+  double azimuth = std::atan2(d.y, d.x) * 180.0 / kPi;
+  if (azimuth >= 180.0) azimuth -= 360.0;
+  const bool top = elevation_max_deg >= 90.0 && elevation >= 90.0;  // the pole belongs to the top band
+  return elevation >= elevation_min_deg && (elevation < elevation_max_deg || top) && azimuth >= azimuth_min_deg &&
+         azimuth < azimuth_max_deg;
+}
+
+std::vector<SphereRegion> LightReportRegions(const ImageF& truth, double source_factor, double source_margin_deg) {
+  std::vector<SphereRegion> regions;
+  const auto band = [](std::string name, double lo, double hi, double az_lo = -180.0, double az_hi = 180.0) {
+    SphereRegion r;
+    r.name = std::move(name);
+    r.elevation_min_deg = lo;
+    r.elevation_max_deg = hi;
+    r.azimuth_min_deg = az_lo;
+    r.azimuth_max_deg = az_hi;
+    return r;
+  };
+  regions.push_back(band("all", -90.0, 90.0));
+  regions.push_back(band("above 15 deg", 15.0, 90.0));
+  regions.push_back(band("horizon +-15 deg", -15.0, 15.0));
+  regions.push_back(band("below -15 deg", -90.0, -15.0));
+  for (int e = 0; e < 6; ++e)
+    for (int a = 0; a < 4; ++a) {
+      const double lo = 60.0 - 30.0 * e, az = -180.0 + 90.0 * a;
+      regions.push_back(band("el " + std::to_string(int(lo)) + ".." + std::to_string(int(lo + 30)) + " az " +
+                                 std::to_string(int(az)) + ".." + std::to_string(int(az + 90)),
+                             lo, lo + 30.0, az, az + 90.0));
+    }
+  if (truth.empty() || truth.channels < 3) return regions;
+  // The truth's compact sources, widened by the margin.
+  const int w = truth.width, h = truth.height;
+  double mean = 0.0, area = 0.0;
+  for (int y = 0; y < h; ++y) {
+    const double omega = EquirectPixelSolidAngle(w, h, y);
+    for (int x = 0; x < w; ++x) {
+      const float* p = truth.Pixel(x, y);
+      mean += LuminanceOf(Vec3{p[0], p[1], p[2]}) * omega;
+      area += omega;
+    }
+  }
+  mean = area > 0.0 ? mean / area : 0.0;
+  std::vector<Vec3> bright;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const float* p = truth.Pixel(x, y);
+      if (mean > 0.0 && LuminanceOf(Vec3{p[0], p[1], p[2]}) > source_factor * mean)
+        bright.push_back(EquirectDirection((x + 0.5) / w, (y + 0.5) / h));
+    }
+  if (bright.empty()) return regions;
+  SphereRegion sources;
+  sources.name = "sources (truth > " + std::to_string(int(source_factor)) + "x mean, +" +
+                 std::to_string(int(source_margin_deg)) + " deg)";
+  sources.mask.assign(static_cast<size_t>(w) * h, 0);
+  const double cos_margin = std::cos(source_margin_deg * kPi / 180.0);
+  ParallelFor(
+      static_cast<size_t>(h),
+      [&](size_t y) {
+        for (int x = 0; x < w; ++x) {
+          const Vec3 d = EquirectDirection((x + 0.5) / w, (y + 0.5) / h);
+          for (const Vec3& b : bright)
+            if (Dot(d, b) >= cos_margin) {
+              sources.mask[y * w + x] = 1;
+              break;
+            }
+        }
+      },
+      4);
+  SphereRegion rest = band("rest (not sources)", -90.0, 90.0);
+  rest.mask = sources.mask;
+  for (unsigned char& m : rest.mask) m = m ? 0 : 1;
+  regions.push_back(std::move(sources));
+  regions.push_back(std::move(rest));
+  return regions;
+}
+
+double RegionFlux(const ImageF& panorama, const SphereRegion& region) {
+  if (panorama.empty() || panorama.channels < 3) return 0.0;
+  const int w = panorama.width, h = panorama.height;
+  const bool masked = !region.mask.empty();
+  if (masked && region.mask.size() != static_cast<size_t>(w) * h)
+    ThrowInputError("light report", "region '" + region.name + "' mask is " + std::to_string(region.mask.size()) +
+                                        " pixels (expected " + std::to_string(w) + "x" + std::to_string(h) + ")");
+  double flux = 0.0;
+  for (int y = 0; y < h; ++y) {
+    const double omega = EquirectPixelSolidAngle(w, h, y);
+    for (int x = 0; x < w; ++x) {
+      const bool in = masked ? region.mask[static_cast<size_t>(y) * w + x] != 0
+                             : region.Contains(EquirectDirection((x + 0.5) / w, (y + 0.5) / h));
+      if (!in) continue;
+      const float* p = panorama.Pixel(x, y);
+      flux += LuminanceOf(Vec3{p[0], p[1], p[2]}) * omega;
+    }
+  }
+  return flux;
 }
 
 }  // namespace nerfar

@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "calib/core/image.h"
 #include "render/insert/scene_field.h"
 #include "render/mesh/mesh.h"
 #include "render/sg/fit.h"
@@ -55,6 +56,15 @@ struct IncidentLightOptions {
   // this (a ball turned about its centre: only its facets move). 1 mm is a
   // fifth of the finest NeRF voxel (5 mm), below what the scene can resolve.
   double start_tolerance_m = 1e-3;
+  // Supersampling where the light changes faster than the N directions
+  // resolve (a lamp a few directions wide, a window's edge): a direction
+  // whose radiance differs by more than refine_contrast× from a neighbour's,
+  // the brighter of the two above the mean, takes the mean of refine_rays
+  // rays spread over its own cell (solid angle 4π/N) instead of its centre
+  // ray's alone, so that each sample carries its cell's light (flux) rather
+  // than a point value that hits or misses a small source. 0: no refinement.
+  int refine_rays = 16;  // fast preset: 0
+  double refine_contrast = 2.0;
   // Every problem as "field: what is wrong (what was expected)".
   std::vector<std::string> Validate() const;
 };
@@ -64,10 +74,17 @@ struct IncidentLightOptions {
 // `depth` (optional) the scene's hit distance from the centre (0 where
 // Ô = 0). `start` (optional, one per direction): ray i integrates the scene
 // from max(start[i], box entry) on (ObjectExitDistances).
+// `refine_rays` > 0: the directions whose light changes fast take the mean
+// over their cells (IncidentLightOptions::refine_rays, refine_contrast; the
+// directions must then be an even set such as FibonacciSphere's); `refined`
+// (optional) receives how many did. A refined direction's opacity is its
+// cell's mean, its depth the centre ray's, and its sub-rays start at the
+// centre ray's start.
 RadianceSamples SampleIncidentLight(const SceneField& scene, const SgMixture& environment, const Vec3& center,
                                     const std::vector<Vec3>& directions, LightSource source,
                                     std::vector<float>* opacity = nullptr, std::vector<float>* depth = nullptr,
-                                    const std::vector<float>* start = nullptr);
+                                    const std::vector<float>* start = nullptr, int refine_rays = 0,
+                                    double refine_contrast = 2.0, size_t* refined = nullptr);
 
 // The object whose light is taken: its mesh as posed in the world (a loan).
 struct LightObjectVolume {
@@ -143,6 +160,11 @@ class IncidentLight {
   const Vec3& center() const { return center_; }
   // The fitted lobes' distances (LobeDistances; empty without parallax).
   const std::vector<double>& lobe_distances() const { return distances_; }
+  // The scene's opacity Ô and hit distance per direction of samples() (0 where Ô = 0).
+  const std::vector<float>& opacity() const { return opacity_; }
+  const std::vector<float>& depth() const { return depth_; }
+  // How many directions the last sampling refined (IncidentLightOptions::refine_rays).
+  size_t refined() const { return refined_; }
 
   // For a light given from elsewhere (a probe): the scene is sampled from
   // `center` for opacity and depth only, and `light`'s lobes get their
@@ -171,6 +193,9 @@ class IncidentLight {
   int directions_ = 0;
   LightSource source_ = LightSource::kFull;
   int lobes_ = 0;
+  int refine_rays_ = 0;
+  double refine_contrast_ = 0.0;
+  size_t refined_ = 0;
   std::vector<Vec3> dirs_;
   RadianceSamples samples_;
   std::vector<float> opacity_, depth_;
@@ -182,5 +207,37 @@ class IncidentLight {
   int given_directions_ = 0;
   bool given_valid_ = false;
 };
+
+// ---- Diagnostics (nerfar insert --truth): where on the sphere the light differs ----
+
+// The raw samples (before the SG fit) as a width × height panorama in the
+// scenes' equirect convention: each pixel takes the radiance of the sample
+// direction nearest to its centre (3 channels). Empty samples: all zero.
+ImageF SamplesPanorama(const RadianceSamples& samples, int width, int height);
+
+// A part of the sphere: the directions with elevation (asin z, degrees) in
+// [elevation_min_deg, elevation_max_deg) and azimuth (atan2(y, x), degrees,
+// in [-180, 180)) in [azimuth_min_deg, azimuth_max_deg); or, with
+// `mask` non-empty, the panorama pixels where mask is non-zero.
+struct SphereRegion {
+  std::string name;
+  double elevation_min_deg = -90.0, elevation_max_deg = 90.0;
+  double azimuth_min_deg = -180.0, azimuth_max_deg = 180.0;
+  std::vector<unsigned char> mask;  // width × height of the panoramas measured (row-major)
+  bool Contains(const Vec3& direction) const;
+};
+
+// The regions a light report lists: the sphere split into three bands
+// (above 15° elevation, the horizon band within ±15°, below −15°), the 2D
+// table of 6 elevation bands of 30° × 4 azimuth quadrants, and "sources":
+// the directions within `source_margin_deg` of a pixel of `truth` brighter
+// than `source_factor` × its mean luminance (lamps, a window: wherever the
+// truth's compact sources are; empty when there is none).
+std::vector<SphereRegion> LightReportRegions(const ImageF& truth, double source_factor = 10.0,
+                                             double source_margin_deg = 5.0);
+
+// Luminance flux ∫_region Y(L) dω (radiance × sr) of an equirect panorama,
+// by summation over its pixels (their centres decide membership).
+double RegionFlux(const ImageF& panorama, const SphereRegion& region);
 
 }  // namespace nerfar

@@ -30,6 +30,9 @@ InsertOptions InsertOptions::Preset(const std::string& name) {
     // Re-aiming near lobes prepares the SSDF query per κ evaluation: ~2-3×
     // the κ work of a frame whose object or light changed (lamps, balanced).
     o.light.parallax = false;
+    // Refining the incident light's fast-changing directions costs 3-4.5×
+    // the light rays on the shared scenes' NeRFs (docs/BENCHMARKS.md).
+    o.light.refine_rays = 0;
   } else if (name == "balanced") {
   } else if (name == "accurate") {
     o.light.directions = 2048;
@@ -88,6 +91,8 @@ std::string InsertOptions::ToJson() const {
   j["light_parallax_min_sharpness"] = light.parallax_min_sharpness;
   j["light_start_outside_object"] = light.start_outside_object;
   j["light_start_tolerance_m"] = light.start_tolerance_m;
+  j["light_refine_rays"] = light.refine_rays;
+  j["light_refine_contrast"] = light.refine_contrast;
   j["sg_lobes"] = light.fit.lobes;
   j["sg_cold_iterations"] = light.fit.cold_iterations;
   j["sg_warm_iterations"] = light.fit.warm_iterations;
