@@ -3,7 +3,7 @@
 // and reports training time, psnr_tm of the test views against the low-noise
 // insert/bg_XXX.exr, depth error on surfaces, model size, and the query
 // throughput (density and radiance samples/s, 1280x720 and 320x180 colour+depth
-// frames at quality full and live - from the compact render copy, and live from the
+// frames at quality full, live and preview - from the compact render copy, and live from the
 // float arrays too - with the mean samples per ray of the 720p frame) on 1 thread and on
 // all threads. --quick: a 20-step run on one scene.
 // $NERFAR_BENCH_NERF_MODELS="lamps=A.nerf,window=B.nerf": no training; the
@@ -69,7 +69,11 @@ void Throughput(const NerfField& field, const std::string& dataset, const std::s
       const double live_ms = MedianMilliseconds([&] { RenderView(field, cam, pose, live); }, 3, 0.5);
       figures.push_back({"frame_" + std::to_string(w) + "x" + std::to_string(h) + "_live_ms", live_ms, "ms",
                          cond + ", quality live (step 2 voxels, min transmittance 3e-2)"});
-      // The same from the float arrays (no render copy), for comparison.
+      const double preview_ms =
+          MedianMilliseconds([&] { RenderView(field, cam, pose, NerfRenderOptions::Preset("preview")); }, 3, 0.5);
+      figures.push_back({"frame_" + std::to_string(w) + "x" + std::to_string(h) + "_preview_ms", preview_ms, "ms",
+                         cond + ", quality preview (step 3 voxels, min transmittance 3e-2)"});
+      // The live frame from the float arrays (no render copy), for comparison.
       NerfRenderOptions live_float = live;
       live_float.use_render_copy = false;
       const double float_ms = MedianMilliseconds([&] { RenderView(field, cam, pose, live_float); }, 3, 0.5);

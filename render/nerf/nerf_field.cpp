@@ -47,7 +47,12 @@ NerfRenderOptions NerfRenderOptions::Preset(const std::string& name) {
     o.min_transmittance = 3e-2f;
     return o;
   }
-  throw InputError("render quality '" + name + "' (expected full or live)");
+  if (name == "preview") {
+    o.step_voxels = 3.0f;
+    o.min_transmittance = 3e-2f;
+    return o;
+  }
+  throw InputError("render quality '" + name + "' (expected full, live or preview)");
 }
 
 std::vector<std::string> NerfRenderOptions::Validate() const {

@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <random>
 
+#include "calib/core/error.h"
 #include "render/nerf/nerf_field.h"
 #include "render/nerf/nerf_internal.h"
 
@@ -241,6 +242,22 @@ TEST(NerfRenderCopy, RenderViewUsesTheCopyAndMatchesTheFloatArrays) {
   }
   EXPECT_GT(differ, 0u) << "RenderView reads the copy";
   for (size_t n = 0; n < a.opacity.pixels.size(); ++n) EXPECT_NEAR(a.opacity.pixels[n], b.opacity.pixels[n], 1e-3f);
+}
+
+TEST(NerfRenderOptions, NamedSettingsAreValidAndOrderedBySpacing) {
+  const NerfRenderOptions full = NerfRenderOptions::Preset("full"), live = NerfRenderOptions::Preset("live"),
+                          preview = NerfRenderOptions::Preset("preview");
+  for (const NerfRenderOptions& o : {full, live, preview}) EXPECT_TRUE(o.Validate().empty());
+  EXPECT_LT(full.step_voxels, live.step_voxels);
+  EXPECT_LT(live.step_voxels, preview.step_voxels);
+  EXPECT_THROW(NerfRenderOptions::Preset("fastest"), InputError);
+  // A preview march takes fewer samples than a live one along the same rays.
+  NerfField f = RandomField(9);
+  f.UpdateRenderCopy();
+  size_t live_samples = 0, preview_samples = 0;
+  for (const NerfRay& ray : RandomRays(f, 200, 10))
+    live_samples += f.RenderRay(ray, live).samples, preview_samples += f.RenderRay(ray, preview).samples;
+  EXPECT_LT(preview_samples, live_samples);
 }
 
 TEST(NerfRenderCopy, Exp4MatchesStdExp) {
