@@ -64,6 +64,17 @@ struct NerfTrainOptions {
   // Adam learning rates of the raw log-density and of the log-colour coefficients
   // (the fast preset doubles lr_density: sharper surfaces, see Preset).
   double lr_density = 0.1, lr_color = 0.05;
+  // Decoupled weight decay of the colour slopes b (log L = a + b·d), per unit of
+  // the colour learning rate: every update multiplies b by (1 - lr_color_now ·
+  // color_slope_decay). A surface seen only from a band of directions (cameras
+  // ringing a table from above) constrains a + b·d there only; Adam moves a and
+  // b by similar amounts, so a colour that had to rise from its start far
+  // (emitters, 1e3) rises much less towards directions no camera saw (from
+  // below) and the extrapolation falls below every seen value. The decay lets
+  // the data keep the slopes they need (Adam's step is up to lr per update,
+  // the decay lr · decay · |b|) and returns unconstrained slopes to 0, i.e.
+  // unseen directions to the view-independent colour a. 0 switches it off.
+  double color_slope_decay = 0.0;
   // The learning rates decay exponentially to this factor of their start by the last step.
   double lr_final_factor = 0.05;
   // Total-variation weights (squared differences to the 6 neighbours), per step. The data
