@@ -66,7 +66,7 @@ void ShadeObjects(const std::vector<InsertObject>& objects, const std::vector<Wo
         std::vector<float> ssd, ssd_min;
         std::vector<float> gamma;
         std::vector<SgMaterial> materials;
-        std::vector<Vec3f> normals, views, rgb, shadowed;
+        std::vector<Vec3f> normals, views, rgb, shadowed, specular_rgb;
         materials.reserve(end - begin);
         normals.reserve(end - begin);
         views.reserve(end - begin);
@@ -128,11 +128,13 @@ void ShadeObjects(const std::vector<InsertObject>& objects, const std::vector<Wo
                             rgb.data(), map ? SgTerms::kDiffuse : SgTerms::kAll);
           }
           if (map) {
+            specular_rgb.resize(count);
+            map->ShadeSpecular(materials.data(), normals.data(), views.data(), count, specular_rgb.data());
             for (size_t k = 0; k < count; ++k) {
               float visibility = 1.0f;
               if (m > 0 && any_shadow && shadowed[k].y > 0.0f && std::isfinite(shadowed[k].y))
                 visibility = std::clamp(shadowed[k].x / shadowed[k].y, 0.0f, 1.0f);
-              rgb[k] += map->ShadeSpecular(materials[k], normals[k], views[k]) * visibility;
+              rgb[k] += specular_rgb[k] * visibility;
             }
           }
           for (size_t k = run; k < run_end; ++k) {

@@ -172,6 +172,7 @@ PrefilteredRadiance::PrefilteredRadiance(const RadianceSamples& samples, int lev
     Level& level = levels_[k];
     level.height = std::clamp(static_cast<int>(std::ceil(kPi / alpha)), 8, finest);
     level.width = 2 * level.height;
+    level.fwidth = static_cast<float>(level.width), level.fheight = static_cast<float>(level.height);
     level.rgb.assign(size_t(level.width) * level.height * 3, 0.0f);
     // Support: angle between R and l up to 2 atan(6α) (θ_h up to atan(6α)).
     const double reach = std::min(kPi, 2.0 * std::atan(6.0 * alpha));
@@ -216,14 +217,57 @@ PrefilteredRadiance::PrefilteredRadiance(const RadianceSamples& samples, int lev
   }
 }
 
-Vec3f PrefilteredRadiance::Sample(const Level& level, float u, float v) const {
-  // u in [0, 1), v in [0, 1]: x0 in [−1, width − 1], wrapped without a division.
-  const float fx = u * level.width - 0.5f, fy = std::clamp(v * level.height - 0.5f, 0.0f, level.height - 1.0f);
-  const int x0 = fx < 0.0f ? -1 : static_cast<int>(fx), y0 = std::min(level.height - 2, static_cast<int>(fy));
+// The constants of a look-up that depend on roughness alone.
+struct PrefilteredRadiance::Prepared {
+  float roughness = 0;  // as given (NaN never equals itself: never reused)
+  int k = 0;            // the lower of the two levels
+  float t = 0;          // the upper level's weight (0: level k alone)
+  float s = 0;          // the lobe's dominant direction: mix(n, R, s)
+  // The environment BRDF's A and B at n·v = i/(kTableNv − 1), already linear
+  // between the table's two roughness rows (bilinear as EnvironmentBrdf, the
+  // two lerps in the other order: a float rounding apart).
+  float scale[kTableNv], bias[kTableNv];
+};
+
+PrefilteredRadiance::Prepared PrefilteredRadiance::Prepare(float rough) const {
+  Prepared p;
+  p.roughness = rough;
+  const float x = std::clamp(std::isfinite(rough) ? rough : 1.0f, 0.0f, 1.0f) * (levels_.size() - 1);
+  p.k = std::min(static_cast<int>(levels_.size()) - 2, static_cast<int>(x));
+  p.t = x - p.k;
+  // The lobe's dominant direction: from R towards n as α grows (at α = 1
+  // it is n: the rough lobe is weighted by n·l more than it is centred on
+  // R); s(α) = (1 − α)(√(1 − α) + α), a published fit to the GGX lobe's
+  // peak. Against brute force over a lamp-lit panorama (shading_test) it
+  // halves the error at r = 1 and changes it by ±0.04 below r = 0.5.
+  const float alpha = std::max(rough * rough, static_cast<float>(kMinAlpha));
+  const float smooth = 1.0f - std::min(alpha, 1.0f);
+  p.s = smooth * (std::sqrt(smooth) + alpha);
+  const std::vector<EnvironmentBrdfTerms>& t = EnvironmentBrdfTable();
+  const float y = std::clamp(rough, 0.0f, 1.0f) * (kTableR - 1);
+  const int j = std::min(kTableR - 2, static_cast<int>(y));
+  const float fy = y - j;
+  for (int i = 0; i < kTableNv; ++i) {
+    const EnvironmentBrdfTerms& lo = t[size_t(j) * kTableNv + i];
+    const EnvironmentBrdfTerms& hi = t[size_t(j + 1) * kTableNv + i];
+    p.scale[i] = (1 - fy) * lo.scale + fy * hi.scale;
+    p.bias[i] = (1 - fy) * lo.bias + fy * hi.bias;
+  }
+  return p;
+}
+
+namespace {
+
+// Bilinear in one level at u in [0, 1), v in [0, 1]: x0 in [−1, width − 1],
+// wrapped without a division. Inlined into the look-up (a call per level was
+// a fifth of a pixel's instructions).
+inline Vec3f SampleLevel(const float* rgb, int width, int height, float fwidth, float fheight, float u, float v) {
+  const float fx = u * fwidth - 0.5f, fy = std::clamp(v * fheight - 0.5f, 0.0f, fheight - 1.0f);
+  const int x0 = fx < 0.0f ? -1 : static_cast<int>(fx), y0 = std::min(height - 2, static_cast<int>(fy));
   const float ax = fx - static_cast<float>(x0), ay = std::min(fy - static_cast<float>(y0), 1.0f);
-  const int xa = x0 < 0 ? level.width - 1 : x0, xb = x0 + 1 >= level.width ? 0 : x0 + 1;
-  const float* row0 = &level.rgb[size_t(y0) * level.width * 3];
-  const float* row1 = row0 + size_t(level.width) * 3;
+  const int xa = x0 < 0 ? width - 1 : x0, xb = x0 + 1 >= width ? 0 : x0 + 1;
+  const float* row0 = rgb + size_t(y0) * width * 3;
+  const float* row1 = row0 + size_t(width) * 3;
   const float* p00 = row0 + xa * 3;
   const float* p01 = row0 + xb * 3;
   const float* p10 = row1 + xa * 3;
@@ -234,37 +278,57 @@ Vec3f PrefilteredRadiance::Sample(const Level& level, float u, float v) const {
   return {out[0], out[1], out[2]};
 }
 
-Vec3f PrefilteredRadiance::Lookup(const Vec3f& d, float roughness) const {
-  if (levels_.empty()) return {};
+}  // namespace
+
+Vec3f PrefilteredRadiance::Lookup(const Vec3f& d, const Prepared& p) const {
   float u, v;
   Coordinates(d, &u, &v);
-  const float x = std::clamp(std::isfinite(roughness) ? roughness : 1.0f, 0.0f, 1.0f) * (levels_.size() - 1);
-  const int k = std::min(static_cast<int>(levels_.size()) - 2, static_cast<int>(x));
-  const float t = x - k;
-  const Vec3f a = Sample(levels_[k], u, v);
-  if (t <= 0.0f) return a;
-  return a * (1.0f - t) + Sample(levels_[k + 1], u, v) * t;
+  const Level& lo = levels_[p.k];
+  const Vec3f a = SampleLevel(lo.rgb.data(), lo.width, lo.height, lo.fwidth, lo.fheight, u, v);
+  if (p.t <= 0.0f) return a;
+  const Level& hi = levels_[p.k + 1];
+  return a * (1.0f - p.t) + SampleLevel(hi.rgb.data(), hi.width, hi.height, hi.fwidth, hi.fheight, u, v) * p.t;
 }
 
-Vec3f PrefilteredRadiance::ShadeSpecular(const SgMaterial& m, const Vec3f& n, const Vec3f& v) const {
+Vec3f PrefilteredRadiance::Lookup(const Vec3f& d, float roughness) const {
+  if (levels_.empty()) return {};
+  return Lookup(d, Prepare(roughness));
+}
+
+Vec3f PrefilteredRadiance::Shade(const Prepared& p, const SgMaterial& m, const Vec3f& n, const Vec3f& v) const {
   const float nv = Dot(n, v);
-  if (!(nv > 0.0f) || levels_.empty()) return {};
+  if (!(nv > 0.0f)) return {};
   const Vec3f r = n * (2.0f * nv) - v;
-  const float rough = static_cast<float>(m.roughness);
-  // The lobe's dominant direction: from R towards n as α grows (at α = 1
-  // it is n: the rough lobe is weighted by n·l more than it is centred on
-  // R); s(α) = (1 − α)(√(1 − α) + α), a published fit to the GGX lobe's
-  // peak. Against brute force over a lamp-lit panorama (shading_test) it
-  // halves the error at r = 1 and changes it by ±0.04 below r = 0.5.
-  const float alpha = std::max(rough * rough, static_cast<float>(kMinAlpha));
-  const float smooth = 1.0f - std::min(alpha, 1.0f), s = smooth * (std::sqrt(smooth) + alpha);
-  const Vec3f L = Lookup(Normalized(n * (1.0f - s) + r * s), rough);
-  const EnvironmentBrdfTerms e = EnvironmentBrdf(nv, rough);
+  const Vec3f L = Lookup(Normalized(n * (1.0f - p.s) + r * p.s), p);
+  const float x = std::min(nv, 1.0f) * (kTableNv - 1);
+  const int i = std::min(kTableNv - 2, static_cast<int>(x));
+  const float fx = x - i;
+  const float scale = (1 - fx) * p.scale[i] + fx * p.scale[i + 1], bias = (1 - fx) * p.bias[i] + fx * p.bias[i + 1];
   const float metal = static_cast<float>(m.metallic), d0 = static_cast<float>(kDielectricF0);
   const float f0r = d0 + (static_cast<float>(m.base_color.x) - d0) * metal;
   const float f0g = d0 + (static_cast<float>(m.base_color.y) - d0) * metal;
   const float f0b = d0 + (static_cast<float>(m.base_color.z) - d0) * metal;
-  return {L.x * (f0r * e.scale + e.bias), L.y * (f0g * e.scale + e.bias), L.z * (f0b * e.scale + e.bias)};
+  return {L.x * (f0r * scale + bias), L.y * (f0g * scale + bias), L.z * (f0b * scale + bias)};
+}
+
+Vec3f PrefilteredRadiance::ShadeSpecular(const SgMaterial& m, const Vec3f& n, const Vec3f& v) const {
+  if (levels_.empty()) return {};
+  return Shade(Prepare(static_cast<float>(m.roughness)), m, n, v);
+}
+
+void PrefilteredRadiance::ShadeSpecular(const SgMaterial* materials, const Vec3f* n, const Vec3f* v, size_t count,
+                                        Vec3f* out) const {
+  if (levels_.empty()) {
+    std::fill(out, out + count, Vec3f{});
+    return;
+  }
+  Prepared p;
+  bool prepared = false;
+  for (size_t i = 0; i < count; ++i) {
+    const float rough = static_cast<float>(materials[i].roughness);
+    if (!prepared || !(rough == p.roughness)) p = Prepare(rough), prepared = true;
+    out[i] = Shade(p, materials[i], n[i], v[i]);
+  }
 }
 
 }  // namespace nerfar

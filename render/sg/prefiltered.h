@@ -55,13 +55,22 @@ class PrefilteredRadiance {
   // The specular radiance of a pixel: Lookup(mirror of v about n) times the
   // environment BRDF with F0 = mix(0.02, a, m); 0 viewed from behind.
   Vec3f ShadeSpecular(const SgMaterial& material, const Vec3f& n, const Vec3f& v) const;
+  // The same for count pixels (out[i] = ShadeSpecular(materials[i], n[i],
+  // v[i])); what depends on roughness alone (levels and blend, the lobe's
+  // shift, the environment BRDF's row) is worked out once per run of pixels
+  // with one roughness (an object's whole material without a roughness map).
+  void ShadeSpecular(const SgMaterial* materials, const Vec3f* n, const Vec3f* v, size_t count, Vec3f* out) const;
 
  private:
   struct Level {
     int width = 0, height = 0;
-    std::vector<float> rgb;  // row-major, 3 floats per texel
+    float fwidth = 0, fheight = 0;  // the same as floats
+    std::vector<float> rgb;         // row-major, 3 floats per texel
   };
-  Vec3f Sample(const Level& level, float u, float v) const;
+  struct Prepared;  // the constants of one roughness (prefiltered.cpp)
+  Prepared Prepare(float roughness) const;
+  Vec3f Lookup(const Vec3f& d, const Prepared& p) const;
+  Vec3f Shade(const Prepared& p, const SgMaterial& material, const Vec3f& n, const Vec3f& v) const;
   std::vector<Level> levels_;
 };
 
