@@ -258,10 +258,12 @@ PrefilteredRadiance::Prepared PrefilteredRadiance::Prepare(float rough) const {
 
 namespace {
 
-// Bilinear in one level at u in [0, 1), v in [0, 1]: x0 in [−1, width − 1],
-// wrapped without a division. Inlined into the look-up (a call per level was
-// a fifth of a pixel's instructions).
-inline Vec3f SampleLevel(const float* rgb, int width, int height, float fwidth, float fheight, float u, float v) {
+// Adds w times the bilinear value of one level at u in [0, 1), v in [0, 1]
+// to acc (x0 in [−1, width − 1], wrapped without a division): the level
+// blend folded into the four texel weights. Inlined into the look-up (a call
+// per level was a fifth of a pixel's instructions).
+inline void AddLevel(const float* rgb, int width, int height, float fwidth, float fheight, float u, float v, float w,
+                     float* acc) {
   const float fx = u * fwidth - 0.5f, fy = std::clamp(v * fheight - 0.5f, 0.0f, fheight - 1.0f);
   const int x0 = fx < 0.0f ? -1 : static_cast<int>(fx), y0 = std::min(height - 2, static_cast<int>(fy));
   const float ax = fx - static_cast<float>(x0), ay = std::min(fy - static_cast<float>(y0), 1.0f);
@@ -272,10 +274,9 @@ inline Vec3f SampleLevel(const float* rgb, int width, int height, float fwidth, 
   const float* p01 = row0 + xb * 3;
   const float* p10 = row1 + xa * 3;
   const float* p11 = row1 + xb * 3;
-  float out[3];
-  for (int c = 0; c < 3; ++c)
-    out[c] = (1 - ay) * ((1 - ax) * p00[c] + ax * p01[c]) + ay * ((1 - ax) * p10[c] + ax * p11[c]);
-  return {out[0], out[1], out[2]};
+  const float top = w * (1 - ay), bottom = w * ay;
+  const float w00 = top * (1 - ax), w01 = top * ax, w10 = bottom * (1 - ax), w11 = bottom * ax;
+  for (int c = 0; c < 3; ++c) acc[c] += w00 * p00[c] + w01 * p01[c] + w10 * p10[c] + w11 * p11[c];
 }
 
 }  // namespace
@@ -283,11 +284,16 @@ inline Vec3f SampleLevel(const float* rgb, int width, int height, float fwidth, 
 Vec3f PrefilteredRadiance::Lookup(const Vec3f& d, const Prepared& p) const {
   float u, v;
   Coordinates(d, &u, &v);
+  float acc[3] = {0, 0, 0};
   const Level& lo = levels_[p.k];
-  const Vec3f a = SampleLevel(lo.rgb.data(), lo.width, lo.height, lo.fwidth, lo.fheight, u, v);
-  if (p.t <= 0.0f) return a;
-  const Level& hi = levels_[p.k + 1];
-  return a * (1.0f - p.t) + SampleLevel(hi.rgb.data(), hi.width, hi.height, hi.fwidth, hi.fheight, u, v) * p.t;
+  if (p.t <= 0.0f) {
+    AddLevel(lo.rgb.data(), lo.width, lo.height, lo.fwidth, lo.fheight, u, v, 1.0f, acc);
+  } else {
+    const Level& hi = levels_[p.k + 1];
+    AddLevel(lo.rgb.data(), lo.width, lo.height, lo.fwidth, lo.fheight, u, v, 1.0f - p.t, acc);
+    AddLevel(hi.rgb.data(), hi.width, hi.height, hi.fwidth, hi.fheight, u, v, p.t, acc);
+  }
+  return {acc[0], acc[1], acc[2]};
 }
 
 Vec3f PrefilteredRadiance::Lookup(const Vec3f& d, float roughness) const {
