@@ -369,8 +369,12 @@ void GroundTruthQuality(const std::string& scenes_dir, const std::string& scene_
 
 }  // namespace
 
+// The incident light on a real NeRF (bench_insert_light.cpp; NERFAR_BENCH_INSERT_NERF).
+void BenchInsertRealNerfLight(const BenchOptions& options, std::vector<BenchFigure>& figures);
+
 std::vector<BenchFigure> BenchInsert(const BenchOptions& options) {
   std::vector<BenchFigure> figures;
+  BenchInsertRealNerfLight(options, figures);
   // NERFAR_BENCH_INSERT_GT=0 skips the ground-truth quality part;
   // NERFAR_BENCH_INSERT_PRESETS="fast,balanced" times only those presets.
   const char* gt_env = std::getenv("NERFAR_BENCH_INSERT_GT");

@@ -61,8 +61,10 @@ namespace {
 SceneSamples RenderFromCenter(const SceneField& scene, const Vec3& center, const std::vector<Vec3>& directions,
                               const std::vector<float>& starts) {
   const size_t n = directions.size();
-  constexpr size_t kChunk = 128;
-  const size_t chunks = (n + kChunk - 1) / kChunk;
+  // A field that splits the batch itself gets every ray at once (its
+  // seen-radiance pass then groups points across the whole batch).
+  const size_t chunk = scene.ParallelLightRays() ? std::max<size_t>(n, 1) : 128;
+  const size_t chunks = (n + chunk - 1) / chunk;
   SceneSamples field;
   field.Resize(n);
   const Aabb box = scene.Box();
@@ -71,7 +73,7 @@ SceneSamples RenderFromCenter(const SceneField& scene, const Vec3& center, const
       [&](size_t c) {
         SceneRays rays;
         SceneSamples out;
-        const size_t begin = c * kChunk, end = std::min(n, begin + kChunk);
+        const size_t begin = c * chunk, end = std::min(n, begin + chunk);
         rays.Reserve(end - begin);
         for (size_t i = begin; i < end; ++i) {
           const auto range = IntersectBox(box, center, directions[i]);

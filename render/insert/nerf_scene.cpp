@@ -3,6 +3,7 @@
 #include <cmath>
 
 #include "calib/core/error.h"
+#include "calib/core/parallel.h"
 
 namespace nerfar {
 
@@ -15,6 +16,10 @@ std::vector<std::string> NerfSceneOptions::Validate() const {
         "nerf.step_voxels: must be a finite number > 0");
   check(render.min_transmittance >= 0.0f && render.min_transmittance < 1.0f,
         "nerf.min_transmittance: must be in [0, 1)");
+  check(light_render.step_voxels > 0.0f && std::isfinite(light_render.step_voxels),
+        "light_render.step_voxels: must be a finite number > 0");
+  check(light_render.min_transmittance >= 0.0f && light_render.min_transmittance < 1.0f,
+        "light_render.min_transmittance: must be in [0, 1)");
   check(normal_probe_voxels >= 0.0 && normal_probe_voxels <= 64.0,
         "normal_probe_voxels: out of range (expected 0 to 64)");
   if (light_seen_radiance) {
@@ -43,11 +48,20 @@ void NerfScene::Render(const SceneRays& rays, SceneSamples& out, bool light) con
     nerf_rays[i].t_near = rays.t_near[i];
     nerf_rays[i].t_far = std::max(rays.t_near[i], rays.t_far[i]);
   }
-  // The callers already split work over threads: render serially here.
   std::vector<NerfRayResult> results(n);
-  for (size_t i = 0; i < n; ++i) results[i] = field_.RenderRay(nerf_rays[i], options_.render);
-  if (light && options_.light_seen_radiance && n > 0)
-    ApplySeenRadiance(field_, nerf_rays, results, options_.seen, options_.render);
+  if (light) {
+    // The light's callers hand over the whole batch (ParallelLightRays).
+    ParallelFor(
+        n, [&](size_t i) { results[i] = field_.RenderRay(nerf_rays[i], options_.light_render); }, 32);
+    uint64_t samples = 0;
+    for (const NerfRayResult& r : results) samples += r.samples;
+    if (options_.light_seen_radiance && n > 0)
+      ApplySeenRadiance(field_, nerf_rays, results, options_.seen, options_.light_render, &samples);
+    light_samples_ += samples;
+  } else {
+    // The callers already split work over threads: render serially here.
+    for (size_t i = 0; i < n; ++i) results[i] = field_.RenderRay(nerf_rays[i], options_.render);
+  }
   for (size_t i = 0; i < n; ++i) {
     const NerfRayResult& r = results[i];
     out.colour[i] = r.color;

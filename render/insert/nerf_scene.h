@@ -4,6 +4,8 @@
 // since one voxel's gradient is noisy).
 #pragma once
 
+#include <atomic>
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -37,6 +39,13 @@ struct NerfSceneOptions {
   // false: the NeRF's own colour.
   bool light_seen_radiance = true;
   SeenRadianceOptions seen;  // capture band, views per point, reach
+  // Step and early stop of the incident-light rays and of their seen-radiance
+  // views (RenderLightRays). Default "live" (2-voxel steps, stop at
+  // transmittance 3e-2: ~4.5x fewer samples than `render`): the light is
+  // fitted with a few SGs over 1024 directions, far coarser than what a
+  // half-voxel step resolves (measured: docs/BENCHMARKS.md "incident light on
+  // a real NeRF"). NerfRenderOptions::Preset("full") gives `render`'s march.
+  NerfRenderOptions light_render = NerfRenderOptions::Preset("live");
   // Every problem as "field: what is wrong (what was expected)".
   std::vector<std::string> Validate() const;
 };
@@ -47,7 +56,13 @@ class NerfScene final : public SceneField {
   explicit NerfScene(const NerfField& field, NerfSceneOptions options = {}) : field_(field), options_(options) {}
   Aabb Box() const override { return field_.aabb; }
   void RenderRays(const SceneRays& rays, SceneSamples& out) const override;
+  // Light rays: marched in parallel here (callers pass the whole batch), and
+  // the seen-radiance substitution done once for the batch.
   void RenderLightRays(const SceneRays& rays, SceneSamples& out) const override;
+  bool ParallelLightRays() const override { return true; }
+  // Density samples taken by RenderLightRays since construction, the
+  // seen-radiance views included (the cost's floor: samples x ns each).
+  uint64_t LightSamples() const { return light_samples_.load(); }
   void Normals(const std::vector<Vec3f>& points, std::vector<Vec3f>& normals) const override;
   const NerfSceneOptions& options() const { return options_; }
 
@@ -57,6 +72,7 @@ class NerfScene final : public SceneField {
   Vec3f GradientNormal(const Vec3f& p) const;
   const NerfField& field_;
   NerfSceneOptions options_;
+  mutable std::atomic<uint64_t> light_samples_{0};
 };
 
 }  // namespace nerfar

@@ -58,6 +58,9 @@ class SceneField {
   // (incident light): a field may correct radiance towards directions its
   // captures never saw (a NeRF: nerf_scene.h). Default: RenderRays.
   virtual void RenderLightRays(const SceneRays& rays, SceneSamples& out) const { RenderRays(rays, out); }
+  // Whether RenderLightRays splits its batch over the threads itself (then
+  // callers hand it every ray at once); false: callers split the batch.
+  virtual bool ParallelLightRays() const { return false; }
   // Unit outward normal of the scene surface at each point (the direction of
   // −∇σ for a NeRF); the zero vector where it is undefined (empty space).
   virtual void Normals(const std::vector<Vec3f>& points, std::vector<Vec3f>& normals) const = 0;

@@ -13,7 +13,7 @@ constexpr float kFar = 4.0f;  // metres from the point to the start of a view's 
 }  // namespace
 
 size_t ApplySeenRadiance(const NerfField& field, const std::vector<NerfRay>& rays, std::vector<NerfRayResult>& results,
-                         const SeenRadianceOptions& options, const NerfRenderOptions& render) {
+                         const SeenRadianceOptions& options, const NerfRenderOptions& render, uint64_t* samples) {
   NERFAR_CHECK_EQ(rays.size(), results.size());
   const double z_min = std::sin(options.min_elevation_deg * kPi / 180);
   // The view directions (from the point towards the camera): a spiral over
@@ -52,7 +52,8 @@ size_t ApplySeenRadiance(const NerfField& field, const std::vector<NerfRay>& ray
   }
   // The seen radiance of each point: mean colour over the views that reach it.
   std::vector<Vec3f> seen(points.size());
-  std::vector<bool> reached(points.size(), false);
+  std::vector<unsigned char> reached(points.size(), 0);  // bytes: written from several threads
+  std::vector<uint64_t> point_samples(points.size(), 0);
   ParallelFor(
       points.size(),
       [&](size_t p) {
@@ -61,17 +62,20 @@ size_t ApplySeenRadiance(const NerfField& field, const std::vector<NerfRay>& ray
           NerfRay ray{points[p] + u * kFar, -u, 0, 0};  // from outside the volume, towards the point
           if (!IntersectAabb(field.aabb, ray.origin, ray.dir, ray.t_near, ray.t_far)) continue;
           const NerfRayResult res = field.RenderRay(ray, render);
+          point_samples[p] += res.samples;
           if (!(res.opacity > options.min_opacity) || std::fabs(res.surface_depth - kFar) > options.reach_m) continue;
           const Vec3f radiance = res.color * (1.0f / res.opacity);
           const double y = LuminanceOf(Vec3(radiance));
           if (y > best) {
             best = y;
             seen[p] = radiance;
-            reached[p] = true;
+            reached[p] = 1;
           }
         }
       },
       8);
+  if (samples)
+    for (uint64_t s : point_samples) *samples += s;
   size_t changed = 0;
   for (size_t r = 0; r < rays.size(); ++r) {
     if (ray_slot[r] == SIZE_MAX || !reached[ray_slot[r]]) continue;

@@ -16,6 +16,7 @@
 // reach_m (measured on both shared scenes: docs/BENCHMARKS.md "env").
 #pragma once
 
+#include <cstdint>
 #include <vector>
 
 #include "render/nerf/nerf_field.h"
@@ -43,7 +44,9 @@ struct SeenRadianceOptions {
 // the ray's opacity, when that is brighter than the ray's own colour; rays
 // whose point no view reaches keep their colour. Points are grouped by
 // voxel (one look-up per voxel). Returns how many rays were changed.
+// `samples` (optional) is increased by the density samples the views took.
 size_t ApplySeenRadiance(const NerfField& field, const std::vector<NerfRay>& rays, std::vector<NerfRayResult>& results,
-                         const SeenRadianceOptions& options, const NerfRenderOptions& render = {});
+                         const SeenRadianceOptions& options, const NerfRenderOptions& render = {},
+                         uint64_t* samples = nullptr);
 
 }  // namespace nerfar

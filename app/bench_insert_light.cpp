@@ -1,0 +1,113 @@
+// Part of `nerfar bench insert`: the incident light's first (cold) frame on a
+// real trained NeRF, where the analytic stand-in of the rest of the stage
+// says little (its rays are closed-form; a NeRF's are marched and its
+// surfaces seen from below get the seen-radiance views). Runs when
+// NERFAR_BENCH_INSERT_NERF names a .nerf model.
+#include <algorithm>
+#include <chrono>
+#include <cstdlib>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "app/bench.h"
+#include "calib/core/log.h"
+#include "calib/core/parallel.h"
+#include "calib/object.h"
+#include "render/insert/incident_light.h"
+#include "render/insert/insert_options.h"
+#include "render/insert/nerf_scene.h"
+#include "render/mesh/mesh.h"
+#include "render/nerf/nerf_file.h"
+
+namespace nerfar {
+
+// NERFAR_BENCH_INSERT_NERF=model.nerf: per preset (NERFAR_BENCH_INSERT_LIGHT_PRESETS,
+// default "fast,balanced"), the median over 3 cold refreshes (a fresh cache each:
+// the object just placed or moved) of the light's sampling time, the cold SG fit,
+// the density samples taken (light rays and seen-radiance views) and the
+// directions refined. The object: monkey_diffuse posed by
+// NERFAR_BENCH_INSERT_NERF_POSE (default scenes/lamps/insert/monkey_diffuse/pose.json);
+// the torus at the scene's centre where neither is there.
+void BenchInsertRealNerfLight(const BenchOptions& options, std::vector<BenchFigure>& figures) {
+  const char* model = std::getenv("NERFAR_BENCH_INSERT_NERF");
+  if (model == nullptr || std::string(model).empty()) return;
+  NerfField nerf = LoadNerf(model);
+  // NERFAR_BENCH_INSERT_NERF_COPY=0: the exact float arrays (no render copy).
+  const char* copy_env = std::getenv("NERFAR_BENCH_INSERT_NERF_COPY");
+  const bool copy = copy_env == nullptr || std::string(copy_env) != "0";
+  if (copy) nerf.UpdateRenderCopy();  // what nerfar render reads (NerfRenderCopy)
+  // NERFAR_BENCH_INSERT_LIGHT_RENDER=full|live|preview: the light rays' march
+  // (NerfSceneOptions::light_render; default live).
+  NerfSceneOptions scene_options;
+  if (const char* render_env = std::getenv("NERFAR_BENCH_INSERT_LIGHT_RENDER"))
+    scene_options.light_render = NerfRenderOptions::Preset(render_env);
+  const std::string model_name = std::filesystem::path(model).filename().string();
+  TriangleMesh mesh;
+  std::string mesh_name = "monkey_diffuse";
+  const std::string obj = options.scenes_dir + "/objects/monkey_diffuse.obj";
+  std::error_code error;
+  if (!options.scenes_dir.empty() && std::filesystem::is_regular_file(obj, error)) {
+    mesh = ReadMesh(obj);
+  } else {
+    mesh = MakeTorus(0.04, 0.015, 48, 24);
+    mesh_name = "torus";
+  }
+  const char* pose_env = std::getenv("NERFAR_BENCH_INSERT_NERF_POSE");
+  const std::string pose_path = pose_env ? pose_env : options.scenes_dir + "/lamps/insert/monkey_diffuse/pose.json";
+  Pose T_world_object{Mat3::Identity(), Vec3(nerf.aabb.min + nerf.aabb.max) * 0.5};
+  double scale = 1.0;
+  if (std::filesystem::is_regular_file(pose_path, error)) {
+    const ObjectPlacement placement = ReadObjectPlacement(pose_path);
+    T_world_object = placement.T_world_object;
+    scale = placement.scale;
+  }
+  const BoundingSphere bs = ComputeBoundingSphere(mesh);
+  const Vec3 center = T_world_object * (bs.center * scale);
+  const LightObjectVolume volume{&mesh, T_world_object, scale};
+  SgMixture environment;  // the timing does not depend on it (one SG look-up per direction)
+  {
+    Sg sky;
+    sky.axis = {0, 0, 1};
+    sky.sharpness = 1.0;
+    sky.amplitude = {0.3, 0.35, 0.4};
+    environment = {sky};
+  }
+  const char* presets_env = std::getenv("NERFAR_BENCH_INSERT_LIGHT_PRESETS");
+  const std::string presets = presets_env ? presets_env : "fast,balanced";
+  const std::string where = model_name + ", " + mesh_name + " at (" + std::to_string(center.x).substr(0, 6) + ", " +
+                            std::to_string(center.y).substr(0, 6) + ", " + std::to_string(center.z).substr(0, 6) +
+                            "), " + (copy ? "render copy, " : "float arrays, ") + std::to_string(ThreadCount()) +
+                            " threads, cold (first frame), median of 3";
+  for (const char* preset : {"fast", "balanced", "accurate"}) {
+    if (presets.find(preset) == std::string::npos) continue;
+    const InsertOptions insert_options = InsertOptions::Preset(preset);
+    std::vector<double> sample_ms, fit_ms, samples, refined;
+    for (int r = 0; r < 3; ++r) {
+      const NerfScene scene(nerf, scene_options);
+      IncidentLight light;
+      const IncidentLight::Update u = light.Refresh(scene, environment, center, insert_options.light, &volume);
+      sample_ms.push_back(u.sample_ms);
+      fit_ms.push_back(u.fit_ms);
+      samples.push_back(static_cast<double>(scene.LightSamples()));
+      refined.push_back(static_cast<double>(light.refined()));
+    }
+    const auto median = [](std::vector<double> v) {
+      std::sort(v.begin(), v.end());
+      return v[v.size() / 2];
+    };
+    const std::string note = std::string(preset) + ", " + where +
+                             "; N=" + std::to_string(insert_options.light.directions) +
+                             ", refine_rays=" + std::to_string(insert_options.light.refine_rays);
+    const std::string p = std::string("real_") + preset + "_";
+    figures.push_back({p + "light_ms", median(sample_ms), "ms", note});
+    figures.push_back(
+        {p + "fit_cold_ms", median(fit_ms), "ms", note + "; M=" + std::to_string(insert_options.light.fit.lobes)});
+    figures.push_back({p + "light_samples", median(samples), "samples", note + "; density samples, views included"});
+    figures.push_back({p + "light_refined", median(refined), "directions", note});
+    LogInfo("bench insert: real NeRF light (" + std::string(preset) + "): " + std::to_string(median(sample_ms)) +
+            " ms, " + std::to_string(median(samples)) + " samples");
+  }
+}
+
+}  // namespace nerfar
