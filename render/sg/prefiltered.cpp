@@ -96,6 +96,32 @@ void Coordinates(const Vec3f& d, float* u, float* v) {
   *u = uu >= 1.0f ? 0.0f : (uu >= 0.0f ? uu : 0.0f);  // also NaN -> 0
 }
 
+// Octahedral layout of the level maps: a direction d projected onto the
+// octahedron |x| + |y| + |z| = 1, the lower half folded out over the
+// square's corners: (x, y) in [−1, 1]². Needs no unit d (the projection is
+// scale-free) and no trigonometry. A texel's solid angle is its area over
+// |p|³ (p its point on the octahedron): within 3^1.5 = 5.2 of each other,
+// no pole singularity. sign(0) counts as +.
+void OctahedralEncode(float x, float y, float z, float* px, float* py) {
+  const float inv = 1.0f / (std::abs(x) + std::abs(y) + std::abs(z));
+  float a = x * inv, b = y * inv;
+  if (z < 0.0f) {
+    const float fa = (1.0f - std::abs(b)) * (a >= 0.0f ? 1.0f : -1.0f);
+    b = (1.0f - std::abs(a)) * (b >= 0.0f ? 1.0f : -1.0f);
+    a = fa;
+  }
+  *px = a, *py = b;
+}
+Vec3f OctahedralDecode(float a, float b) {
+  const float z = 1.0f - std::abs(a) - std::abs(b);
+  if (z < 0.0f) {
+    const float fa = (1.0f - std::abs(b)) * (a >= 0.0f ? 1.0f : -1.0f);
+    b = (1.0f - std::abs(a)) * (b >= 0.0f ? 1.0f : -1.0f);
+    a = fa;
+  }
+  return Normalized(Vec3f(a, b, z));
+}
+
 }  // namespace
 
 EnvironmentBrdfTerms EnvironmentBrdf(float n_dot_v, float roughness) {
@@ -170,29 +196,33 @@ PrefilteredRadiance::PrefilteredRadiance(const RadianceSamples& samples, int lev
     const double alpha = std::sqrt(alpha_brdf * alpha_brdf + 0.25 * spacing * spacing);
     const float a2 = static_cast<float>(alpha * alpha);
     Level& level = levels_[k];
-    level.height = std::clamp(static_cast<int>(std::ceil(kPi / alpha)), 8, finest);
-    level.width = 2 * level.height;
-    level.fwidth = static_cast<float>(level.width), level.fheight = static_cast<float>(level.height);
-    level.rgb.assign(size_t(level.width) * level.height * 3, 0.0f);
+    // n = 1.5 × the rows of an equirect map of α-wide texels: the largest
+    // texel (at the octahedron's vertices) is 2/n = 1.33/rows rad wide, finer
+    // than that map's equator (π/rows).
+    const int equirect_rows = std::clamp(static_cast<int>(std::ceil(kPi / alpha)), 8, finest);
+    const int n = (3 * equirect_rows + 1) / 2, padded = n + 2;
+    level.size = n, level.fsize = static_cast<float>(n);
+    level.rgb.assign(size_t(padded) * padded * 3, 0.0f);
     // Support: angle between R and l up to 2 atan(6α) (θ_h up to atan(6α)).
     const double reach = std::min(kPi, 2.0 * std::atan(6.0 * alpha));
     const float cos_reach = static_cast<float>(std::cos(reach));
     ParallelFor(
-        static_cast<size_t>(level.height),
+        static_cast<size_t>(n),
         [&](size_t row) {
-          const double theta = kPi * (row + 0.5) / level.height;
-          const double lo = theta - reach, hi = theta + reach;
-          const int r0 = std::max(0, static_cast<int>(std::floor(lo / kPi * kRows)));
-          const int r1 = std::min(kRows - 1, static_cast<int>(std::floor(hi / kPi * kRows)));
-          // Columns within reach: all near a pole, else |Δφ| ≤ asin(sin reach / sin θ) plus a bucket.
-          int half_cols = kCols;
-          if (lo > 0 && hi < kPi && reach < 0.5 * kPi) {
-            const double dphi = std::asin(std::min(1.0, std::sin(reach) / std::sin(theta)));
-            half_cols = static_cast<int>(std::ceil(dphi / (2.0 * kPi) * kCols)) + 1;
-          }
-          for (int col = 0; col < level.width; ++col) {
-            const double u = (col + 0.5) / level.width;
-            const Vec3f R(EquirectDirection(u, (row + 0.5) / level.height));
+          for (int col = 0; col < n; ++col) {
+            const Vec3f R = OctahedralDecode(2.0f * (col + 0.5f) / n - 1.0f, 2.0f * (row + 0.5f) / n - 1.0f);
+            float u, v;
+            Coordinates(R, &u, &v);
+            const double theta = kPi * v;
+            const double lo = theta - reach, hi = theta + reach;
+            const int r0 = std::max(0, static_cast<int>(std::floor(lo / kPi * kRows)));
+            const int r1 = std::min(kRows - 1, static_cast<int>(std::floor(hi / kPi * kRows)));
+            // Columns within reach: all near a pole, else |Δφ| ≤ asin(sin reach / sin θ) plus a bucket.
+            int half_cols = kCols;
+            if (lo > 0 && hi < kPi && reach < 0.5 * kPi) {
+              const double dphi = std::asin(std::min(1.0, std::sin(reach) / std::sin(theta)));
+              half_cols = static_cast<int>(std::ceil(dphi / (2.0 * kPi) * kCols)) + 1;
+            }
             const int c_mid = std::min(kCols - 1, static_cast<int>(u * kCols));
             const int c0 = half_cols >= kCols / 2 ? 0 : c_mid - half_cols;
             const int c1 = half_cols >= kCols / 2 ? kCols - 1 : c_mid + half_cols;
@@ -209,11 +239,26 @@ PrefilteredRadiance::PrefilteredRadiance(const RadianceSamples& samples, int lev
                   sw += w, sr += w * lr[i], sg += w * lg[i], sb += w * lb[i];
                 }
               }
-            float* out = &level.rgb[(row * level.width + col) * 3];
+            float* out = &level.rgb[((row + 1) * padded + col + 1) * 3];
             if (sw > 0) out[0] = sr / sw, out[1] = sg / sw, out[2] = sb / sw;
           }
         },
         1);
+    // The border: each padded texel copies the interior texel it neighbours
+    // across the square's edge (the edge x = ±1 folds onto itself mirrored
+    // in y, likewise y = ±1; a corner onto the opposite corner), so a
+    // bilinear read never wraps.
+    for (int row = 0; row < padded; ++row)
+      for (int col = 0; col < padded; ++col) {
+        if (row > 0 && row <= n && col > 0 && col <= n) continue;
+        float a = 2.0f * (col - 0.5f) / n - 1.0f, b = 2.0f * (row - 0.5f) / n - 1.0f;
+        if (std::abs(a) > 1.0f) a = (a > 0 ? 2.0f : -2.0f) - a, b = -b;
+        if (std::abs(b) > 1.0f) b = (b > 0 ? 2.0f : -2.0f) - b, a = -a;
+        const int ic = std::clamp(static_cast<int>((a + 1.0f) * 0.5f * n), 0, n - 1);
+        const int ir = std::clamp(static_cast<int>((b + 1.0f) * 0.5f * n), 0, n - 1);
+        const float* from = &level.rgb[((ir + 1) * padded + ic + 1) * 3];
+        std::copy(from, from + 3, &level.rgb[(row * padded + col) * 3]);
+      }
   }
 }
 
@@ -258,40 +303,36 @@ PrefilteredRadiance::Prepared PrefilteredRadiance::Prepare(float rough) const {
 
 namespace {
 
-// Adds w times the bilinear value of one level at u in [0, 1), v in [0, 1]
-// to acc (x0 in [−1, width − 1], wrapped without a division): the level
-// blend folded into the four texel weights. Inlined into the look-up (a call
-// per level was a fifth of a pixel's instructions).
-inline void AddLevel(const float* rgb, int width, int height, float fwidth, float fheight, float u, float v, float w,
-                     float* acc) {
-  const float fx = u * fwidth - 0.5f, fy = std::clamp(v * fheight - 0.5f, 0.0f, fheight - 1.0f);
-  const int x0 = fx < 0.0f ? -1 : static_cast<int>(fx), y0 = std::min(height - 2, static_cast<int>(fy));
-  const float ax = fx - static_cast<float>(x0), ay = std::min(fy - static_cast<float>(y0), 1.0f);
-  const int xa = x0 < 0 ? width - 1 : x0, xb = x0 + 1 >= width ? 0 : x0 + 1;
-  const float* row0 = rgb + size_t(y0) * width * 3;
-  const float* row1 = row0 + size_t(width) * 3;
-  const float* p00 = row0 + xa * 3;
-  const float* p01 = row0 + xb * 3;
-  const float* p10 = row1 + xa * 3;
-  const float* p11 = row1 + xb * 3;
-  const float top = w * (1 - ay), bottom = w * ay;
-  const float w00 = top * (1 - ax), w01 = top * ax, w10 = bottom * (1 - ax), w11 = bottom * ax;
-  for (int c = 0; c < 3; ++c) acc[c] += w00 * p00[c] + w01 * p01[c] + w10 * p10[c] + w11 * p11[c];
+// Adds w times the bilinear value of one level at octahedral (a, b) in
+// [−1, 1]² to acc: the level blend folded into the four texel weights; the
+// padded border makes every read in range (NaN reads texel 0). Inlined into
+// the look-up (a call per level was a fifth of a pixel's instructions).
+inline void AddLevel(const float* rgb, int size, float fsize, float a, float b, float w, float* acc) {
+  const float top = fsize + 0.99999f;  // the padded texel n + 1 starts at n + 1
+  const float fx = std::min(std::max(0.0f, (a + 1.0f) * 0.5f * fsize + 0.5f), top);
+  const float fy = std::min(std::max(0.0f, (b + 1.0f) * 0.5f * fsize + 0.5f), top);
+  const int x0 = std::min(static_cast<int>(fx), size), y0 = std::min(static_cast<int>(fy), size);
+  const float ax = fx - static_cast<float>(x0), ay = fy - static_cast<float>(y0);
+  const float* p00 = rgb + (size_t(y0) * (size + 2) + x0) * 3;
+  const float* p10 = p00 + size_t(size + 2) * 3;
+  const float t = w * (1 - ay), u = w * ay;
+  const float w00 = t * (1 - ax), w01 = t * ax, w10 = u * (1 - ax), w11 = u * ax;
+  for (int c = 0; c < 3; ++c) acc[c] += w00 * p00[c] + w01 * p00[3 + c] + w10 * p10[c] + w11 * p10[3 + c];
 }
 
 }  // namespace
 
 Vec3f PrefilteredRadiance::Lookup(const Vec3f& d, const Prepared& p) const {
-  float u, v;
-  Coordinates(d, &u, &v);
+  float a, b;
+  OctahedralEncode(d.x, d.y, d.z, &a, &b);
   float acc[3] = {0, 0, 0};
   const Level& lo = levels_[p.k];
   if (p.t <= 0.0f) {
-    AddLevel(lo.rgb.data(), lo.width, lo.height, lo.fwidth, lo.fheight, u, v, 1.0f, acc);
+    AddLevel(lo.rgb.data(), lo.size, lo.fsize, a, b, 1.0f, acc);
   } else {
     const Level& hi = levels_[p.k + 1];
-    AddLevel(lo.rgb.data(), lo.width, lo.height, lo.fwidth, lo.fheight, u, v, 1.0f - p.t, acc);
-    AddLevel(hi.rgb.data(), hi.width, hi.height, hi.fwidth, hi.fheight, u, v, p.t, acc);
+    AddLevel(lo.rgb.data(), lo.size, lo.fsize, a, b, 1.0f - p.t, acc);
+    AddLevel(hi.rgb.data(), hi.size, hi.fsize, a, b, p.t, acc);
   }
   return {acc[0], acc[1], acc[2]};
 }
@@ -305,7 +346,7 @@ Vec3f PrefilteredRadiance::Shade(const Prepared& p, const SgMaterial& m, const V
   const float nv = Dot(n, v);
   if (!(nv > 0.0f)) return {};
   const Vec3f r = n * (2.0f * nv) - v;
-  const Vec3f L = Lookup(Normalized(n * (1.0f - p.s) + r * p.s), p);
+  const Vec3f L = Lookup(n * (1.0f - p.s) + r * p.s, p);  // any length: octahedral
   const float x = std::min(nv, 1.0f) * (kTableNv - 1);
   const int i = std::min(kTableNv - 2, static_cast<int>(x));
   const float fx = x - i;

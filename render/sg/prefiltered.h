@@ -4,8 +4,7 @@
 // F0·A(n·v, r) + B(n·v, r) that holds the BRDF's integral under white light.
 // An SG light of a few dozen lobes cannot carry reflections of compact
 // sources sharper than its lobes; the samples can, up to their spacing.
-// Directions are world unit vectors (sphere.h's panorama convention for the
-// maps' layout); radiance linear RGB; materials as in brdf.h.
+// Directions are world unit vectors; radiance linear RGB; materials as in brdf.h.
 #pragma once
 
 #include <vector>
@@ -37,9 +36,10 @@ EnvironmentBrdfTerms EnvironmentBrdf(float n_dot_v, float roughness);
 // w_i = D_α(h_i)·max(R·l_i, 0)·Δω_i, h_i the half vector of R and l_i (the
 // lobe with n = v = R). The filter's α is widened to √(α² + (Δ/2)²), Δ the
 // samples' mean spacing (√ of their mean solid angle): a map cannot hold a
-// reflection finer than the samples it is made of. Each level is a panorama
-// whose texels are about α wide (at most the samples' resolution, at least
-// 16 × 8); the GGX tail beyond tan θ_h = 6α (under 3 % of the lobe's
+// reflection finer than the samples it is made of. Each level is an
+// octahedral map (the sphere projected onto |x| + |y| + |z| = 1, the lower
+// half folded out; a direction's texel by abs and one division) n × n with
+// n = 1.5 × clamp(⌈π/α⌉, 8, the samples' resolution); the GGX tail beyond tan θ_h = 6α (under 3 % of the lobe's
 // projected energy) is left out of the sums.
 class PrefilteredRadiance {
  public:
@@ -63,9 +63,11 @@ class PrefilteredRadiance {
 
  private:
   struct Level {
-    int width = 0, height = 0;
-    float fwidth = 0, fheight = 0;  // the same as floats
-    std::vector<float> rgb;         // row-major, 3 floats per texel
+    int size = 0;     // n: the octahedral map is n × n texels
+    float fsize = 0;  // n as a float
+    // (n + 2)² texels, row-major, 3 floats each: the map with a one-texel
+    // border copied from across the square's folded edges.
+    std::vector<float> rgb;
   };
   struct Prepared;  // the constants of one roughness (prefiltered.cpp)
   Prepared Prepare(float roughness) const;

@@ -69,8 +69,10 @@ double RelativeL2(const std::vector<Vec3>& a, const std::vector<Vec3>& b) {
 // grazing views, and it factors the Fresnel term out of the light, which
 // matters most for dielectrics (F rises from 0.02 to ~0.2 across a grazing
 // lobe). Measured relative L2 errors (prefiltered / 32-SG product
-// integral): r 0.25 dielectric 0.255 / 0.121, metal 0.145 / 0.127; r 0.5
-// 0.438 / 0.515, 0.194 / 0.265; r 1 0.288 / 0.735, 0.058 / 0.571. The
+// integral): r 0.25 dielectric 0.256 / 0.121, metal 0.145 / 0.127; r 0.5
+// 0.435 / 0.515, 0.191 / 0.265; r 1 0.293 / 0.735, 0.063 / 0.571 (octahedral
+// maps; the equirect ones before them: 0.255, 0.145, 0.438, 0.194, 0.288,
+// 0.058). The
 // bounds are those plus about 25 % (a regression of the table, the filter
 // or the dominant direction shows as a doubling), and over all six the
 // prefiltered error must be under 0.65 × the SG's (measured 0.59).
