@@ -437,6 +437,9 @@ NerfRayResult NerfField::RenderRay(const NerfRay& ray, const NerfRenderOptions& 
   const nerf_detail::RaySteps steps(*this, ray, step, 0.5f);
   const bool coarse = SkipGridCurrent();
   int64_t n = 0, n_end = steps.count;
+  // Whether one step is longer than a cell's diagonal (sqrt 3 voxels; 1.8 leaves 4 % for rounding):
+  // then consecutive samples never share a cell.
+  const bool steps_leave_cells = options.step_voxels >= 1.8f;
   if (coarse) {
     // The occupied cells span grid coordinates [lo, hi + 1]; grown by one cell so that samples
     // which rounding puts just outside the grid (and At() clamps into it) are kept.
@@ -476,31 +479,30 @@ NerfRayResult NerfField::RenderRay(const NerfRay& ray, const NerfRenderOptions& 
     if (!steps.At(n, s)) break;
     if (s.i != cell.i || s.j != cell.j || s.k != cell.k) {
       if ((s.i >> 2) != bi || (s.j >> 2) != bj || (s.k >> 2) != bk) {
-        int empty_shift = -1;  // the largest empty block holding the sample
-        // The finest level (bricks) first: in occupied space it is the only test that fails.
-        if (coarse && !skip.levels.back().Occupied(s.i, s.j, s.k))
-          for (const NerfSkipGrid::Level& level : skip.levels)
-            if (!level.Occupied(s.i, s.j, s.k)) {
-              empty_shift = level.shift;
-              break;
-            }
-        if (empty_shift < 0) {
-          const int32_t b = brick_table[(size_t(s.k >> 2) * bricks[1] + (s.j >> 2)) * bricks[0] + (s.i >> 2)];
-          if (b < 0 || occupancy[b] == 0) {
-            empty_shift = 2;
-          } else {
-            bi = s.i >> 2, bj = s.j >> 2, bk = s.k >> 2;
-            brick = b;
-            brick_bits = occupancy[b];
-          }
-        }
-        if (empty_shift >= 0) {
+        // The brick first: an occupied one is entered without the coarse levels' tests. An empty
+        // one is jumped with the largest empty block holding the sample (at least the brick).
+        const int32_t b = brick_table[(size_t(s.k >> 2) * bricks[1] + (s.j >> 2)) * bricks[0] + (s.i >> 2)];
+        if (b < 0 || occupancy[b] == 0) {
+          int empty_shift = 2;
+          if (coarse)
+            for (const NerfSkipGrid::Level& level : skip.levels)
+              if (level.shift > 2 && !level.Occupied(s.i, s.j, s.k)) {
+                empty_shift = level.shift;
+                break;
+              }
           n = steps.SkipBlock(n, empty_shift, s);
           continue;
         }
+        bi = s.i >> 2, bj = s.j >> 2, bk = s.k >> 2;
+        brick = b;
+        brick_bits = occupancy[b];
       }
       if (!((brick_bits >> (((s.k & 3) * 4 + (s.j & 3)) * 4 + (s.i & 3))) & 1u)) {
-        n = steps.SkipBlock(n, 0, s);
+        // An empty cell. With steps longer than a cell's diagonal the next sample lies outside it, so
+        // SkipBlock(n, 0, s) returns n + 1 (but where At() clamped a sample outside the grid into the
+        // cell): taken directly. The samples are the same either way: n + 1 is never beyond the
+        // block's exit, and a sample visited is tested for occupancy like any other.
+        n = steps_leave_cells ? n + 1 : steps.SkipBlock(n, 0, s);
         continue;
       }
       const int32_t block = use_copy ? render_copy.block[size_t(brick)] : -1;

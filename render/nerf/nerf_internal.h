@@ -229,6 +229,11 @@ struct RaySteps {
       inv_d[axis] = d[axis] != 0.0f ? 1.0f / d[axis] : 1e30f;
       last_cell[axis] = f.res[axis] - 2;
       max_g[axis] = float(f.res[axis] - 1);
+      // An axis the ray does not move along never limits a block's exit: its plane distance is
+      // plane + 1e30 (factor 1), beyond every other axis' exit.
+      exit_far[axis] = d[axis] > 0.0f ? 1 : 0;
+      exit_o[axis] = d[axis] != 0.0f ? o[axis] : -1e30f;
+      exit_inv[axis] = d[axis] != 0.0f ? inv_d[axis] : 1.0f;
     }
   }
 
@@ -256,17 +261,18 @@ struct RaySteps {
   // The next interval to visit after interval n, whose sample s lies in an empty block of 2^shift
   // cells per side (aligned to multiples of 2^shift): the first one beyond the block, never n itself.
   int64_t SkipBlock(int64_t n, int shift, const Sample& s) const {
-    const int b[3] = {s.i >> shift, s.j >> shift, s.k >> shift};
-    float t_exit = 1e30f;
-    for (int axis = 0; axis < 3; ++axis) {
-      const float dir = d[axis];
-      if (dir == 0.0f) continue;
-      const float plane = float((dir > 0.0f ? b[axis] + 1 : b[axis]) << shift);
-      t_exit = std::min(t_exit, (plane - o[axis]) * inv_d[axis]);
-    }
+    const float tx = (float(((s.i >> shift) + exit_far[0]) << shift) - exit_o[0]) * exit_inv[0];
+    const float ty = (float(((s.j >> shift) + exit_far[1]) << shift) - exit_o[1]) * exit_inv[1];
+    const float tz = (float(((s.k >> shift) + exit_far[2]) << shift) - exit_o[2]) * exit_inv[2];
+    const float t_exit = std::min(std::min(tx, ty), std::min(tz, 1e30f));
     // 1e-3 of a step of slack: a sample that rounding puts on the exit plane is visited, never skipped.
-    const float next = std::ceil((t_exit - t0) / step - offset - 1e-3f);
-    return next > float(n + 1) ? (next < float(count) ? int64_t(next) : count) : n + 1;
+    // The first interval whose sample lies beyond is ceil(x); ceil(x) > n + 1 exactly when x > n + 1
+    // and ceil(x) < count when x <= count - 1 (integers), so ceil is taken only on that range.
+    const float x = (t_exit - t0) / step - offset - 1e-3f;
+    if (!(x > float(n + 1))) return n + 1;
+    if (!(x <= float(count - 1))) return count;
+    const int64_t k = int64_t(x);
+    return k + (float(k) < x ? 1 : 0);
   }
 
   float t0, t1, step, offset;
@@ -274,6 +280,8 @@ struct RaySteps {
   int64_t count;
   float inv_d[3], max_g[3];
   int last_cell[3];
+  int exit_far[3];               // 1 where the ray moves up the axis (exits a block at its far face)
+  float exit_o[3], exit_inv[3];  // SkipBlock's o and inv_d, made neutral on axes with d = 0
 };
 
 // Calls visit(t, dt, corners) for every sample of RaySteps in an occupied cell,

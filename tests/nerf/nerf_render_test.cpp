@@ -1,7 +1,8 @@
 // Tests of the NeRF renderer's compact render copy (NerfRenderCopy, NerfField::UpdateRenderCopy):
 // its values against the exact float field within the quantisation bound, rendering from it against
 // the plain float march and against an analytic slab, that a changed field never renders stale
-// copy data, and the 4-wide exp against std::exp.
+// copy data, the 4-wide exp against std::exp, and the renderer's march (empty-space skipping) against a
+// brute-force march that visits every interval.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -242,6 +243,130 @@ TEST(NerfRenderCopy, RenderViewUsesTheCopyAndMatchesTheFloatArrays) {
   }
   EXPECT_GT(differ, 0u) << "RenderView reads the copy";
   for (size_t n = 0; n < a.opacity.pixels.size(); ++n) EXPECT_NEAR(a.opacity.pixels[n], b.opacity.pixels[n], 1e-3f);
+}
+
+// A 3 m box at voxel 0.1 m (30 cells, 8 bricks per axis) of sparse occupancy: blobs of random density
+// (cells occupied one by one inside them), empty cells inside occupied bricks, empty bricks and empty
+// blocks of 8 and 16 cells between them.
+constexpr float kBlobs[3][3] = {{0.7f, 0.8f, 0.6f}, {2.2f, 1.9f, 2.3f}, {1.6f, 0.5f, 2.4f}};
+NerfField SparseField(uint32_t seed) {
+  NerfField f = NerfField::Dense({Vec3(0, 0, 0), Vec3(3, 3, 3)}, 0.1, 0.0f, Vec3f(0, 0, 0));
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f), raw(0.0f, 4.0f);
+  for (size_t b = 0; b < f.BrickCount(); ++b)
+    for (int v = 0; v < kNerfBrickSlots; ++v) {
+      const Vec3f p =
+          Vec3f(float(f.brick_coords[3 * b] * 4 + (v & 3)), float(f.brick_coords[3 * b + 1] * 4 + (v >> 2 & 3)),
+                float(f.brick_coords[3 * b + 2] * 4 + (v >> 4))) *
+          f.voxel_m;
+      bool in_blob = false;
+      for (const auto& c : kBlobs) in_blob |= Length(p - Vec3f(c[0], c[1], c[2])) < 0.45f;
+      // Outside blobs σ = e^-9 (below the threshold); inside, one vertex in 4 dense (σ 1 .. 55 / m).
+      f.density[b * kNerfBrickSlots + size_t(v)] = in_blob && u(rng) < 0.25f ? raw(rng) : -9.0f;
+    }
+  f.UpdateOccupancy(1e-2f);
+  return f;
+}
+
+// Opacity, mean depth and sample count of a ray by brute force: every interval of RaySteps visited
+// (no empty-space skipping), the sample kept when its cell is occupied, no early stop - what RenderRay
+// takes with min_alpha = 0 and min_transmittance = 0, and what MarchRay visits.
+struct PlainMarch {
+  double opacity = 0.0, depth = 0.0;
+  int64_t samples = 0;
+};
+PlainMarch MarchPlain(const NerfField& f, const NerfRay& ray, float step_voxels) {
+  PlainMarch m;
+  double transmittance = 1.0, depth_sum = 0.0;
+  const nerf_detail::RaySteps steps(f, ray, step_voxels * f.voxel_m, 0.5f);
+  nerf_detail::RaySteps::Sample s;
+  nerf_detail::Corners c;
+  for (int64_t n = 0; n < steps.count && steps.At(n, s); ++n) {
+    if (nerf_detail::CellState(f, s.i, s.j, s.k) != 2) continue;
+    EXPECT_TRUE(nerf_detail::LocateGrid(f, s.g, c));
+    const double alpha = -std::expm1(-double(std::exp(nerf_detail::RawDensity(f, c))) * s.dt);
+    depth_sum += transmittance * alpha * s.t;
+    transmittance *= 1.0 - alpha;
+    ++m.samples;
+  }
+  m.opacity = 1.0 - transmittance;
+  m.depth = m.opacity > 0.0 ? depth_sum / m.opacity : 0.0;
+  return m;
+}
+
+TEST(NerfRenderMarch, TakesThePlainMarchsSamples) {
+  NerfField f = SparseField(11);
+  // The field has all kinds of space: occupied cells, empty cells in occupied bricks, empty bricks.
+  size_t occupied_bricks = 0, empty_cells_in_occupied = 0;
+  for (const uint64_t bits : f.occupancy)
+    if (bits != 0) ++occupied_bricks, empty_cells_in_occupied += 64 - size_t(__builtin_popcountll(bits));
+  ASSERT_GT(occupied_bricks, 20u);
+  ASSERT_LT(occupied_bricks, f.BrickCount() / 3);
+  ASSERT_GT(empty_cells_in_occupied, 500u);
+  std::mt19937 rng(12);
+  std::uniform_real_distribution<float> u(0.0f, 3.0f);
+  std::vector<NerfRay> rays;
+  // Rays from random points towards random points near a blob's centre, starting and stopping at
+  // random points (inside blocks; a quarter stop before the aim), and diagonal rays through brick
+  // corners (0.4 m apart), which cross brick and cell faces at their edges and corners.
+  std::uniform_real_distribution<float> jitter(-0.3f, 0.3f);
+  for (int n = 0; n < 1500; ++n) {
+    NerfRay r;
+    r.origin = Vec3f(u(rng), u(rng), u(rng));
+    const float* c = kBlobs[n % 3];
+    const Vec3f aim = Vec3f(c[0] + jitter(rng), c[1] + jitter(rng), c[2] + jitter(rng));
+    const float dist = Length(aim - r.origin);
+    if (dist < 0.1f) continue;
+    r.dir = (aim - r.origin) * (1.0f / dist);
+    float t_near = 0.0f, t_far = 0.0f;
+    if (!IntersectAabb(f.aabb, r.origin, r.dir, t_near, t_far)) continue;
+    r.t_near = std::uniform_real_distribution<float>(0.0f, 0.5f * dist)(rng);
+    r.t_far = n % 4 == 0 ? std::uniform_real_distribution<float>(r.t_near, dist)(rng)
+                         : std::uniform_real_distribution<float>(dist, std::max(dist, t_far))(rng);
+    rays.push_back(r);
+  }
+  for (int a = 0; a <= 7; ++a)
+    for (int sx : {-1, 1})
+      for (int sy : {-1, 1}) {
+        NerfRay r;
+        r.origin = Vec3f(0.4f * float(a), sx > 0 ? 0.0f : 2.8f, 0.4f * float(7 - a)) + Vec3f(0, 0, 0.1f * float(sy));
+        r.dir = Normalized(Vec3f(1.0f, float(sx), float(sy)));
+        if (IntersectAabb(f.aabb, r.origin, r.dir, r.t_near, r.t_far)) rays.push_back(r);
+      }
+  ASSERT_GT(rays.size(), 1000u);
+  NerfField no_skip_grid = f;  // a copy: its skip grid is not current, so no coarse levels
+  ASSERT_FALSE(no_skip_grid.SkipGridCurrent());
+  ASSERT_TRUE(f.SkipGridCurrent());
+  // Steps below and above a cell's diagonal (sqrt 3 voxels), and the live and preview spacings.
+  for (const float step : {0.5f, 1.0f, 1.7f, 1.8f, 2.0f, 3.0f}) {
+    NerfRenderOptions o = NerfRenderOptions::Preset("live");
+    o.step_voxels = step, o.min_alpha = 0.0f, o.min_transmittance = 0.0f;
+    int64_t total = 0;
+    int dense = 0;
+    for (const NerfRay& ray : rays) {
+      const PlainMarch want = MarchPlain(f, ray, step);
+      for (const NerfField* field : {&f, &no_skip_grid}) {
+        const NerfRayResult got = field->RenderRay(ray, FloatArrays(o));
+        ASSERT_EQ(got.samples, want.samples) << "step " << step;
+        int64_t marched = 0;  // the trainer's march (MarchRay) visits the same samples
+        nerf_detail::MarchRay(*field, ray, step * f.voxel_m, 0.5f,
+                              [&](float, float, const nerf_detail::Corners&) { return ++marched, true; });
+        ASSERT_EQ(marched, want.samples) << "step " << step;
+        // Float sums and products over <= ~500 samples against double ones (relative error up to
+        // ~500 x 6e-8 = 3e-5), and trilinear forms that differ by rounding (~1e-6 relative in log σ):
+        // 1e-5 in opacity, 1e-4 of the depth (+1e-5 m) where the opacity is > 0.1 (the renderer's
+        // opacity 1 - T in float loses 6e-8 / opacity relative, which the mean depth divides by).
+        EXPECT_NEAR(got.opacity, want.opacity, 1e-5) << "step " << step;
+        if (want.opacity > 0.1) {
+          EXPECT_NEAR(got.depth, want.depth, 1e-4 * want.depth + 1e-5) << "step " << step;
+        }
+      }
+      total += want.samples;
+      dense += want.opacity > 0.5;
+    }
+    EXPECT_GT(total, int64_t(rays.size())) << "the rays sample occupied cells";
+    EXPECT_GT(dense, 10) << "and some are mostly opaque";
+  }
 }
 
 TEST(NerfRenderOptions, NamedSettingsAreValidAndOrderedBySpacing) {
