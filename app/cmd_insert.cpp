@@ -273,7 +273,9 @@ int RunInsert(const CommandArgs& args) {
   // Inputs.
   const Dataset dataset = ReadDataset(DatasetSplitPath(dataset_dir, split));
   // Without a NeRF (ground-truth inputs) the scene is empty: nothing occludes.
-  const NerfField nerf = without_nerf ? NerfField{} : LoadNerf(nerf_path);
+  NerfField nerf = without_nerf ? NerfField{} : LoadNerf(nerf_path);
+  // The field does not change from here on: rays read its compact copy (same samples, quantised values).
+  if (!without_nerf) nerf.UpdateRenderCopy();
   std::unique_ptr<SceneField> scene_field;
   if (without_nerf)
     scene_field = std::make_unique<EmptyScene>(dataset.aabb ? *dataset.aabb : Aabb{{-1, -1, -1}, {1, 1, 1}});

@@ -64,6 +64,7 @@ LiveSceneData LoadLiveScene(const LiveScenePaths& paths) {
   LiveSceneData data;
   data.paths = paths;
   data.nerf = LoadNerf(paths.nerf);
+  data.nerf.UpdateRenderCopy();  // the field does not change from here on: rays read its compact copy
   data.field = std::make_unique<NerfScene>(data.nerf);
   if (!paths.env.empty()) {
     data.env = ReadEnvLight(paths.env);
