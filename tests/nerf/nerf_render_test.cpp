@@ -17,6 +17,13 @@
 namespace nerfar {
 namespace {
 
+// Where vertex slot v of brick b lies, in metres from the field's origin.
+Vec3f SlotOffset(const NerfField& f, size_t b, int v) {
+  return Vec3f(float(f.brick_coords[3 * b] * 4 + (v & 3)), float(f.brick_coords[3 * b + 1] * 4 + (v >> 2 & 3)),
+               float(f.brick_coords[3 * b + 2] * 4 + (v >> 4))) *
+         f.voxel_m;
+}
+
 // Ranges of the random test field: raw log-density in [-3, 5], colour bases in [-2, 2], slopes in
 // [-0.5, 0.5]. A block at the grid's far faces also holds vertices outside the grid (density -30),
 // so a block's density range is at most 35 and its colour ranges at most 4 (bases) and 1 (slopes).
@@ -108,10 +115,7 @@ TEST(NerfRenderCopy, RendersLikeThePlainFloatMarch) {
   // centre), so that rays end in all states: clear, half and opaque.
   for (size_t b = 0; b < f.BrickCount(); ++b)
     for (int v = 0; v < kNerfBrickSlots; ++v) {
-      const Vec3f p =
-          Vec3f(float(f.brick_coords[3 * b] * 4 + (v & 3)), float(f.brick_coords[3 * b + 1] * 4 + (v >> 2 & 3)),
-                float(f.brick_coords[3 * b + 2] * 4 + (v >> 4))) *
-          f.voxel_m;
+      const Vec3f p = SlotOffset(f, b, v);
       f.density[b * kNerfBrickSlots + size_t(v)] += Length(p - Vec3f(0.5f, 0.5f, 0.5f)) < 0.3f ? 2.0f : -6.0f;
     }
   f.UpdateOccupancy(1e-6f);
@@ -255,10 +259,7 @@ NerfField SparseField(uint32_t seed) {
   std::uniform_real_distribution<float> u(0.0f, 1.0f), raw(0.0f, 4.0f);
   for (size_t b = 0; b < f.BrickCount(); ++b)
     for (int v = 0; v < kNerfBrickSlots; ++v) {
-      const Vec3f p =
-          Vec3f(float(f.brick_coords[3 * b] * 4 + (v & 3)), float(f.brick_coords[3 * b + 1] * 4 + (v >> 2 & 3)),
-                float(f.brick_coords[3 * b + 2] * 4 + (v >> 4))) *
-          f.voxel_m;
+      const Vec3f p = SlotOffset(f, b, v);
       bool in_blob = false;
       for (const auto& c : kBlobs) in_blob |= Length(p - Vec3f(c[0], c[1], c[2])) < 0.45f;
       // Outside blobs σ = e^-9 (below the threshold); inside, one vertex in 4 dense (σ 1 .. 55 / m).

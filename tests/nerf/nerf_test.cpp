@@ -18,6 +18,7 @@
 #include "render/nerf/nerf_field.h"
 #include "render/nerf/nerf_file.h"
 #include "render/nerf/nerf_train.h"
+#include "tests/nerf/box_scene.h"
 #include "tests/support/support.h"
 
 namespace nerfar {
@@ -699,12 +700,8 @@ TEST(NerfRender, SkipGridJumpsOnlyEmptySpace) {
 
 // A tiny analytic scene: a table slab and three boxes of constant radiance per
 // box (one bright, HDR), seen against black. Pixels are 4x4 supersampled.
-struct Box {
-  Vec3 lo, hi;
-  Vec3f radiance;
-};
-const std::vector<Box>& SceneBoxes() {
-  static const std::vector<Box> boxes = {
+const std::vector<testing::RadiantBox>& SceneBoxes() {
+  static const std::vector<testing::RadiantBox> boxes = {
       {Vec3(-0.4, -0.3, -0.04), Vec3(0.4, 0.3, 0.0), Vec3f(0.4f, 0.3f, 0.2f)},
       {Vec3(-0.25, -0.1, 0.0), Vec3(-0.05, 0.1, 0.2), Vec3f(0.8f, 0.1f, 0.1f)},
       {Vec3(0.1, -0.15, 0.0), Vec3(0.2, -0.05, 0.1), Vec3f(0.1f, 0.6f, 0.2f)},
@@ -713,46 +710,8 @@ const std::vector<Box>& SceneBoxes() {
   return boxes;
 }
 
-Vec3f TraceScene(const Vec3& o, const Vec3& d) {
-  double best = 1e30;
-  Vec3f value;
-  for (const Box& b : SceneBoxes()) {
-    float t0, t1;
-    Aabb box{b.lo, b.hi};
-    if (IntersectAabb(box, Vec3f(o), Vec3f(d), t0, t1) && t0 < best) {
-      best = t0;
-      value = b.radiance;
-    }
-  }
-  return value;
-}
-
 NerfView MakeView(double azimuth, double elevation, int w, int h) {
-  NerfView v;
-  v.camera.width = w, v.camera.height = h;
-  v.camera.fx = v.camera.fy = 0.9 * w;
-  v.camera.cx = w / 2.0, v.camera.cy = h / 2.0;
-  const Vec3 centre(1.3 * std::cos(elevation) * std::cos(azimuth), 1.3 * std::cos(elevation) * std::sin(azimuth),
-                    1.3 * std::sin(elevation));
-  const Vec3 z = Normalized(Vec3(0, 0, 0.05) - centre);
-  const Vec3 x = Normalized(Cross(z, Vec3(0, 0, 1)));
-  const Vec3 y = Cross(z, x);
-  v.T_world_camera.rotation = Mat3::FromColumns(x, y, z);
-  v.T_world_camera.translation = centre;
-  v.rgb = ImageF(w, h, 3);
-  const int ss = 4;
-  for (int py = 0; py < h; ++py)
-    for (int px = 0; px < w; ++px) {
-      Vec3f sum;
-      for (int sy = 0; sy < ss; ++sy)
-        for (int sx = 0; sx < ss; ++sx) {
-          const Vec3 dc = Normalized(Vec3((px + (sx + 0.5) / ss - v.camera.cx) / v.camera.fx,
-                                          (py + (sy + 0.5) / ss - v.camera.cy) / v.camera.fy, 1.0));
-          sum += TraceScene(centre, v.T_world_camera.Rotate(dc));
-        }
-      for (int ch = 0; ch < 3; ++ch) v.rgb.at(px, py, ch) = sum[ch] / float(ss * ss);
-    }
-  return v;
+  return testing::RingView(SceneBoxes(), azimuth, elevation, 1.3, 0.05, w, h, 4);
 }
 
 const NerfTrainData& TinyScene() {

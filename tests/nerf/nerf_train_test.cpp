@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "render/nerf/nerf_field.h"
+#include "tests/nerf/box_scene.h"
 
 namespace nerfar {
 namespace {
@@ -17,56 +18,16 @@ namespace {
 // A bright Lambertian emitter (radiance 50 in every direction, HDR against a
 // dim table) on a dim table, seen against black by a ring of cameras from
 // above only (elevations 0.4..0.8 rad), as the shared scenes' lamps are.
-struct Box {
-  Vec3 lo, hi;
-  Vec3f radiance;
-};
-const std::vector<Box>& Boxes() {
-  static const std::vector<Box> boxes = {
+const std::vector<testing::RadiantBox>& Boxes() {
+  static const std::vector<testing::RadiantBox> boxes = {
       {Vec3(-0.4, -0.4, -0.04), Vec3(0.4, 0.4, 0.0), Vec3f(0.3f, 0.25f, 0.2f)},
       {Vec3(-0.06, -0.06, 0.15), Vec3(0.06, 0.06, 0.27), Vec3f(50.0f, 45.0f, 30.0f)},  // floating emitter
   };
   return boxes;
 }
 
-Vec3f Trace(const Vec3& o, const Vec3& d) {
-  float best = 1e30f;
-  Vec3f value;
-  for (const Box& b : Boxes()) {
-    float t0, t1;
-    if (IntersectAabb(Aabb{b.lo, b.hi}, Vec3f(o), Vec3f(d), t0, t1) && t0 < best) {
-      best = t0;
-      value = b.radiance;
-    }
-  }
-  return value;
-}
-
 NerfView View(double azimuth, double elevation, int w, int h) {
-  NerfView v;
-  v.camera.width = w, v.camera.height = h;
-  v.camera.fx = v.camera.fy = 0.9 * w;
-  v.camera.cx = w / 2.0, v.camera.cy = h / 2.0;
-  const Vec3 centre(1.2 * std::cos(elevation) * std::cos(azimuth), 1.2 * std::cos(elevation) * std::sin(azimuth),
-                    1.2 * std::sin(elevation));
-  const Vec3 z = Normalized(Vec3(0, 0, 0.1) - centre);
-  const Vec3 x = Normalized(Cross(z, Vec3(0, 0, 1)));
-  v.T_world_camera.rotation = Mat3::FromColumns(x, Cross(z, x), z);
-  v.T_world_camera.translation = centre;
-  v.rgb = ImageF(w, h, 3);
-  constexpr int kSuper = 3;  // supersampling per pixel side
-  for (int py = 0; py < h; ++py)
-    for (int px = 0; px < w; ++px) {
-      Vec3f sum;
-      for (int sy = 0; sy < kSuper; ++sy)
-        for (int sx = 0; sx < kSuper; ++sx) {
-          const Vec3 dc = Normalized(Vec3((px + (sx + 0.5) / kSuper - v.camera.cx) / v.camera.fx,
-                                          (py + (sy + 0.5) / kSuper - v.camera.cy) / v.camera.fy, 1.0));
-          sum += Trace(centre, v.T_world_camera.Rotate(dc));
-        }
-      for (int ch = 0; ch < 3; ++ch) v.rgb.at(px, py, ch) = sum[ch] / float(kSuper * kSuper);
-    }
-  return v;
+  return testing::RingView(Boxes(), azimuth, elevation, 1.2, 0.1, w, h, 3);
 }
 
 const NerfTrainData& RingScene() {
