@@ -2,7 +2,9 @@
 // lobe as the light, and a sphere object with its exact visibility.
 #pragma once
 
+#include <cmath>
 #include <memory>
+#include <optional>
 
 #include "render/insert/inserter.h"
 #include "render/insert/object_visibility.h"
@@ -51,5 +53,20 @@ struct SphereObject {
     return o;
   }
 };
+
+// The plain table's point (z = 0, within |x| <= 0.6, |y| <= 0.4) seen through
+// pixel (x, y) of a rendered frame where no object covers the pixel; nullopt
+// on object pixels and rays that miss that part of the table. The truth a κ
+// pixel is compared with is taken there.
+inline std::optional<Vec3> TablePointAt(const InsertLayers& layers, const CameraIntrinsics& camera, const Pose& cam,
+                                        int x, int y) {
+  const ObjectGBuffer& g = layers.gbuffer;
+  if (g.rect.Contains(x, y) && g.object[g.Index(x, y)] >= 0) return std::nullopt;
+  const Vec3 d(CameraRayDirection(camera, cam, x, y));
+  if (d.z >= 0) return std::nullopt;
+  const Vec3 p = cam.translation + d * (-cam.translation.z / d.z);
+  if (std::abs(p.x) > 0.6 || std::abs(p.y) > 0.4) return std::nullopt;
+  return p;
+}
 
 }  // namespace nerfar::testing

@@ -11,6 +11,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <limits>
+#include <optional>
 
 #include "calib/core/error.h"
 #include "calib/core/parallel.h"
@@ -161,13 +162,9 @@ TEST(Shadow, KappaMatchesQuadratureUnderASphere) {
   size_t count = 0, dark = 0;
   for (int y = layers.kappa_rect.y0; y < layers.kappa_rect.y1; y += 3) {
     for (int x = layers.kappa_rect.x0; x < layers.kappa_rect.x1; x += 3) {
-      const ObjectGBuffer& g = layers.gbuffer;
-      if (g.rect.Contains(x, y) && g.object[g.Index(x, y)] >= 0) continue;
-      const Vec3 d(CameraRayDirection(camera, cam, x, y));
-      const Vec3 eye = cam.translation;
-      if (d.z >= 0) continue;
-      const Vec3 p = eye + d * (-eye.z / d.z);
-      if (std::abs(p.x) > 0.6 || std::abs(p.y) > 0.4) continue;
+      const std::optional<Vec3> table = testing::TablePointAt(layers, camera, cam, x, y);
+      if (!table) continue;
+      const Vec3 p = *table;
       const double truth = reference.At(p, object.center, object.radius);
       const float kappa = layers.kappa.at(x - layers.kappa_rect.x0, y - layers.kappa_rect.y0);
       ASSERT_GE(kappa, 0.0f);

@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 #include <vector>
 
 #include "render/insert/inserter.h"
@@ -323,13 +324,9 @@ TEST(PointLightShadow, MatchesTheAnalyticHardShadow) {
   size_t umbra = 0, lit = 0;
   for (int y = layers.kappa_rect.y0; y < layers.kappa_rect.y1; ++y)
     for (int x = layers.kappa_rect.x0; x < layers.kappa_rect.x1; ++x) {
-      const ObjectGBuffer& g = layers.gbuffer;
-      if (g.rect.Contains(x, y) && g.object[g.Index(x, y)] >= 0) continue;
-      const Vec3 d(CameraRayDirection(camera, cam, x, y));
-      const Vec3 eye = cam.translation;
-      if (d.z >= 0) continue;
-      const Vec3 p = eye + d * (-eye.z / d.z);
-      if (std::abs(p.x) > 0.6 || std::abs(p.y) > 0.4) continue;
+      const std::optional<Vec3> table = testing::TablePointAt(layers, camera, cam, x, y);
+      if (!table) continue;
+      const Vec3 p = *table;
       const Vec3 to_centre = object.center - p;
       const double margin = std::acos(std::clamp(Dot(Normalized(to_centre), to_light), -1.0, 1.0)) -
                             std::asin(object.radius / Length(to_centre));  // < 0: the light is hidden
