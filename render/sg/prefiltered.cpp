@@ -10,8 +10,6 @@ namespace nerfar {
 
 namespace {
 
-constexpr float kPiF = 3.14159265358979323846f;
-
 // Environment-BRDF table: nodes n·v = i/(kTableNv − 1) (0 taken as 1e-4),
 // r = j/(kTableR − 1); each node integrated with kTableSamples GGX
 // importance samples (Hammersley points).
@@ -72,28 +70,13 @@ const std::vector<EnvironmentBrdfTerms>& EnvironmentBrdfTable() {
   return table;
 }
 
-// acos and atan2 by polynomials (absolute error under 7e-5 and 1e-5 rad,
-// far below a map texel of ≥ 1.4°): the libm calls were most of a look-up.
-float FastAcos(float x) {
-  const float a = std::min(std::abs(x), 1.0f);
-  const float r = std::sqrt(1.0f - a) * (1.5707288f + a * (-0.2121144f + a * (0.0742610f - 0.0187293f * a)));
-  return x < 0.0f ? kPiF - r : r;
-}
-float FastAtan2(float y, float x) {
-  const float ax = std::abs(x), ay = std::abs(y), hi = std::max(ax, ay);
-  if (!(hi > 0.0f)) return 0.0f;
-  const float a = std::min(ax, ay) / hi, s = a * a;
-  float r = ((-0.0464964749f * s + 0.15931422f) * s - 0.327622764f) * s * a + a;
-  if (ay > ax) r = 0.5f * kPiF - r;
-  if (x < 0.0f) r = kPiF - r;
-  return y < 0.0f ? -r : r;
-}
-
-// Panorama coordinates of a unit direction (sphere.h's convention), float.
+// Bucket coordinates of a direction (sphere.h's panorama convention); a
+// non-finite one lands at (0, 0) (its sample counts as black anyway). Only
+// the maps' build uses them, to find the samples near a texel.
 void Coordinates(const Vec3f& d, float* u, float* v) {
-  *v = std::clamp(FastAcos(d.z) / kPiF, 0.0f, 1.0f);
-  const float uu = 0.5f * (1.0f - FastAtan2(d.y, d.x) / kPiF);
-  *u = uu >= 1.0f ? 0.0f : (uu >= 0.0f ? uu : 0.0f);  // also NaN -> 0
+  double du = 0, dv = 0;
+  if (std::isfinite(d.x) && std::isfinite(d.y) && std::isfinite(d.z)) EquirectCoordinates(Vec3(d), &du, &dv);
+  *u = static_cast<float>(du), *v = static_cast<float>(dv);
 }
 
 // Octahedral layout of the level maps: a direction d projected onto the
