@@ -166,6 +166,54 @@ void VertexLanes(const NerfField& f, int i, int j, int k, float lanes[NerfRender
     for (int c = 0; c < 4; ++c) lanes[4 * c + ch] = q[4 * ch + c];  // a, bx, by, bz of channel ch
 }
 
+// NerfRenderCopy::entry: block indices in the order of the allocated bricks with an occupied cell,
+// and for every other brick-table position -D, D the Chebyshev distance in bricks to the nearest
+// brick with a block, capped at kMaxDistance. The distance is separable: one pass per axis,
+// d'(x) = min over x' on x's line of max(|x - x'|, d(x')), starting from 0 at bricks with a block and
+// the cap elsewhere, gives min(D, cap) exactly (ties of max and min keep the cap a cap).
+std::vector<int32_t> CopyEntries(const NerfField& f) {
+  constexpr int32_t kCap = NerfRenderCopy::kMaxDistance;
+  const size_t dims[3] = {size_t(f.bricks[0]), size_t(f.bricks[1]), size_t(f.bricks[2])};
+  const size_t count = dims[0] * dims[1] * dims[2];
+  std::vector<int32_t> dist(count, kCap), next(count);
+  for (size_t n = 0; n < count; ++n) {
+    const int32_t b = f.brick_table[n];
+    if (b >= 0 && f.occupancy[size_t(b)] != 0) dist[n] = 0;
+  }
+  const size_t strides[3] = {1, dims[0], dims[0] * dims[1]};
+  for (int axis = 0; axis < 3; ++axis) {
+    const size_t len = dims[axis], stride = strides[axis];
+    // Lines along `axis`: start positions are those with coordinate 0 on it.
+    ParallelFor(
+        count / len,
+        [&](size_t line) {
+          const size_t start = axis == 0   ? line * len
+                               : axis == 1 ? (line / dims[0]) * dims[0] * dims[1] + line % dims[0]
+                                           : line;
+          for (size_t x = 0; x < len; ++x) {
+            int32_t best = dist[start + x * stride];
+            for (size_t r = 1; int32_t(r) < best; ++r) {
+              if (x >= r) best = std::min(best, std::max(int32_t(r), dist[start + (x - r) * stride]));
+              if (x + r < len) best = std::min(best, std::max(int32_t(r), dist[start + (x + r) * stride]));
+            }
+            next[start + x * stride] = best;
+          }
+        },
+        64);
+    dist.swap(next);
+  }
+  for (int32_t& d : dist) d = -d;  // the zeros (bricks with a block) are all set below
+  int32_t blocks = 0;
+  // Block indices follow the allocated bricks' order (the order the blocks are filled in).
+  for (size_t b = 0; b < f.BrickCount(); ++b)
+    if (f.occupancy[b] != 0) {
+      const size_t n = (size_t(f.brick_coords[3 * b + 2]) * dims[1] + size_t(f.brick_coords[3 * b + 1])) * dims[0] +
+                       size_t(f.brick_coords[3 * b]);
+      dist[n] = blocks++;
+    }
+  return dist;
+}
+
 }  // namespace
 
 void NerfField::UpdateRenderCopy() {
@@ -173,17 +221,18 @@ void NerfField::UpdateRenderCopy() {
   constexpr int kVertices = C::kSide * C::kSide * C::kSide;
   ClearRenderCopy();
   if (empty() || occupancy.size() != BrickCount() || brick_coords.size() != 3 * BrickCount() ||
-      density.size() != BrickCount() * kNerfBrickSlots || color.size() != density.size() * kNerfColorCoeffs)
+      density.size() != BrickCount() * kNerfBrickSlots || color.size() != density.size() * kNerfColorCoeffs ||
+      brick_table.size() != size_t(bricks[0]) * size_t(bricks[1]) * size_t(bricks[2]))
     return;
   C c;
-  c.block.assign(BrickCount(), -1);
   std::vector<int32_t> bricks_of_block;
   for (size_t b = 0; b < BrickCount(); ++b)
     if (occupancy[b] != 0) {
-      c.block[b] = int32_t(bricks_of_block.size());
       bricks_of_block.push_back(int32_t(b));
+      c.occupancy.push_back(occupancy[b]);
     }
   const size_t blocks = bricks_of_block.size();
+  c.entry = CopyEntries(*this);
   c.bytes.assign(std::max<size_t>(blocks, 1) * C::kBlockBytes + 64, 0);
   c.first = (64 - reinterpret_cast<uintptr_t>(c.bytes.data()) % 64) % 64;
   ParallelFor(
@@ -402,9 +451,8 @@ inline void PrefetchCopyCell(const NerfField& f, const Vec3f& g) {
   if (!(g.x >= 0.0f && g.y >= 0.0f && g.z >= 0.0f)) return;
   const int i = std::min(int(g.x), f.res[0] - 2), j = std::min(int(g.y), f.res[1] - 2),
             k = std::min(int(g.z), f.res[2] - 2);
-  const int32_t b = f.brick_table[(size_t(k >> 2) * f.bricks[1] + size_t(j >> 2)) * f.bricks[0] + size_t(i >> 2)];
-  if (b < 0) return;
-  const int32_t block = f.render_copy.block[size_t(b)];
+  const int32_t block =
+      f.render_copy.entry[(size_t(k >> 2) * f.bricks[1] + size_t(j >> 2)) * f.bricks[0] + size_t(i >> 2)];
   if (block < 0) return;
   const uint8_t* v = f.render_copy.Vertex(block, i & 3, j & 3, k & 3);
   constexpr int L = NerfRenderCopy::kLanes, S = NerfRenderCopy::kSide;
@@ -428,7 +476,8 @@ inline float Trilinear(const float v[8], float fx, float fy, float fz) {
 // The samples are those of nerf_detail::MarchRay (interval n's at t_near + (n + 0.5)·step, empty
 // bricks and cells jumped over), evaluated with the cell's corners loaded once per cell. With a
 // current skip grid the ray is first clipped to the occupied cells' box and empty blocks of 16 and
-// 8 cells are jumped whole: the samples are the same (only empty space is jumped).
+// 8 cells are jumped whole; with a current render copy an empty brick is left by jumping the cube of
+// bricks its distance entry proves empty instead. The samples are the same (only empty space is jumped).
 NerfRayResult NerfField::RenderRay(const NerfRay& ray, const NerfRenderOptions& options) const {
   NerfRayResult result;
   const float t0 = ray.t_near, t1 = ray.t_far;
@@ -464,14 +513,15 @@ NerfRayResult NerfField::RenderRay(const NerfRay& ray, const NerfRenderOptions& 
   nerf_detail::RaySteps::Sample s;
   float transmittance = 1.0f, depth_sum = 0.0f;
   RenderCell cell;
-  // With a current render copy, cells of bricks that have a block are read from it (copy_v0: the
-  // lanes of the current cell's corner 0, null when the cell is read from the float arrays).
+  // With a current render copy every cell is read from it (every brick with an occupied cell has a
+  // block; copy_v0: the lanes of the current cell's corner 0, null when reading the float arrays).
   const bool use_copy = options.use_render_copy && RenderCopyCurrent();
   const nerf_detail::CopyRay copy_ray(ray.dir);
   nerf_detail::CopyBlock copy_block;
   int32_t copy_block_index = -1;  // the block copy_block was set for
   const uint8_t* copy_v0 = nullptr;
-  // The brick of the current cell once it is known to hold occupied cells.
+  // The brick of the current cell once it is known to hold occupied cells, and its index: its block
+  // in the copy, else its index in the float arrays.
   int bi = -1, bj = -1, bk = -1;
   int32_t brick = -1;
   uint64_t brick_bits = 0;
@@ -479,23 +529,36 @@ NerfRayResult NerfField::RenderRay(const NerfRay& ray, const NerfRenderOptions& 
     if (!steps.At(n, s)) break;
     if (s.i != cell.i || s.j != cell.j || s.k != cell.k) {
       if ((s.i >> 2) != bi || (s.j >> 2) != bj || (s.k >> 2) != bk) {
-        // The brick first: an occupied one is entered without the coarse levels' tests. An empty
-        // one is jumped with the largest empty block holding the sample (at least the brick).
-        const int32_t b = brick_table[(size_t(s.k >> 2) * bricks[1] + (s.j >> 2)) * bricks[0] + (s.i >> 2)];
-        if (b < 0 || occupancy[b] == 0) {
-          int empty_shift = 2;
-          if (coarse)
-            for (const NerfSkipGrid::Level& level : skip.levels)
-              if (level.shift > 2 && !level.Occupied(s.i, s.j, s.k)) {
-                empty_shift = level.shift;
-                break;
-              }
-          n = steps.SkipBlock(n, empty_shift, s);
-          continue;
+        // The brick first. From the copy: one entry, a block or the distance to the nearest one
+        // (the empty cube of bricks around this one is jumped). From the float arrays: an occupied
+        // brick is entered without the coarse levels' tests, an empty one is jumped with the largest
+        // empty block holding the sample (at least the brick).
+        const size_t at = (size_t(s.k >> 2) * bricks[1] + size_t(s.j >> 2)) * bricks[0] + size_t(s.i >> 2);
+        if (use_copy) {
+          const int32_t e = render_copy.entry[at];
+          if (e < 0) {
+            n = steps.SkipBricks(n, -e, s);
+            continue;
+          }
+          brick = e;
+          brick_bits = render_copy.occupancy[size_t(e)];
+        } else {
+          const int32_t b = brick_table[at];
+          if (b < 0 || occupancy[b] == 0) {
+            int empty_shift = 2;
+            if (coarse)
+              for (const NerfSkipGrid::Level& level : skip.levels)
+                if (level.shift > 2 && !level.Occupied(s.i, s.j, s.k)) {
+                  empty_shift = level.shift;
+                  break;
+                }
+            n = steps.SkipBlock(n, empty_shift, s);
+            continue;
+          }
+          brick = b;
+          brick_bits = occupancy[b];
         }
         bi = s.i >> 2, bj = s.j >> 2, bk = s.k >> 2;
-        brick = b;
-        brick_bits = occupancy[b];
       }
       if (!((brick_bits >> (((s.k & 3) * 4 + (s.j & 3)) * 4 + (s.i & 3))) & 1u)) {
         // An empty cell. With steps longer than a cell's diagonal the next sample lies outside it, so
@@ -505,11 +568,10 @@ NerfRayResult NerfField::RenderRay(const NerfRay& ray, const NerfRenderOptions& 
         n = steps_leave_cells ? n + 1 : steps.SkipBlock(n, 0, s);
         continue;
       }
-      const int32_t block = use_copy ? render_copy.block[size_t(brick)] : -1;
-      if (block >= 0) {
+      if (use_copy) {
         cell.i = s.i, cell.j = s.j, cell.k = s.k;
-        if (block != copy_block_index) copy_block.Set(render_copy.Header(block), copy_ray), copy_block_index = block;
-        copy_v0 = render_copy.Vertex(block, s.i & 3, s.j & 3, s.k & 3);
+        if (brick != copy_block_index) copy_block.Set(render_copy.Header(brick), copy_ray), copy_block_index = brick;
+        copy_v0 = render_copy.Vertex(brick, s.i & 3, s.j & 3, s.k & 3);
       } else {
         cell.Load(*this, s.i, s.j, s.k, brick);
         copy_v0 = nullptr;

@@ -118,14 +118,23 @@ struct NerfSkipGrid {
 // block's 128-byte header; the density's high byte has scale 256·scale), so |error| <= scale/2:
 // colour range/510 (the file stores bases at 8 bits per brick too), density range/131070.
 // Each block is 2176 bytes (34 cache lines, aligned): 0.6x the float arrays' bytes per vertex.
+// For empty-space skipping the copy keeps, per position of the field's brick table, either the
+// brick's block or the Chebyshev distance (in bricks) to the nearest brick that has one: a ray in
+// an empty brick jumps the whole cube of bricks around it that the distance proves empty (one
+// look-up, where the skip grid's aligned levels need one per level and jump less).
 struct NerfRenderCopy {
   static constexpr int kSide = 5;           // vertices per block side
   static constexpr int kLanes = 16;         // bytes (8-bit lanes) per vertex
   static constexpr int kHeaderBytes = 128;  // float scale[16], offset[16]
   static constexpr int kBlockBytes = 2176;  // header + 125 vertices, padded to 64 bytes
-  std::vector<int32_t> block;               // per field brick: its block index, or -1 (no occupied cell)
-  std::vector<uint8_t> bytes;               // the blocks, block b at first + b * kBlockBytes
-  size_t first = 0;                         // 64-byte aligned offset of block 0 in `bytes`
+  static constexpr int kMaxDistance = 64;   // distances are capped here (a cap only shortens jumps)
+  // Per brick-table position (x fastest, as NerfField::brick_table): the block index (>= 0) of a
+  // brick with an occupied cell, else -D with 1 <= D <= kMaxDistance: every brick (bx', by', bz')
+  // with max(|bx' - bx|, |by' - by|, |bz' - bz|) < D has no block (positions outside the table have none).
+  std::vector<int32_t> entry;
+  std::vector<uint64_t> occupancy;  // per block: its brick's occupancy bits (NerfField::occupancy)
+  std::vector<uint8_t> bytes;       // the blocks, block b at first + b * kBlockBytes
+  size_t first = 0;                 // 64-byte aligned offset of block 0 in `bytes`
   // The arrays it was built from (data pointers and sizes): a field whose arrays were replaced or
   // resized renders from its float arrays instead.
   const float* density_source = nullptr;
@@ -196,7 +205,7 @@ class NerfField {
     return !c.bytes.empty() && c.density_source == density.data() && c.density_size == density.size() &&
            c.color_source == color.data() && c.color_size == color.size() && c.occupancy_source == occupancy.data() &&
            c.occupancy_size == occupancy.size() && c.table_source == brick_table.data() &&
-           c.table_size == brick_table.size() && c.block.size() == BrickCount();
+           c.table_size == brick_table.size() && c.entry.size() == brick_table.size();
   }
   // Fraction of the grid's cells that are occupied.
   double OccupiedFraction() const;

@@ -180,9 +180,9 @@ inline bool CopyPointValues(const NerfField& f, const Vec3f& g, const Vec3f& dir
   if (!(g.x <= float(f.res[0] - 1) && g.y <= float(f.res[1] - 1) && g.z <= float(f.res[2] - 1))) return false;
   const int i = std::min(int(g.x), f.res[0] - 2), j = std::min(int(g.y), f.res[1] - 2),
             k = std::min(int(g.z), f.res[2] - 2);
-  const int32_t b = f.brick_table[(size_t(k >> 2) * f.bricks[1] + size_t(j >> 2)) * f.bricks[0] + size_t(i >> 2)];
-  if (b < 0 || f.render_copy.block[size_t(b)] < 0) return false;
-  const int32_t block = f.render_copy.block[size_t(b)];
+  const int32_t block =
+      f.render_copy.entry[(size_t(k >> 2) * f.bricks[1] + size_t(j >> 2)) * f.bricks[0] + size_t(i >> 2)];
+  if (block < 0) return false;
   CopyBlock cb;
   cb.Set(f.render_copy.Header(block), CopyRay(dir));
   float v[4];
@@ -261,9 +261,25 @@ struct RaySteps {
   // The next interval to visit after interval n, whose sample s lies in an empty block of 2^shift
   // cells per side (aligned to multiples of 2^shift): the first one beyond the block, never n itself.
   int64_t SkipBlock(int64_t n, int shift, const Sample& s) const {
-    const float tx = (float(((s.i >> shift) + exit_far[0]) << shift) - exit_o[0]) * exit_inv[0];
-    const float ty = (float(((s.j >> shift) + exit_far[1]) << shift) - exit_o[1]) * exit_inv[1];
-    const float tz = (float(((s.k >> shift) + exit_far[2]) << shift) - exit_o[2]) * exit_inv[2];
+    return SkipPast(n, float(((s.i >> shift) + exit_far[0]) << shift), float(((s.j >> shift) + exit_far[1]) << shift),
+                    float(((s.k >> shift) + exit_far[2]) << shift));
+  }
+
+  // SkipBlock for the empty cube of bricks (4 cells per side) within Chebyshev distance < D of the
+  // brick holding s (NerfRenderCopy::entry): from brick b - (D - 1) to b + (D - 1) on each axis.
+  int64_t SkipBricks(int64_t n, int D, const Sample& s) const {
+    return SkipPast(n, float(((s.i >> 2) + (exit_far[0] ? D : 1 - D)) * 4),
+                    float(((s.j >> 2) + (exit_far[1] ? D : 1 - D)) * 4),
+                    float(((s.k >> 2) + (exit_far[2] ? D : 1 - D)) * 4));
+  }
+
+  // The next interval to visit after interval n, whose sample lies in an empty box of cells that the
+  // ray leaves through the planes x = px, y = py, z = pz (grid coordinates; on each axis the face the
+  // ray moves towards): the first interval beyond the box, never n itself.
+  int64_t SkipPast(int64_t n, float px, float py, float pz) const {
+    const float tx = (px - exit_o[0]) * exit_inv[0];
+    const float ty = (py - exit_o[1]) * exit_inv[1];
+    const float tz = (pz - exit_o[2]) * exit_inv[2];
     const float t_exit = std::min(std::min(tx, ty), std::min(tz, 1e30f));
     // 1e-3 of a step of slack: a sample that rounding puts on the exit plane is visited, never skipped.
     // The first interval whose sample lies beyond is ceil(x); ceil(x) > n + 1 exactly when x > n + 1

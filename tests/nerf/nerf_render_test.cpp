@@ -1,8 +1,8 @@
 // Tests of the NeRF renderer's compact render copy (NerfRenderCopy, NerfField::UpdateRenderCopy):
 // its values against the exact float field within the quantisation bound, rendering from it against
 // the plain float march and against an analytic slab, that a changed field never renders stale
-// copy data, the 4-wide exp against std::exp, and the renderer's march (empty-space skipping) against a
-// brute-force march that visits every interval.
+// copy data, the 4-wide exp against std::exp, and the renderer's march (empty-space skipping, from the
+// float arrays and from the copy's brick distances) against a brute-force march that visits every interval.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -367,6 +367,163 @@ TEST(NerfRenderMarch, TakesThePlainMarchsSamples) {
     }
     EXPECT_GT(total, int64_t(rays.size())) << "the rays sample occupied cells";
     EXPECT_GT(dense, 10) << "and some are mostly opaque";
+  }
+}
+
+// A 28.8 m box at voxel 0.1 m (288 cells, 73 bricks per axis: more than NerfRenderCopy::kMaxDistance)
+// holding only a few allocated bricks near one corner, so that most of the brick table is empty space
+// whose distance to the nearest block runs from 1 to beyond the cap.
+NerfField LargeSparseField(uint32_t seed) {
+  NerfField f;
+  f.aabb = {Vec3(0, 0, 0), Vec3(28.8, 28.8, 28.8)};
+  f.origin = Vec3f(0, 0, 0);
+  f.voxel_m = 0.1f;
+  for (int a = 0; a < 3; ++a) f.res[a] = 289, f.bricks[a] = (f.res[a] + 3) / 4;
+  f.brick_table.assign(size_t(f.bricks[0]) * f.bricks[1] * f.bricks[2], -1);
+  for (int z = 1; z <= 3; ++z)
+    for (int y = 2; y <= 3; ++y)
+      for (int x = 1; x <= 4; ++x) f.AllocateBrick(x, y, z);
+  f.AllocateBrick(8, 6, 9);
+  f.AllocateBrick(9, 6, 9);
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f), raw(-1.0f, 3.0f);
+  // One vertex in 3 dense (σ e^-1 .. e^3 / m), the rest below the threshold: empty cells in occupied bricks.
+  for (float& d : f.density) d = u(rng) < 0.33f ? raw(rng) : -9.0f;
+  f.UpdateOccupancy(1e-2f);
+  return f;
+}
+
+// Chebyshev distance in bricks from brick (x, y, z) to the nearest brick with an occupied cell,
+// against every such brick (1 << 20 when there is none).
+int BruteForceBrickDistance(const NerfField& f, int x, int y, int z) {
+  int best = 1 << 20;
+  for (size_t b = 0; b < f.BrickCount(); ++b)
+    if (f.occupancy[b] != 0)
+      best = std::min(best, std::max({std::abs(f.brick_coords[3 * b] - x), std::abs(f.brick_coords[3 * b + 1] - y),
+                                      std::abs(f.brick_coords[3 * b + 2] - z)}));
+  return best;
+}
+
+// The copy's per-brick entries against brute force: every brick with an occupied cell has its own
+// block (with the brick's occupancy bits), every other position the capped distance to the nearest one.
+void ExpectEntriesMatchBruteForce(const NerfField& f) {
+  ASSERT_TRUE(f.RenderCopyCurrent());
+  const NerfRenderCopy& c = f.render_copy;
+  std::vector<int> seen(c.occupancy.size(), 0);
+  int capped = 0, far = 0;
+  for (int z = 0; z < f.bricks[2]; ++z)
+    for (int y = 0; y < f.bricks[1]; ++y)
+      for (int x = 0; x < f.bricks[0]; ++x) {
+        const size_t n = (size_t(z) * f.bricks[1] + size_t(y)) * f.bricks[0] + size_t(x);
+        const int32_t b = f.brick_table[n], e = c.entry[n];
+        if (b >= 0 && f.occupancy[size_t(b)] != 0) {
+          ASSERT_GE(e, 0);
+          ASSERT_LT(size_t(e), c.occupancy.size());
+          EXPECT_EQ(c.occupancy[size_t(e)], f.occupancy[size_t(b)]);
+          ++seen[size_t(e)];
+        } else {
+          const int want = std::min(BruteForceBrickDistance(f, x, y, z), NerfRenderCopy::kMaxDistance);
+          ASSERT_EQ(-e, want) << "brick " << x << " " << y << " " << z;
+          capped += want == NerfRenderCopy::kMaxDistance;
+          far += want >= 3;
+        }
+      }
+  for (const int count : seen) EXPECT_EQ(count, 1) << "each block belongs to one brick";
+  std::printf("entries: %zu blocks, %d positions at distance >= 3, %d capped\n", c.occupancy.size(), far, capped);
+}
+
+TEST(NerfRenderMarch, CopyEntriesAreTheBrickDistances) {
+  const NerfField small = [] {
+    NerfField f = SparseField(11);
+    f.UpdateRenderCopy();
+    return f;
+  }();
+  ExpectEntriesMatchBruteForce(small);
+  NerfField large = LargeSparseField(21);
+  large.UpdateRenderCopy();
+  ExpectEntriesMatchBruteForce(large);
+  // The large field reaches the cap (73 bricks per axis, blocks only near one corner).
+  EXPECT_EQ(*std::min_element(large.render_copy.entry.begin(), large.render_copy.entry.end()),
+            -NerfRenderCopy::kMaxDistance);
+}
+
+// Rays that stress a march over bricks (0.4 m here): diagonal rays through brick corners, rays
+// along brick faces and edges (a direction component 0 with the origin exactly on a brick plane, or
+// off it by 1e-4 rad), rays starting and stopping inside bricks, and random rays towards `aims`.
+std::vector<NerfRay> BrickTraversalRays(const NerfField& f, const std::vector<Vec3f>& aims, uint32_t seed) {
+  std::mt19937 rng(seed);
+  const Vec3f size = Vec3f(f.aabb.max - f.aabb.min);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  std::vector<NerfRay> rays;
+  auto add = [&](const Vec3f& origin, const Vec3f& dir, bool clip_inside) {
+    NerfRay r;
+    r.origin = origin;
+    r.dir = Normalized(dir);
+    if (!IntersectAabb(f.aabb, r.origin, r.dir, r.t_near, r.t_far)) return;
+    if (clip_inside) {  // [t_near, t_far] cut at random points, both ends inside the box (often inside a brick)
+      const float a = r.t_near + u(rng) * (r.t_far - r.t_near), b = r.t_near + u(rng) * (r.t_far - r.t_near);
+      r.t_near = std::min(a, b), r.t_far = std::max(a, b);
+      if (!(r.t_far > r.t_near)) return;
+    }
+    rays.push_back(r);
+  };
+  const int bricks = f.bricks[0];
+  std::uniform_int_distribution<int> brick(0, bricks - 1);
+  const float side = 4.0f * f.voxel_m;  // a brick's side
+  for (int n = 0; n < 300; ++n) {
+    // Through a brick corner along a cube diagonal (crossing brick and cell corners on the way).
+    const Vec3f corner = Vec3f(float(brick(rng)), float(brick(rng)), float(brick(rng))) * side;
+    const Vec3f diagonal(n & 1 ? 1.0f : -1.0f, n & 2 ? 1.0f : -1.0f, n & 4 ? 1.0f : -1.0f);
+    add(corner - diagonal * (2.0f * size.x), diagonal, n % 3 == 0);
+    // Along a face (one coordinate on a brick plane, direction component 0) or an edge (two), or just
+    // off them.
+    const int axis = n % 3;
+    Vec3f origin(u(rng) * size.x, u(rng) * size.y, u(rng) * size.z), dir = RandomDirection(rng);
+    origin[axis] = float(brick(rng)) * side;
+    dir[axis] = n % 4 == 3 ? 1e-4f : 0.0f;
+    if (n % 2 == 0) {
+      const int second = (axis + 1) % 3;
+      origin[second] = float(brick(rng)) * side;
+      dir[second] = 0.0f;
+    }
+    add(origin - Normalized(dir) * (2.0f * size.x), dir, n % 5 == 0);
+    // Towards an aim from a random point, starting inside the box, half of them clipped inside.
+    const Vec3f from(u(rng) * size.x, u(rng) * size.y, u(rng) * size.z);
+    const Vec3f aim = aims[size_t(n) % aims.size()] + Vec3f(u(rng) - 0.5f, u(rng) - 0.5f, u(rng) - 0.5f) * side;
+    if (Length(aim - from) > 1e-3f) add(from, aim - from, n % 2 == 0);
+  }
+  return rays;
+}
+
+TEST(NerfRenderMarch, CopyDistanceJumpsTakeThePlainMarchsSamples) {
+  NerfField small = SparseField(11), large = LargeSparseField(21);
+  std::vector<Vec3f> small_aims, large_aims = {Vec3f(1.0f, 1.0f, 0.9f), Vec3f(3.6f, 2.6f, 3.8f)};
+  for (const auto& c : kBlobs) small_aims.push_back(Vec3f(c[0], c[1], c[2]));
+  for (NerfField* f : {&small, &large}) {
+    f->UpdateRenderCopy();
+    ASSERT_TRUE(f->RenderCopyCurrent());
+    const std::vector<NerfRay> rays = BrickTraversalRays(*f, f == &small ? small_aims : large_aims, 31);
+    ASSERT_GT(rays.size(), 600u);
+    for (const float step : {0.5f, 2.0f, 3.0f}) {
+      NerfRenderOptions o = NerfRenderOptions::Preset("live");
+      o.step_voxels = step, o.min_alpha = 0.0f, o.min_transmittance = 0.0f;
+      int64_t total = 0;
+      int sampled = 0;
+      for (const NerfRay& ray : rays) {
+        const PlainMarch want = MarchPlain(*f, ray, step);
+        const NerfRayResult got = f->RenderRay(ray, o);
+        ASSERT_EQ(got.samples, want.samples) << "step " << step;
+        // The copy's values: log-density within range/131070 of the floats (range <= 39 here: -30 at
+        // vertices outside the grid or unallocated, up to 3 or 4), so each σ within 3e-4 relative and
+        // the opacity within 3e-4 · max(τ e^-τ) < 1.2e-4; plus float rounding (1e-5, as above).
+        EXPECT_NEAR(got.opacity, want.opacity, 1.3e-4) << "step " << step;
+        total += want.samples;
+        sampled += want.samples > 0;
+      }
+      EXPECT_GT(sampled, int(rays.size()) / 10) << "a tenth of the rays or more meet occupied cells";
+      std::printf("%s field, step %.1f: %zu rays, %d sample occupied cells, %lld samples\n",
+                  f == &small ? "small" : "large", step, rays.size(), sampled, static_cast<long long>(total));
+    }
   }
 }
 
