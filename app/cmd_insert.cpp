@@ -193,6 +193,10 @@ int RunInsert(const CommandArgs& args) {
   bool sg_specular = false;
   parser.Flag("--sg-specular", &sg_specular,
               "specular from the SG light (paper eq. 5) instead of the prefiltered incident-light samples");
+  bool no_specular_parallax = false;
+  parser.Flag("--no-specular-parallax", &no_specular_parallax,
+              "prefiltered reflections looked up along the reflected direction, as if all they reflect were distant "
+              "(default: from each pixel's point towards where its reflected ray meets the scene's distance)");
   parser.Flag("--paper-gamma", &paper_gamma,
               "self-shadow γ = f_h(S)/f_h(π/2) as in the paper (default: horizon-relative)");
   parser.Option("--light-probe", &light_probe, "FILE", "light every object with this panorama fitted with SGs instead");
@@ -263,6 +267,7 @@ int RunInsert(const CommandArgs& args) {
   if (no_shadows) options.shadows = false;
   if (paper_gamma) options.self_shadow_horizon = false;
   if (sg_specular) options.prefiltered_specular = false;
+  if (no_specular_parallax) options.specular_parallax = false;
   {
     Problems p("nerfar insert options");
     for (const std::string& s : options.Validate()) p.Add("", s);
@@ -327,6 +332,7 @@ int RunInsert(const CommandArgs& args) {
   }
   // The probe's lobe distances per object, from a NeRF's depth at its centre.
   std::vector<std::vector<double>> probe_lobe_distances(loaded.size());
+  std::vector<DistanceMap> probe_reflection_distances(loaded.size());  // the same depth per direction
   if (!probe_distances.empty() && options.light.parallax) {
     const NerfField distance_nerf = LoadNerf(probe_distances);
     const NerfScene distance_scene(distance_nerf, nerf_options);
@@ -343,6 +349,7 @@ int RunInsert(const CommandArgs& args) {
       const RadianceSamples near = SampleIncidentLight(distance_scene, {}, center, dirs, LightSource::kNearFieldOnly,
                                                        &opacity, &depth, starts.empty() ? nullptr : &starts);
       probe_lobe_distances[i] = LobeDistances(probe_light, dirs, opacity, depth, near.radiance);
+      probe_reflection_distances[i] = ReflectionDistances(dirs, opacity, depth, near.radiance, &probe_light);
       std::string list;
       for (size_t k = 0; k < probe_light.size(); ++k)
         if (std::isfinite(probe_lobe_distances[i][k]))
@@ -373,6 +380,7 @@ int RunInsert(const CommandArgs& args) {
     o.light_center = loaded[i].placement.center_world;
     if (!light_probe.empty()) o.light_override = &probe_light, o.light_samples = &probe_samples;
     if (!probe_lobe_distances[i].empty()) o.light_distances = &probe_lobe_distances[i];
+    if (!probe_reflection_distances[i].empty()) o.light_sample_distances = &probe_reflection_distances[i];
   }
 
   Inserter inserter(scene, environment.lobes, options);

@@ -65,6 +65,8 @@ std::vector<std::string> InsertOptions::Validate() const {
   check(std::isfinite(shadow_epsilon) && shadow_epsilon >= 0 && shadow_epsilon < 1,
         "shadow_epsilon: out of range (expected 0 <= value < 1)");
   check(specular_levels >= 2 && specular_levels <= 64, "specular_levels: out of range (expected 2 to 64)");
+  check(specular_parallax_iterations >= 1 && specular_parallax_iterations <= 16,
+        "specular_parallax_iterations: out of range (expected 1 to 16)");
   check(occlusion_step >= 1 && occlusion_step <= 64, "occlusion_step: out of range (expected 1 to 64)");
   check(std::isfinite(occlusion_clear_opacity) && occlusion_clear_opacity >= 0 && occlusion_clear_opacity < 1,
         "occlusion_clear_opacity: out of range (expected 0 <= value < 1)");
@@ -107,6 +109,8 @@ std::string InsertOptions::ToJson() const {
   j["self_shadow_per_vertex"] = self_shadow_per_vertex;
   j["prefiltered_specular"] = prefiltered_specular;
   j["specular_levels"] = specular_levels;
+  j["specular_parallax"] = specular_parallax;
+  j["specular_parallax_iterations"] = specular_parallax_iterations;
   j["antialias_edges"] = antialias_edges;
   j["occlusion_step"] = occlusion_step;
   j["occlusion_clear_opacity"] = occlusion_clear_opacity;

@@ -37,6 +37,14 @@ struct InsertOptions {
   // (paper eq. 5), which cannot reflect sources sharper than its lobes.
   bool prefiltered_specular = true;
   int specular_levels = 9;
+  // Parallax-corrected reflections of the prefiltered specular: each pixel
+  // looks its reflection up towards where its reflected ray from its own
+  // surface point meets the scene's distance seen from the light's centre
+  // (PrefilteredRadiance::SetParallax; near walls, the table, neighbouring
+  // objects), in this many fixed-point steps; false: along the reflected
+  // direction, as if everything reflected were distant.
+  bool specular_parallax = true;
+  int specular_parallax_iterations = 3;
 
   // Object edges blended with the background by the fraction of each pixel
   // the objects cover (4×4 sub-samples of the rasteriser), as a camera's

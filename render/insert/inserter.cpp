@@ -171,6 +171,16 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
     for (size_t o = 0; o < n_objects; ++o) {
       const RadianceSamples* samples = objects[o].light_override ? objects[o].light_samples : &lights_[o].samples();
       if (samples != nullptr) specular[o] = PrefilteredRadiance(*samples, options_.specular_levels);
+      // Parallax-corrected reflections: the distances the samples' light comes from.
+      if (!options_.specular_parallax || specular[o].empty()) continue;
+      if (objects[o].light_override && objects[o].light_sample_distances)
+        specular[o].SetParallax(parallax[o].center, *objects[o].light_sample_distances,
+                                options_.specular_parallax_iterations);
+      else if (!objects[o].light_override)
+        specular[o].SetParallax(
+            parallax[o].center,
+            ReflectionDistances(lights_[o].samples().directions, lights_[o].opacity(), lights_[o].depth()),
+            options_.specular_parallax_iterations);
     }
   }
   // Self-shadow γ per mesh vertex, kept while the objects and the light

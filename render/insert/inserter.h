@@ -24,6 +24,7 @@
 #include "render/insert/scene_field.h"
 #include "render/mesh/mesh.h"
 #include "render/sg/brdf.h"
+#include "render/sg/prefiltered.h"
 
 namespace nerfar {
 
@@ -48,8 +49,24 @@ struct InsertObject {
   // With light_override: the radiance samples it stands for (e.g. the probe's
   // pixels), for the prefiltered specular term; nullptr: SG specular.
   const RadianceSamples* light_samples = nullptr;
+  // With light_samples: how far each direction's light comes from, seen
+  // from the light centre (parallax-corrected reflections,
+  // InsertOptions::specular_parallax); nullptr: none.
+  const DistanceMap* light_sample_distances = nullptr;
   std::optional<Vec3> light_center;  // world point the incident light is taken at (default: bounding-sphere centre)
 };
+
+// The distance map of parallax-corrected reflections (DistanceMap) from the
+// scene seen from a light's centre, by LobeDistances' rule per direction:
+// the inverse distance is s / depth where the scene's opacity reaches a
+// surface's (≥ 1/2, as κ's receivers take it), else 0 (thin fog, the
+// environment), with s = min(1, Y(near_radiance) / Y(light)) the share of
+// the light there that the scene's own radiance explains (a bright distant
+// window seen past dim near fog stays distant); s = 1 without
+// near_radiance or light. Defined with the shading (object_shading.cpp).
+DistanceMap ReflectionDistances(const std::vector<Vec3>& directions, const std::vector<float>& opacity,
+                                const std::vector<float>& depth, const std::vector<Vec3>& near_radiance = {},
+                                const SgMixture* light = nullptr);
 
 // Wall time of each stage of one frame, milliseconds.
 struct InsertTimings {

@@ -49,6 +49,25 @@ SgMaterial PixelMaterial(const InsertObject& object, const std::array<float, 2>&
 
 }  // namespace
 
+DistanceMap ReflectionDistances(const std::vector<Vec3>& directions, const std::vector<float>& opacity,
+                                const std::vector<float>& depth, const std::vector<Vec3>& near_radiance,
+                                const SgMixture* light) {
+  constexpr float kSurfaceOpacity = 0.5f;
+  const size_t n = std::min({directions.size(), opacity.size(), depth.size()});
+  std::vector<float> distance(n, std::numeric_limits<float>::infinity());
+  const bool shares = light != nullptr && !light->empty() && near_radiance.size() >= n;
+  for (size_t i = 0; i < n; ++i) {
+    if (!(opacity[i] >= kSurfaceOpacity && std::isfinite(depth[i]) && depth[i] > 0.0f)) continue;
+    double share = 1.0;
+    if (shares) {
+      const double all = LuminanceOf(Evaluate(*light, directions[i])), near = LuminanceOf(near_radiance[i]);
+      share = all > 0.0 && std::isfinite(near) ? std::clamp(near / all, 0.0, 1.0) : 0.0;
+    }
+    if (share > 0.0) distance[i] = static_cast<float>(depth[i] / share);
+  }
+  return DistanceMap(std::vector<Vec3>(directions.begin(), directions.begin() + n), distance);
+}
+
 void ShadeObjects(const std::vector<InsertObject>& objects, const std::vector<WorldSphere>& spheres,
                   const std::vector<LightPrep>& preps, const std::vector<VertexGamma>* vertex_gamma,
                   const std::vector<std::vector<Vec3f>>& vertex_normals, const InsertOptions& options,
@@ -66,7 +85,7 @@ void ShadeObjects(const std::vector<InsertObject>& objects, const std::vector<Wo
         std::vector<float> ssd, ssd_min;
         std::vector<float> gamma;
         std::vector<SgMaterial> materials;
-        std::vector<Vec3f> normals, views, rgb, shadowed, specular_rgb;
+        std::vector<Vec3f> normals, views, points, rgb, shadowed, specular_rgb;
         materials.reserve(end - begin);
         normals.reserve(end - begin);
         views.reserve(end - begin);
@@ -82,6 +101,7 @@ void ShadeObjects(const std::vector<InsertObject>& objects, const std::vector<Wo
           materials.clear();
           normals.clear();
           views.clear();
+          points.clear();
           const VertexGamma* vg = vertex_gamma ? &(*vertex_gamma)[o] : nullptr;
           for (size_t k = run; k < run_end; ++k) {
             const uint32_t i = covered[k];
@@ -112,6 +132,7 @@ void ShadeObjects(const std::vector<InsertObject>& objects, const std::vector<Wo
             materials.push_back(PixelMaterial(objects[o], g.uv[i]));
             normals.push_back(n);
             views.push_back(Normalized(eye - g.position[i]));
+            points.push_back(g.position[i]);
           }
           rgb.assign(count, Vec3f{});
           const PrefilteredRadiance* map = size_t(o) < specular.size() && !specular[o].empty() ? &specular[o] : nullptr;
@@ -129,7 +150,8 @@ void ShadeObjects(const std::vector<InsertObject>& objects, const std::vector<Wo
           }
           if (map) {
             specular_rgb.resize(count);
-            map->ShadeSpecular(materials.data(), normals.data(), views.data(), count, specular_rgb.data());
+            map->ShadeSpecular(materials.data(), normals.data(), views.data(), points.data(), count,
+                               specular_rgb.data());
             for (size_t k = 0; k < count; ++k) {
               float visibility = 1.0f;
               if (m > 0 && any_shadow && shadowed[k].y > 0.0f && std::isfinite(shadowed[k].y))

@@ -20,7 +20,9 @@ namespace nerfar {
 // takes its specular term from it (PrefilteredRadiance::ShadeSpecular) times
 // the SG specular's self-shadow ratio (with γ over without: the SG light
 // knows where the lobes are shadowed, the map what they reflect) and its
-// diffuse term from the SG light; the others shade with SGs alone.
+// diffuse term from the SG light; the others shade with SGs alone. A map
+// with a distance field (SetParallax) looks each pixel's reflection up from
+// its world point.
 void ShadeObjects(const std::vector<InsertObject>& objects, const std::vector<WorldSphere>& spheres,
                   const std::vector<LightPrep>& preps, const std::vector<VertexGamma>* vertex_gamma,
                   const std::vector<std::vector<Vec3f>>& vertex_normals, const InsertOptions& options,

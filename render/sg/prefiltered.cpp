@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <utility>
 
 #include "calib/core/parallel.h"
 
@@ -105,7 +106,87 @@ Vec3f OctahedralDecode(float a, float b) {
   return Normalized(Vec3f(a, b, z));
 }
 
+// Fills the one-texel border of an n × n octahedral map stored (n + 2)²
+// texels of `channels` floats: each padded texel copies the interior texel
+// it neighbours across the square's edge (the edge x = ±1 folds onto itself
+// mirrored in y, likewise y = ±1; a corner onto the opposite corner), so a
+// bilinear read never wraps.
+void FillFoldedBorder(float* texels, int n, int channels) {
+  const int padded = n + 2;
+  for (int row = 0; row < padded; ++row)
+    for (int col = 0; col < padded; ++col) {
+      if (row > 0 && row <= n && col > 0 && col <= n) continue;
+      float a = 2.0f * (col - 0.5f) / n - 1.0f, b = 2.0f * (row - 0.5f) / n - 1.0f;
+      if (std::abs(a) > 1.0f) a = (a > 0 ? 2.0f : -2.0f) - a, b = -b;
+      if (std::abs(b) > 1.0f) b = (b > 0 ? 2.0f : -2.0f) - b, a = -a;
+      const int ic = std::clamp(static_cast<int>((a + 1.0f) * 0.5f * n), 0, n - 1);
+      const int ir = std::clamp(static_cast<int>((b + 1.0f) * 0.5f * n), 0, n - 1);
+      const float* from = &texels[(size_t(ir + 1) * padded + ic + 1) * channels];
+      std::copy(from, from + channels, &texels[(size_t(row) * padded + col) * channels]);
+    }
+}
+
+// Bilinear read position of octahedral (a, b) in [−1, 1]² on an n × n map
+// with its border: the top-left texel (x0, y0) of the four and the weights
+// (ax, ay) of the right and lower ones; NaN reads texel 0.
+inline void BilinearAt(float a, float b, int size, float fsize, int* x0, int* y0, float* ax, float* ay) {
+  const float top = fsize + 0.99999f;  // the padded texel n + 1 starts at n + 1
+  const float fx = std::min(std::max(0.0f, (a + 1.0f) * 0.5f * fsize + 0.5f), top);
+  const float fy = std::min(std::max(0.0f, (b + 1.0f) * 0.5f * fsize + 0.5f), top);
+  *x0 = std::min(static_cast<int>(fx), size), *y0 = std::min(static_cast<int>(fy), size);
+  *ax = fx - static_cast<float>(*x0), *ay = fy - static_cast<float>(*y0);
+}
+
 }  // namespace
+
+DistanceMap::DistanceMap(const std::vector<Vec3>& directions, const std::vector<float>& distance) {
+  const size_t count = std::min(directions.size(), distance.size());
+  if (count == 0) return;
+  std::vector<Vec3f> dirs;
+  std::vector<float> inverse;
+  dirs.reserve(count);
+  inverse.reserve(count);
+  for (size_t i = 0; i < count; ++i) {
+    const Vec3f d = Normalized(Vec3f(directions[i]));
+    if (!(std::isfinite(d.x) && std::isfinite(d.y) && std::isfinite(d.z))) continue;
+    dirs.push_back(d);
+    inverse.push_back(std::isfinite(distance[i]) && distance[i] > 0.0f ? 1.0f / distance[i] : 0.0f);
+  }
+  if (dirs.empty()) return;
+  const int n = std::clamp(static_cast<int>(std::ceil(std::sqrt(static_cast<double>(dirs.size())))), 8, 128);
+  size_ = n, fsize_ = static_cast<float>(n);
+  const int padded = n + 2;
+  inverse_.assign(size_t(padded) * padded, 0.0f);
+  // The nearest given direction per texel (brute force: n² ≈ count texels
+  // × count directions, once per light).
+  ParallelFor(
+      static_cast<size_t>(n),
+      [&](size_t row) {
+        for (int col = 0; col < n; ++col) {
+          const Vec3f t = OctahedralDecode(2.0f * (col + 0.5f) / n - 1.0f, 2.0f * (row + 0.5f) / n - 1.0f);
+          float best = -2.0f;
+          size_t nearest = 0;
+          for (size_t i = 0; i < dirs.size(); ++i) {
+            const float c = Dot(t, dirs[i]);
+            if (c > best) best = c, nearest = i;
+          }
+          inverse_[(row + 1) * padded + col + 1] = inverse[nearest];
+        }
+      },
+      1);
+  FillFoldedBorder(inverse_.data(), n, 1);
+}
+
+float DistanceMap::InverseAt(const Vec3f& d) const {
+  if (size_ == 0) return 0.0f;
+  float a, b, ax, ay;
+  int x0, y0;
+  OctahedralEncode(d.x, d.y, d.z, &a, &b);
+  BilinearAt(a, b, size_, fsize_, &x0, &y0, &ax, &ay);
+  const float* p0 = &inverse_[size_t(y0) * (size_ + 2) + x0];
+  const float* p1 = p0 + (size_ + 2);
+  return (1 - ay) * ((1 - ax) * p0[0] + ax * p0[1]) + ay * ((1 - ax) * p1[0] + ax * p1[1]);
+}
 
 EnvironmentBrdfTerms EnvironmentBrdf(float n_dot_v, float roughness) {
   const std::vector<EnvironmentBrdfTerms>& t = EnvironmentBrdfTable();
@@ -227,21 +308,7 @@ PrefilteredRadiance::PrefilteredRadiance(const RadianceSamples& samples, int lev
           }
         },
         1);
-    // The border: each padded texel copies the interior texel it neighbours
-    // across the square's edge (the edge x = ±1 folds onto itself mirrored
-    // in y, likewise y = ±1; a corner onto the opposite corner), so a
-    // bilinear read never wraps.
-    for (int row = 0; row < padded; ++row)
-      for (int col = 0; col < padded; ++col) {
-        if (row > 0 && row <= n && col > 0 && col <= n) continue;
-        float a = 2.0f * (col - 0.5f) / n - 1.0f, b = 2.0f * (row - 0.5f) / n - 1.0f;
-        if (std::abs(a) > 1.0f) a = (a > 0 ? 2.0f : -2.0f) - a, b = -b;
-        if (std::abs(b) > 1.0f) b = (b > 0 ? 2.0f : -2.0f) - b, a = -a;
-        const int ic = std::clamp(static_cast<int>((a + 1.0f) * 0.5f * n), 0, n - 1);
-        const int ir = std::clamp(static_cast<int>((b + 1.0f) * 0.5f * n), 0, n - 1);
-        const float* from = &level.rgb[((ir + 1) * padded + ic + 1) * 3];
-        std::copy(from, from + 3, &level.rgb[(row * padded + col) * 3]);
-      }
+    FillFoldedBorder(level.rgb.data(), n, 3);
   }
 }
 
@@ -291,11 +358,9 @@ namespace {
 // padded border makes every read in range (NaN reads texel 0). Inlined into
 // the look-up (a call per level was a fifth of a pixel's instructions).
 inline void AddLevel(const float* rgb, int size, float fsize, float a, float b, float w, float* acc) {
-  const float top = fsize + 0.99999f;  // the padded texel n + 1 starts at n + 1
-  const float fx = std::min(std::max(0.0f, (a + 1.0f) * 0.5f * fsize + 0.5f), top);
-  const float fy = std::min(std::max(0.0f, (b + 1.0f) * 0.5f * fsize + 0.5f), top);
-  const int x0 = std::min(static_cast<int>(fx), size), y0 = std::min(static_cast<int>(fy), size);
-  const float ax = fx - static_cast<float>(x0), ay = fy - static_cast<float>(y0);
+  int x0, y0;
+  float ax, ay;
+  BilinearAt(a, b, size, fsize, &x0, &y0, &ax, &ay);
   const float* p00 = rgb + (size_t(y0) * (size + 2) + x0) * 3;
   const float* p10 = p00 + size_t(size + 2) * 3;
   const float t = w * (1 - ay), u = w * ay;
@@ -325,11 +390,37 @@ Vec3f PrefilteredRadiance::Lookup(const Vec3f& d, float roughness) const {
   return Lookup(d, Prepare(roughness));
 }
 
-Vec3f PrefilteredRadiance::Shade(const Prepared& p, const SgMaterial& m, const Vec3f& n, const Vec3f& v) const {
+void PrefilteredRadiance::SetParallax(const Vec3& center, DistanceMap distances, int iterations) {
+  center_ = Vec3f(center);
+  distances_ = std::move(distances);
+  iterations_ = std::max(1, iterations);
+}
+
+Vec3f PrefilteredRadiance::ParallaxDirection(const Vec3f& point, const Vec3f& r) const {
+  if (distances_.empty()) return r;
+  const Vec3f x = point - center_, u = Normalized(r);
+  const float xx = Dot(x, x), b = Dot(x, u);
+  Vec3f d = r;
+  for (int k = 0; k < iterations_; ++k) {
+    const float inverse = distances_.InverseAt(d);
+    // Distant (or a non-finite point): the hit is at infinity along r.
+    if (!(inverse > 0.0f) || !std::isfinite(xx)) return r;
+    // |x + t·u| = D with D² at least |x|²: t = −b + √(b² − |x|² + D²) ≥ 0.
+    const float d2 = std::max(1.0f / (inverse * inverse), xx);
+    const float t = std::sqrt(std::max(0.0f, b * b - xx + d2)) - b;
+    d = x + u * t;
+  }
+  return d;
+}
+
+Vec3f PrefilteredRadiance::Shade(const Prepared& p, const SgMaterial& m, const Vec3f& n, const Vec3f& v,
+                                 const Vec3f* point) const {
   const float nv = Dot(n, v);
   if (!(nv > 0.0f)) return {};
   const Vec3f r = n * (2.0f * nv) - v;
-  const Vec3f L = Lookup(n * (1.0f - p.s) + r * p.s, p);  // any length: octahedral
+  Vec3f dominant = n * (1.0f - p.s) + r * p.s;  // any length: octahedral
+  if (point != nullptr && !distances_.empty()) dominant = ParallaxDirection(*point, dominant);
+  const Vec3f L = Lookup(dominant, p);
   const float x = std::min(nv, 1.0f) * (kTableNv - 1);
   const int i = std::min(kTableNv - 2, static_cast<int>(x));
   const float fx = x - i;
@@ -348,6 +439,11 @@ Vec3f PrefilteredRadiance::ShadeSpecular(const SgMaterial& m, const Vec3f& n, co
 
 void PrefilteredRadiance::ShadeSpecular(const SgMaterial* materials, const Vec3f* n, const Vec3f* v, size_t count,
                                         Vec3f* out) const {
+  ShadeSpecular(materials, n, v, nullptr, count, out);
+}
+
+void PrefilteredRadiance::ShadeSpecular(const SgMaterial* materials, const Vec3f* n, const Vec3f* v,
+                                        const Vec3f* points, size_t count, Vec3f* out) const {
   if (levels_.empty()) {
     std::fill(out, out + count, Vec3f{});
     return;
@@ -357,7 +453,7 @@ void PrefilteredRadiance::ShadeSpecular(const SgMaterial* materials, const Vec3f
   for (size_t i = 0; i < count; ++i) {
     const float rough = static_cast<float>(materials[i].roughness);
     if (!prepared || !(rough == p.roughness)) p = Prepare(rough), prepared = true;
-    out[i] = Shade(p, materials[i], n[i], v[i]);
+    out[i] = Shade(p, materials[i], n[i], v[i], points ? &points[i] : nullptr);
   }
 }
 

@@ -31,6 +31,30 @@ struct EnvironmentBrdfTerms {
 };
 EnvironmentBrdfTerms EnvironmentBrdf(float n_dot_v, float roughness);
 
+// The distance from the point the light was taken at (its centre) to what
+// each direction sees: an octahedral map (prefiltered.cpp's layout) of the
+// inverse distance, nearest given direction per texel, bilinear between
+// texels (inverse: distant light is 0, and a silhouette between a near
+// surface and the sky blends towards the sky). For parallax-corrected
+// reflections (PrefilteredRadiance::SetParallax).
+class DistanceMap {
+ public:
+  DistanceMap() = default;
+  // `distance[i]` (metres) is what direction `directions[i]` meets; a
+  // non-finite or non-positive one: nothing near (distant light). The map
+  // has n × n texels, n = clamp(⌈√count⌉, 8, 128) (about a texel per given
+  // direction). No directions: empty().
+  DistanceMap(const std::vector<Vec3>& directions, const std::vector<float>& distance);
+  bool empty() const { return size_ == 0; }
+  // 1 / distance around direction d (any length, non-zero); 0: distant.
+  float InverseAt(const Vec3f& d) const;
+
+ private:
+  int size_ = 0;
+  float fsize_ = 0;
+  std::vector<float> inverse_;  // (n + 2)² texels with the folded border, as the level maps
+};
+
 // GGX-prefiltered radiance at `levels` roughness levels r_k = k/(levels − 1):
 // map k holds, per direction R, Σ_i w_i L_i / Σ_i w_i with
 // w_i = D_α(h_i)·max(R·l_i, 0)·Δω_i, h_i the half vector of R and l_i (the
@@ -61,6 +85,27 @@ class PrefilteredRadiance {
   // with one roughness (an object's whole material without a roughness map).
   void ShadeSpecular(const SgMaterial* materials, const Vec3f* n, const Vec3f* v, size_t count, Vec3f* out) const;
 
+  // Parallax-corrected reflections: the samples were taken at `center` and
+  // `distances` says how far each direction's light comes from. A pixel at
+  // world point p then looks its reflection up not along its reflected
+  // direction R but towards where the ray p + t·R meets that distance
+  // field, found by `iterations` fixed-point steps from R: with the
+  // direction d_k, D_k = distance(d_k), t_k solves |p − center + t·R| = D_k
+  // (D_k at least |p − center|, so a point beyond the field's surface looks
+  // from where it stands) and d_{k+1} = p − center + t_k·R. A distant
+  // direction (inverse distance 0) gives d = R: with no near surface the
+  // look-up is the uncorrected one. Empty `distances`: no correction.
+  void SetParallax(const Vec3& center, DistanceMap distances, int iterations = 3);
+  bool has_parallax() const { return !distances_.empty(); }
+  // As ShadeSpecular above with each pixel's world point `points[i]`
+  // (nullptr, or no parallax set: uncorrected).
+  void ShadeSpecular(const SgMaterial* materials, const Vec3f* n, const Vec3f* v, const Vec3f* points, size_t count,
+                     Vec3f* out) const;
+  // The corrected look-up direction (any length) of a reflected ray from
+  // world point p along direction r (any length, non-zero): r itself, as
+  // given, without parallax or where the first step finds nothing near.
+  Vec3f ParallaxDirection(const Vec3f& p, const Vec3f& r) const;
+
  private:
   struct Level {
     int size = 0;     // n: the octahedral map is n × n texels
@@ -72,8 +117,12 @@ class PrefilteredRadiance {
   struct Prepared;  // the constants of one roughness (prefiltered.cpp)
   Prepared Prepare(float roughness) const;
   Vec3f Lookup(const Vec3f& d, const Prepared& p) const;
-  Vec3f Shade(const Prepared& p, const SgMaterial& material, const Vec3f& n, const Vec3f& v) const;
+  Vec3f Shade(const Prepared& p, const SgMaterial& material, const Vec3f& n, const Vec3f& v,
+              const Vec3f* point = nullptr) const;
   std::vector<Level> levels_;
+  Vec3f center_;
+  DistanceMap distances_;
+  int iterations_ = 3;
 };
 
 }  // namespace nerfar

@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <optional>
 #include <vector>
 
@@ -242,6 +243,258 @@ TEST(PrefilteredSpecular, ResolvesACompactSourceAtLowRoughness) {
   EXPECT_GT(on.x, 0.5f * 200.0f);
   const Vec3 aside = Normalized(lamp + Normalized(Cross(lamp, Vec3(0, 0, 1))) * std::tan(20.0 * kPi / 180.0));
   EXPECT_LT(map.Lookup(Vec3f(aside), 0.02f).x, 1.0f);
+}
+
+// ---- Parallax-corrected reflections (PrefilteredRadiance::SetParallax) ----
+
+// A room: the light is taken at `center` inside the box [−0.3, 0.3]² ×
+// [0, 0.4] (a table at z = 0, walls, a ceiling) whose walls glow with a
+// smooth pattern of the world point (0.6 to 2.6, wavelengths ≥ 0.8 m, so
+// the filter's ~1.5° blur and the maps' bilinear reads stay far below the
+// parallax shift of a point 5 cm off the centre).
+struct Room {
+  Vec3 center{0.05, -0.03, 0.12};
+  Vec3 lo{-0.3, -0.3, 0.0}, hi{0.3, 0.3, 0.4};
+  // Distance from p along unit d to the box's wall (p inside).
+  double Hit(const Vec3& p, const Vec3& d) const {
+    double t = std::numeric_limits<double>::infinity();
+    for (int a = 0; a < 3; ++a) {
+      if (d[a] > 0) t = std::min(t, (hi[a] - p[a]) / d[a]);
+      if (d[a] < 0) t = std::min(t, (lo[a] - p[a]) / d[a]);
+    }
+    return t;
+  }
+  static Vec3 Radiance(const Vec3& q) {
+    const double g = 1.6 + 0.6 * std::sin(7.0 * q.x + 0.5) * std::cos(6.0 * q.y) + 0.4 * std::sin(8.0 * q.z);
+    return {g, 0.8 * g + 0.2, 1.2 - 0.2 * g + 0.6};
+  }
+};
+
+// The room's light as samples taken at its centre (Fibonacci directions,
+// 4π/N each) and the hit distance per direction.
+RadianceSamples RoomSamples(const Room& room, int n, std::vector<float>* distance) {
+  RadianceSamples s;
+  s.directions = FibonacciSphere(n);
+  s.solid_angles.assign(n, 4.0 * kPi / n);
+  distance->clear();
+  for (const Vec3& d : s.directions) {
+    const double t = room.Hit(room.center, d);
+    s.radiance.push_back(Room::Radiance(room.center + d * t));
+    distance->push_back(static_cast<float>(t));
+  }
+  return s;
+}
+
+// The room's samples prefiltered with their distances (3 steps), built
+// once for the tests that read it.
+const PrefilteredRadiance& RoomMap() {
+  static const PrefilteredRadiance map = [] {
+    const Room room;
+    std::vector<float> distance;
+    const RadianceSamples samples = RoomSamples(room, 16384, &distance);
+    PrefilteredRadiance m(samples, 9);
+    m.SetParallax(room.center, DistanceMap(samples.directions, distance), 3);
+    return m;
+  }();
+  return map;
+}
+
+// Surface points on a 5 cm ball around the room's centre (the object the
+// light was taken for), each with a view that reflects into `R`.
+struct Reflection {
+  Vec3 p, n, v, r;
+};
+std::vector<Reflection> BallReflections(const Vec3& center, double radius, int count) {
+  std::vector<Reflection> out;
+  const std::vector<Vec3> normals = FibonacciSphere(count);
+  for (size_t i = 0; i < normals.size(); ++i) {
+    const Vec3 n = normals[i];
+    const Vec3 t = Normalized(Cross(n, std::abs(n.z) < 0.9 ? Vec3(0, 0, 1) : Vec3(1, 0, 0)));
+    const double angle = (i % 3 == 0 ? 0.2 : i % 3 == 1 ? 0.7 : 1.1) * (i % 2 ? 1.0 : -1.0);
+    const Vec3 v = Normalized(n * std::cos(angle) + t * std::sin(angle));
+    out.push_back({center + n * radius, n, v, Normalized(n * (2.0 * Dot(n, v)) - v)});
+  }
+  return out;
+}
+
+// The corrected look-up returns the radiance of the true hit point: a
+// mirror-like lobe (r 0.02, level 0) at points of a ball 5 cm around the
+// centre of a 60 × 60 × 40 cm room, against the pattern evaluated where
+// the reflected ray p + t·R meets the walls (ray-box intersection here,
+// not the code's distance field). Measured mean / max relative error:
+// corrected 0.0018 / 0.022 (the max at the box's edges and corners, where
+// the distance map's nearest-direction texels and bilinear inverse blur the
+// kink), uncorrected mean 0.022. Bounds: mean 0.005, max 0.05, and the
+// corrected mean under a fifth of the uncorrected (a look-up that ignored
+// the distance field fails all three).
+TEST(ParallaxReflection, LookupReturnsTheRadianceAtTheTrueHitPoint) {
+  const Room room;
+  const PrefilteredRadiance& map = RoomMap();
+  ASSERT_TRUE(map.has_parallax());
+  double sum = 0, sum_plain = 0, worst = 0;
+  int count = 0;
+  for (const Reflection& x : BallReflections(room.center, 0.05, 600)) {
+    const Vec3 truth = Room::Radiance(x.p + x.r * room.Hit(x.p, x.r));
+    const Vec3f d = map.ParallaxDirection(Vec3f(x.p), Vec3f(x.r));
+    const Vec3 ours(map.Lookup(d, 0.02f)), plain(map.Lookup(Vec3f(x.r), 0.02f));
+    const double e = Length(ours - truth) / Length(truth), e_plain = Length(plain - truth) / Length(truth);
+    sum += e, sum_plain += e_plain, worst = std::max(worst, e), ++count;
+  }
+  const double mean = sum / count, mean_plain = sum_plain / count;
+  EXPECT_LT(mean, 0.005);
+  EXPECT_LT(worst, 0.05);
+  EXPECT_LT(mean, 0.2 * mean_plain) << "uncorrected " << mean_plain;
+}
+
+// The whole specular term with points: a white metal (F0 = 1) at r 0.02
+// reflects (A + B)(n·v) × the true hit point's radiance (A + B from
+// EnvironmentBrdf, tested above against the directional albedo). Same
+// room and error sources as above plus the table's lerp; measured mean
+// relative error 0.0018, bound 0.005.
+TEST(ParallaxReflection, ShadeSpecularWithPointsReflectsTheTrueHitPoint) {
+  const Room room;
+  const PrefilteredRadiance& map = RoomMap();
+  SgMaterial m;
+  m.base_color = {1, 1, 1};
+  m.metallic = 1;
+  m.roughness = 0.02;
+  std::vector<SgMaterial> materials;
+  std::vector<Vec3f> n, v, p;
+  std::vector<Vec3> truth;
+  for (const Reflection& x : BallReflections(room.center, 0.05, 300)) {
+    materials.push_back(m), n.push_back(Vec3f(x.n)), v.push_back(Vec3f(x.v)), p.push_back(Vec3f(x.p));
+    const EnvironmentBrdfTerms e = EnvironmentBrdf(static_cast<float>(Dot(x.n, x.v)), 0.02f);
+    truth.push_back(Room::Radiance(x.p + x.r * room.Hit(x.p, x.r)) * double(e.scale + e.bias));
+  }
+  std::vector<Vec3f> out(n.size());
+  map.ShadeSpecular(materials.data(), n.data(), v.data(), p.data(), n.size(), out.data());
+  double sum = 0;
+  for (size_t i = 0; i < out.size(); ++i) sum += Length(Vec3(out[i]) - truth[i]) / Length(truth[i]);
+  EXPECT_LT(sum / out.size(), 0.005);
+}
+
+// A table alone (the plane z = 0 under the centre, nothing else near: the
+// upper half is distant sky): rays from the ball that go down must see the
+// table's pattern where they meet it; rays that go up see the sky exactly
+// as the uncorrected look-up (distance infinite there, d = R). Measured
+// mean relative error on the table 0.0012 (uncorrected 0.029), bound 0.004;
+// upward rays (R·z > 0.3, their corrected direction never near the
+// horizon's blend) within 1e-6 of the uncorrected look-up.
+TEST(ParallaxReflection, PlaneBelowAndDistantSkyAbove) {
+  const Vec3 center(0.0, 0.0, 0.06);
+  const auto sky = [](const Vec3& d) { return Vec3(0.5, 0.7, 1.0) * (1.0 + d.z); };
+  RadianceSamples samples;
+  samples.directions = FibonacciSphere(16384);
+  samples.solid_angles.assign(samples.size(), 4.0 * kPi / samples.size());
+  std::vector<float> distance;
+  for (const Vec3& d : samples.directions) {
+    const double t = d.z < 0 ? -center.z / d.z : std::numeric_limits<double>::infinity();
+    samples.radiance.push_back(std::isfinite(t) ? Room::Radiance(center + d * t) : sky(d));
+    distance.push_back(static_cast<float>(t));
+  }
+  PrefilteredRadiance map(samples, 9);
+  map.SetParallax(center, DistanceMap(samples.directions, distance));
+  double sum = 0, sum_plain = 0;
+  int down = 0, up = 0;
+  for (const Reflection& x : BallReflections(center, 0.05, 600)) {
+    const Vec3f d = map.ParallaxDirection(Vec3f(x.p), Vec3f(x.r));
+    if (x.r.z < -0.3) {
+      const Vec3 truth = Room::Radiance(x.p + x.r * (-x.p.z / x.r.z));
+      sum += Length(Vec3(map.Lookup(d, 0.02f)) - truth) / Length(truth);
+      sum_plain += Length(Vec3(map.Lookup(Vec3f(x.r), 0.02f)) - truth) / Length(truth);
+      ++down;
+    } else if (x.r.z > 0.3) {
+      const Vec3f a = map.Lookup(d, 0.02f), b = map.Lookup(Vec3f(x.r), 0.02f);
+      EXPECT_NEAR(a.x, b.x, 1e-6f * b.x);
+      EXPECT_NEAR(a.z, b.z, 1e-6f * b.z);
+      ++up;
+    }
+  }
+  ASSERT_GT(down, 50);
+  ASSERT_GT(up, 50);
+  EXPECT_LT(sum / down, 0.004) << "uncorrected " << sum_plain / down;
+}
+
+// With every distance infinite (or no distance given) the corrected
+// shading is the uncorrected one, bit for bit (d = R exactly).
+TEST(ParallaxReflection, InfiniteDistanceEqualsTheUncorrectedLookup) {
+  const RadianceSamples samples = SamplesFromEquirect(TestPanorama(), 128, 64);
+  const PrefilteredRadiance plain(samples, 9);
+  PrefilteredRadiance far = plain, none = plain;
+  far.SetParallax(
+      Vec3(0.1, 0.2, 0.3),
+      DistanceMap(samples.directions, std::vector<float>(samples.size(), std::numeric_limits<float>::infinity())));
+  none.SetParallax(Vec3(0.1, 0.2, 0.3), DistanceMap());
+  EXPECT_FALSE(none.has_parallax());
+  for (double roughness : {0.02, 0.3, 1.0}) {
+    SgMaterial m;
+    m.roughness = roughness;
+    m.metallic = 0.5;
+    std::vector<SgMaterial> materials;
+    std::vector<Vec3f> n, v, p;
+    for (const Pixel& x : Pixels(0.2)) {
+      materials.push_back(m), n.push_back(Vec3f(x.n)), v.push_back(Vec3f(x.v));
+      p.push_back(Vec3f(x.n * 0.05 + Vec3(0.1, 0.2, 0.3)));
+    }
+    std::vector<Vec3f> a(n.size()), b(n.size()), c(n.size());
+    plain.ShadeSpecular(materials.data(), n.data(), v.data(), n.size(), a.data());
+    far.ShadeSpecular(materials.data(), n.data(), v.data(), p.data(), n.size(), b.data());
+    none.ShadeSpecular(materials.data(), n.data(), v.data(), p.data(), n.size(), c.data());
+    for (size_t i = 0; i < a.size(); ++i) {
+      EXPECT_EQ(a[i].x, b[i].x);
+      EXPECT_EQ(a[i].y, b[i].y);
+      EXPECT_EQ(a[i].z, b[i].z);
+      EXPECT_EQ(a[i].x, c[i].x);
+    }
+  }
+}
+
+// Extremes of the corrected look-up: roughness 0.02 and 1, metallic 0 and
+// 1, the point at the probe centre (|x| = 0: t = D, d = D·R, the same
+// direction as the uncorrected: equal to float rounding, 1e-5 relative),
+// directions whose distance is tiny (1 mm, points 5 cm out: beyond the
+// field's surface, D clamped to |x|) or zero / negative / NaN (distant),
+// and non-finite points: finite, non-negative, bounded by the brightest
+// sample.
+TEST(ParallaxReflection, StableAtTheExtremes) {
+  const RadianceSamples samples = SamplesFromEquirect(TestPanorama(1e5), 128, 64);
+  std::vector<float> distance(samples.size());
+  for (size_t i = 0; i < distance.size(); ++i) {
+    const int k = static_cast<int>(i % 5);
+    distance[i] = k == 0 ? 1e-3f : k == 1 ? 0.0f : k == 2 ? -1.0f : k == 3 ? std::nanf("") : 0.2f;
+  }
+  const Vec3 center(0.0, 0.0, 0.1);
+  const PrefilteredRadiance plain(samples, 9);
+  PrefilteredRadiance map = plain;
+  map.SetParallax(center, DistanceMap(samples.directions, distance));
+  for (double roughness : {0.02, 1.0})
+    for (double metallic : {0.0, 1.0}) {
+      SgMaterial m;
+      m.base_color = {1, 1, 1};
+      m.roughness = roughness;
+      m.metallic = metallic;
+      for (const Pixel& x : Pixels(0.0)) {
+        for (const Vec3f p : {Vec3f(center + x.n * 0.05), Vec3f(center + x.n * 5.0), Vec3f(std::nanf(""), 0.0f, 0.0f),
+                              Vec3f(1e30f, 1e30f, 1e30f)}) {
+          std::vector<SgMaterial> mm = {m};
+          const Vec3f n(x.n), v(x.v);
+          Vec3f s;
+          map.ShadeSpecular(mm.data(), &n, &v, &p, 1, &s);
+          for (float c : {s.x, s.y, s.z}) {
+            ASSERT_TRUE(std::isfinite(c));
+            EXPECT_GE(c, 0.0f);
+            EXPECT_LE(c, 1e5f);
+          }
+        }
+        // At the centre: the uncorrected direction.
+        const Vec3f at(center), n(x.n), v(x.v);
+        std::vector<SgMaterial> mm = {m};
+        Vec3f a, b;
+        map.ShadeSpecular(mm.data(), &n, &v, &at, 1, &a);
+        plain.ShadeSpecular(mm.data(), &n, &v, 1, &b);
+        EXPECT_NEAR(a.x, b.x, 1e-5f * b.x + 1e-6f);
+      }
+    }
 }
 
 // The SG kernel's visibility sums (the specular's self-shadow ratio that
