@@ -558,5 +558,25 @@ TEST(NerfRenderCopy, Exp4MatchesStdExp) {
   EXPECT_LT(worst, 4.8e-7);
 }
 
+TEST(NerfRenderMarch, OneMinusExpNegMatchesExpm1) {
+  // Both branches (the series below 0.25, 1 - exp above), their boundary, tiny, large and huge x.
+  std::vector<float> xs = {0.0f, 1e-30f, 1e-12f, 1e-6f, 0.2499999f, 0.25f, 0.2500001f, 79.9f, 80.0f, 1e4f, 1e30f};
+  std::mt19937 rng(13);
+  std::uniform_real_distribution<float> exponent(-20.0f, 2.5f);
+  for (int n = 0; n < 200000; ++n) xs.push_back(std::pow(10.0f, exponent(rng)));
+  double worst = 0;
+  for (const float x : xs) {
+    const double want = -std::expm1(-double(x)), got = nerf_detail::OneMinusExpNeg(x);
+    if (want == 0.0) {
+      EXPECT_EQ(got, 0.0);
+      continue;
+    }
+    worst = std::max(worst, std::abs(got / want - 1.0));
+  }
+  // The stated bound: 1.1e-6 from exp's polynomial above 0.25 plus float rounding of 1 - e (6e-8).
+  EXPECT_LT(worst, 1.2e-6);
+  std::printf("worst relative error %.3g\n", worst);
+}
+
 }  // namespace
 }  // namespace nerfar
