@@ -452,7 +452,7 @@ std::vector<BenchFigure> BenchInsert(const BenchOptions& options) {
     // knobs set over the preset (to attribute one preset's cost against
     // another's): kappa_step, kappa_coarse_factor, shadow_reach_radii,
     // shadow_epsilon, kappa_cache_spacing_radii, occlusion_step, parallax,
-    // kappa_refine_delta.
+    // kappa_refine_delta, kappa_refine_by_halves.
     if (const char* knobs = std::getenv("NERFAR_BENCH_INSERT_KNOBS")) {
       std::string list = knobs;
       for (size_t begin = 0; begin < list.size();) {
@@ -466,6 +466,7 @@ std::vector<BenchFigure> BenchInsert(const BenchOptions& options) {
         if (name == "kappa_step") insert_options.kappa_step = int(v);
         if (name == "kappa_coarse_factor") insert_options.kappa_coarse_factor = int(v);
         if (name == "kappa_refine_delta") insert_options.kappa_refine_delta = v;
+        if (name == "kappa_refine_by_halves") insert_options.kappa_refine_by_halves = v != 0;
         if (name == "shadow_reach_radii") insert_options.shadow_reach_radii = v;
         if (name == "shadow_epsilon") insert_options.shadow_epsilon = v;
         if (name == "kappa_cache_spacing_radii") insert_options.kappa_cache_spacing_radii = v;

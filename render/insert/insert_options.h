@@ -82,6 +82,12 @@ struct InsertOptions {
   // the others are interpolated (1: every node of the grid).
   int kappa_coarse_factor = 4;
   double kappa_refine_delta = 0.02;
+  // A differing cell is refined by halves: it gets the nodes that halve it
+  // (edge midpoints, centre), and each half is tested again with its own
+  // corners, down to neighbouring nodes (a smooth gradient stops at the
+  // first half it passes; an edge is followed to every node); false: every
+  // node of a differing coarse cell at once.
+  bool kappa_refine_by_halves = true;
   // Refined nodes inside a coarse cell whose four receivers lie on one plane
   // take their receiver where their ray meets that plane (no NeRF march, no
   // normal query); false: every refined node is marched.

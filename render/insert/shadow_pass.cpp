@@ -1,6 +1,7 @@
 #include "render/insert/shadow_pass.h"
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <cmath>
 #include <limits>
@@ -29,6 +30,11 @@ struct CellPlane {
 struct ThreadScratch {
   KappaScratch kappa;
   LatticeMemo memo;
+  // The eight nodes around the last receiver (its lattice cell and normal
+  // cell `corner_key`; value −1: not fetched yet): receivers a few pixels
+  // apart mostly share one lattice cell, and then need no key or memo probe.
+  uint64_t corner_key = ~uint64_t(0);
+  std::array<float, 8> corner_value{};
 };
 
 // This thread's scratch for pass `pass` (a number new for every κ pass of
@@ -41,6 +47,7 @@ ThreadScratch& ScratchFor(uint64_t pass) {
   thread_local uint64_t scratch_pass = 0;
   if (scratch_pass != pass) {
     scratch.memo = LatticeMemo{};
+    scratch.corner_key = ~uint64_t(0);
     scratch.kappa.cw_light = nullptr;  // the lights may have changed
     scratch_pass = pass;
   }
@@ -234,6 +241,7 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
                                  double(options.kappa_step),
                                  double(options.kappa_coarse_factor),
                                  options.kappa_refine_delta,
+                                 options.kappa_refine_by_halves ? 1.0 : 0.0,
                                  options.kappa_plane_upsampling ? 1.0 : 0.0,
                                  options.receiver_min_opacity,
                                  options.shadow_epsilon_snap ? 1.0 : 0.0,
@@ -351,6 +359,11 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
         const double fx = x.x / spacing, fy = x.y / spacing, fz = x.z / spacing;
         const double bx = std::floor(fx), by = std::floor(fy), bz = std::floor(fz);
         const double wx = fx - bx, wy = fy - by, wz = fz - bz;
+        const uint64_t corner_key = LatticeKey(int64_t(bx), int64_t(by), int64_t(bz), cell);
+        if (corner_key != sc.corner_key) {
+          sc.corner_key = corner_key;
+          sc.corner_value.fill(-1.0f);
+        }
         double sum = 0.0, total = 0.0;
         for (int corner = 0; corner < 8; ++corner) {
           const int dx = corner & 1, dy = (corner >> 1) & 1, dz = corner >> 2;
@@ -359,6 +372,11 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
           // lattice plane would otherwise pull in the layer beyond it).
           if (weight < 1e-3) continue;
           total += weight;
+          float& cached = sc.corner_value[size_t(corner)];
+          if (cached >= 0.0f) {
+            sum += weight * cached;
+            continue;
+          }
           const int64_t i = int64_t(bx) + dx, j = int64_t(by) + dy, k = int64_t(bz) + dz;
           const uint64_t key = LatticeKey(i, j, k, cell);
           const size_t slot = LatticeMemo::Slot(key);
@@ -376,6 +394,7 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
           }
           sc.memo.key[slot] = key;
           sc.memo.value[slot] = value;
+          cached = value;
           sum += weight * value;
         }
         return total > 0.0 ? static_cast<float>(std::clamp(sum / total, 0.0, 1.0)) : 1.0f;
@@ -506,8 +525,6 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
         return c;
       };
       const std::vector<size_t> cx = coarse_axis(nx), cy = coarse_axis(ny);
-      std::vector<uint8_t> is_coarse_row(ny, 0);
-      for (size_t r : cy) is_coarse_row[r] = 1;
       auto t_stage = InsertClock::now();
       // Nodes no background pixel needs (kappa_skip_covered): neither found
       // nor evaluated, except coarse nodes of a coarse grid (their cells'
@@ -531,19 +548,7 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
           cy.size(), [&](size_t i) { kappa_row(cy[i], coarse_cols[i]); }, 1);
       kappa_ms += MsSince(t_stage);
       if (factor > 1) {
-        // Nodes that need their own κ: those of cells with differing corners.
-        std::vector<uint8_t> need(nx * ny, 0);
         const float delta = static_cast<float>(options.kappa_refine_delta);
-        for (size_t j = 0; j + 1 < cy.size(); ++j)
-          for (size_t i = 0; i + 1 < cx.size(); ++i) {
-            const float a = kappa_grid[cy[j] * nx + cx[i]], b = kappa_grid[cy[j] * nx + cx[i + 1]];
-            const float c = kappa_grid[cy[j + 1] * nx + cx[i]], d = kappa_grid[cy[j + 1] * nx + cx[i + 1]];
-            if (std::max({a, b, c, d}) - std::min({a, b, c, d}) <= delta) continue;
-            for (size_t r = cy[j]; r <= cy[j + 1]; ++r)
-              for (size_t q = cx[i]; q <= cx[i + 1]; ++q) need[r * nx + q] = !hidden[r * nx + q];
-          }
-        std::vector<uint8_t> is_coarse_col(nx, 0);
-        for (size_t q : cx) is_coarse_col[q] = 1;
         // Coarse cells whose four receivers lie on one plane (normals within
         // 10° of their mean, points within 5% of the cell's size of the
         // plane through their mean); only where the receivers were marched.
@@ -580,77 +585,166 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
               plane.normal = mean_n;
             }
         }
-        // Per row: nodes inside a planar coarse cell take their receiver
-        // on the plane, the others needing κ are found, ...
-        std::vector<std::vector<size_t>> refine_cols(ny);
+        // Cells of the grid by node index ranges [x0, x1] × [y0, y1], refined
+        // level by level: a cell whose corners differ by more than
+        // kappa_refine_delta gets its own nodes — with
+        // kappa_refine_by_halves those that halve it (edge midpoints and
+        // centre), each half then tested the same way with its own corners
+        // down to cells one node apart; without, every node at once. Cells
+        // that pass are interpolated from their corners (`smooth`, per level:
+        // a finer level's values win on the edges they share).
+        struct Cell {
+          uint32_t x0, y0, x1, y1;
+        };
+        const auto differ = [&](const Cell& c) {
+          const float a = kappa_grid[c.y0 * nx + c.x0], b = kappa_grid[c.y0 * nx + c.x1];
+          const float d0 = kappa_grid[c.y1 * nx + c.x0], d1 = kappa_grid[c.y1 * nx + c.x1];
+          return std::max({a, b, d0, d1}) - std::min({a, b, d0, d1}) > delta;
+        };
+        std::vector<Cell> refine;
+        std::vector<std::vector<Cell>> smooth(1);
+        for (size_t j = 0; j + 1 < cy.size(); ++j)
+          for (size_t i = 0; i + 1 < cx.size(); ++i) {
+            const Cell c{uint32_t(cx[i]), uint32_t(cy[j]), uint32_t(cx[i + 1]), uint32_t(cy[j + 1])};
+            (differ(c) ? refine : smooth[0]).push_back(c);
+          }
+        std::vector<uint8_t> known(nx * ny, 0);  // κ set (or scheduled) at the node
+        for (size_t r : cy)
+          for (size_t q : cx) known[r * nx + q] = 1;
+        const bool halves = options.kappa_refine_by_halves;
+        std::vector<std::vector<size_t>> new_cols(ny), refine_cols(ny);
+        // Nodes inside a planar coarse cell take their receiver on the plane.
         struct PlaneNode {
           size_t q;
           Vec3f point;
           const CellPlane* plane;
         };
         std::vector<std::vector<PlaneNode>> plane_nodes(ny);
+        while (!refine.empty()) {
+          // This level's nodes per row: a cell's halving nodes, or all its
+          // nodes; hidden ones only where no finer cell compares them (the
+          // cell's halves hold no node inside).
+          std::vector<size_t> rows;
+          const auto schedule = [&](uint32_t q, uint32_t r, bool skip_hidden) {
+            const size_t node = size_t(r) * nx + q;
+            if (known[node] || (skip_hidden && hidden[node])) return;
+            known[node] = 1;
+            if (new_cols[r].empty()) rows.push_back(r);
+            new_cols[r].push_back(q);
+          };
+          for (const Cell& c : refine) {
+            if (!halves) {
+              for (uint32_t r = c.y0; r <= c.y1; ++r)
+                for (uint32_t q = c.x0; q <= c.x1; ++q) schedule(q, r, true);
+              continue;
+            }
+            const bool last = c.x1 - c.x0 <= 2 && c.y1 - c.y0 <= 2;
+            const uint32_t px[3] = {c.x0, (c.x0 + c.x1) / 2, c.x1}, py[3] = {c.y0, (c.y0 + c.y1) / 2, c.y1};
+            for (uint32_t r : py)
+              for (uint32_t q : px) schedule(q, r, last);
+          }
+          std::sort(rows.begin(), rows.end());
+          for (std::vector<CellCandidate>& f : found) f.clear();
+          // Per row: plane nodes placed, the others found, ...
+          t_stage = InsertClock::now();
+          ParallelFor(
+              rows.size(),
+              [&](size_t k) {
+                const size_t r = rows[k];
+                std::vector<size_t>& cols = refine_cols[r];
+                cols.clear();
+                plane_nodes[r].clear();
+                std::sort(new_cols[r].begin(), new_cols[r].end());
+                const size_t j = std::min<size_t>(r / factor, cy.size() - 2);
+                for (size_t q : new_cols[r]) {
+                  // Depth-aware upsampling: inside a planar coarse cell the
+                  // receiver is where this node's ray meets the plane.
+                  const CellPlane& plane = planes[j * (cx.size() - 1) + std::min<size_t>(q / factor, cx.size() - 2)];
+                  if (plane.valid) {
+                    const Vec3f d = CameraRayDirection(camera, T_world_camera, xs[q], ys[r]);
+                    const float cosine = Dot(d, plane.normal);
+                    const float t = cosine < -0.05f ? Dot(plane.point - eye, plane.normal) / cosine : -1.0f;
+                    if (t >= 0.9f * plane.t_min && t <= 1.1f * plane.t_max) {
+                      plane_nodes[r].push_back({q, eye + d * t, &plane});
+                      continue;
+                    }
+                  }
+                  cols.push_back(q);
+                }
+                new_cols[r].clear();
+                find_row(r, cols);
+              },
+              1);
+          resolve_cell_normals();
+          // Plane-placed nodes take their world cell's normal too (a new
+          // cell's from their planes' normals), so that their lattice nodes,
+          // like every receiver's, do not change with the view: the mean
+          // normal of a coarse cell's corners changes as the grid slides over
+          // the scene, and each new normal cell costs eight new lattice nodes.
+          if (cell_normals) {
+            std::vector<CellCandidate> placed;
+            for (size_t r : rows)
+              for (const PlaneNode& p : plane_nodes[r]) placed.push_back({r * nx + p.q, p.point, p.plane->normal});
+            cache->cell_normals.Resolve(spacing, placed);
+            for (const CellCandidate& c : placed) node_normal[c.node] = c.normal;
+          }
+          find_ms += MsSince(t_stage);
+          // ... then their κ.
+          t_stage = InsertClock::now();
+          ParallelFor(
+              rows.size(),
+              [&](size_t k) {
+                const size_t r = rows[k];
+                ThreadScratch& scratch = ScratchFor(pass);
+                for (const PlaneNode& p : plane_nodes[r])
+                  kappa_grid[r * nx + p.q] =
+                      receiver_kappa(p.point, cell_normals ? node_normal[r * nx + p.q] : p.plane->normal, scratch, r);
+                kappa_row(r, refine_cols[r]);
+              },
+              1);
+          kappa_ms += MsSince(t_stage);
+          // The halves of this level's cells (those with nodes inside).
+          std::vector<Cell> next;
+          if (halves) {
+            smooth.emplace_back();
+            for (const Cell& c : refine) {
+              const uint32_t xm = (c.x0 + c.x1) / 2, ym = (c.y0 + c.y1) / 2;
+              const bool split_x = c.x1 - c.x0 >= 2, split_y = c.y1 - c.y0 >= 2;
+              for (int b = 0; b < (split_y ? 2 : 1); ++b)
+                for (int a = 0; a < (split_x ? 2 : 1); ++a) {
+                  const Cell h{split_x ? (a ? xm : c.x0) : c.x0, split_y ? (b ? ym : c.y0) : c.y0,
+                               split_x ? (a ? c.x1 : xm) : c.x1, split_y ? (b ? c.y1 : ym) : c.y1};
+                  if (h.x1 - h.x0 <= 1 && h.y1 - h.y0 <= 1) continue;  // every node a corner
+                  (differ(h) ? next : smooth.back()).push_back(h);
+                }
+            }
+          }
+          refine = std::move(next);
+        }
+        // The rest bilinear in its cell, level by level (each row by one thread).
         t_stage = InsertClock::now();
-        ParallelFor(
-            ny,
-            [&](size_t r) {
-              std::vector<size_t>& cols = refine_cols[r];
-              const size_t j = std::min<size_t>(r / factor, cy.size() - 2);
-              for (size_t q = 0; q < nx; ++q) {
-                if (!need[r * nx + q] || (is_coarse_row[r] && is_coarse_col[q])) continue;
-                // Depth-aware upsampling: inside a planar coarse cell the
-                // receiver is where this node's ray meets the plane.
-                const CellPlane& plane = planes[j * (cx.size() - 1) + std::min<size_t>(q / factor, cx.size() - 2)];
-                if (plane.valid) {
-                  const Vec3f d = CameraRayDirection(camera, T_world_camera, xs[q], ys[r]);
-                  const float cosine = Dot(d, plane.normal);
-                  const float t = cosine < -0.05f ? Dot(plane.point - eye, plane.normal) / cosine : -1.0f;
-                  if (t >= 0.9f * plane.t_min && t <= 1.1f * plane.t_max) {
-                    plane_nodes[r].push_back({q, eye + d * t, &plane});
-                    continue;
+        for (const std::vector<Cell>& level : smooth) {
+          std::vector<std::vector<uint32_t>> by_row(ny);
+          for (size_t k = 0; k < level.size(); ++k)
+            for (uint32_t r = level[k].y0; r <= level[k].y1; ++r) by_row[r].push_back(uint32_t(k));
+          ParallelFor(
+              ny,
+              [&](size_t r) {
+                for (uint32_t k : by_row[r]) {
+                  const Cell& c = level[k];
+                  const float wy = float(r - c.y0) / float(c.y1 - c.y0);
+                  const float a = kappa_grid[c.y0 * nx + c.x0], b = kappa_grid[c.y0 * nx + c.x1];
+                  const float d0 = kappa_grid[c.y1 * nx + c.x0], d1 = kappa_grid[c.y1 * nx + c.x1];
+                  for (size_t q = c.x0; q <= c.x1; ++q) {
+                    if (known[r * nx + q]) continue;
+                    const float wx = float(q - c.x0) / float(c.x1 - c.x0);
+                    kappa_grid[r * nx + q] =
+                        (1 - wx) * (1 - wy) * a + wx * (1 - wy) * b + (1 - wx) * wy * d0 + wx * wy * d1;
                   }
                 }
-                cols.push_back(q);
-              }
-              find_row(r, cols);
-            },
-            1);
-        resolve_cell_normals();
-        // Plane-placed nodes take their world cell's normal too (a new
-        // cell's from their planes' normals), so that their lattice nodes,
-        // like every receiver's, do not change with the view: the mean normal
-        // of a coarse cell's corners changes as the grid slides over the
-        // scene, and each new normal cell costs eight new lattice nodes.
-        if (cell_normals) {
-          std::vector<CellCandidate> placed;
-          for (size_t r = 0; r < ny; ++r)
-            for (const PlaneNode& p : plane_nodes[r]) placed.push_back({r * nx + p.q, p.point, p.plane->normal});
-          cache->cell_normals.Resolve(spacing, placed);
-          for (const CellCandidate& c : placed) node_normal[c.node] = c.normal;
+              },
+              8);
         }
-        find_ms += MsSince(t_stage);
-        // ... then their κ, and the rest bilinear in their coarse cell.
-        t_stage = InsertClock::now();
-        ParallelFor(
-            ny,
-            [&](size_t r) {
-              ThreadScratch& scratch = ScratchFor(pass);
-              for (const PlaneNode& p : plane_nodes[r])
-                kappa_grid[r * nx + p.q] =
-                    receiver_kappa(p.point, cell_normals ? node_normal[r * nx + p.q] : p.plane->normal, scratch, r);
-              kappa_row(r, refine_cols[r]);
-              const size_t j = std::min<size_t>(r / factor, cy.size() - 2);
-              const float wy = float(r - cy[j]) / float(cy[j + 1] - cy[j]);
-              for (size_t q = 0; q < nx; ++q) {
-                if (need[r * nx + q] || (is_coarse_row[r] && is_coarse_col[q])) continue;
-                const size_t i = std::min<size_t>(q / factor, cx.size() - 2);
-                const float wx = float(q - cx[i]) / float(cx[i + 1] - cx[i]);
-                kappa_grid[r * nx + q] = (1 - wx) * (1 - wy) * kappa_grid[cy[j] * nx + cx[i]] +
-                                         wx * (1 - wy) * kappa_grid[cy[j] * nx + cx[i + 1]] +
-                                         (1 - wx) * wy * kappa_grid[cy[j + 1] * nx + cx[i]] +
-                                         wx * wy * kappa_grid[cy[j + 1] * nx + cx[i + 1]];
-              }
-            },
-            1);
         kappa_ms += MsSince(t_stage);
       }
       // Nodes no background pixel reads hold 1 (κ is not applied there).
