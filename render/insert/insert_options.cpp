@@ -67,6 +67,9 @@ std::vector<std::string> InsertOptions::Validate() const {
   check(specular_levels >= 2 && specular_levels <= 64, "specular_levels: out of range (expected 2 to 64)");
   check(specular_parallax_iterations >= 1 && specular_parallax_iterations <= 16,
         "specular_parallax_iterations: out of range (expected 1 to 16)");
+  check(kappa_sample_bins >= 4 && kappa_sample_bins <= 4096, "kappa_sample_bins: out of range (expected 4 to 4096)");
+  check(std::isfinite(kappa_sample_min_radius) && kappa_sample_min_radius >= 0 && kappa_sample_min_radius <= 1,
+        "kappa_sample_min_radius: out of range (expected 0 to 1 radians)");
   check(occlusion_step >= 1 && occlusion_step <= 64, "occlusion_step: out of range (expected 1 to 64)");
   check(std::isfinite(occlusion_clear_opacity) && occlusion_clear_opacity >= 0 && occlusion_clear_opacity < 1,
         "occlusion_clear_opacity: out of range (expected 0 <= value < 1)");
@@ -112,6 +115,9 @@ std::string InsertOptions::ToJson() const {
   j["specular_parallax"] = specular_parallax;
   j["specular_parallax_iterations"] = specular_parallax_iterations;
   j["antialias_edges"] = antialias_edges;
+  j["kappa_from_samples"] = kappa_from_samples;
+  j["kappa_sample_bins"] = kappa_sample_bins;
+  j["kappa_sample_min_radius"] = kappa_sample_min_radius;
   j["occlusion_step"] = occlusion_step;
   j["occlusion_clear_opacity"] = occlusion_clear_opacity;
   j["kappa_cache_spacing_radii"] = kappa_cache_spacing_radii;

@@ -70,6 +70,13 @@ struct InsertOptions {
   // receivers across the whole reach had κ a hair under 1); false: κ kept
   // as computed.
   bool shadow_epsilon_snap = true;
+  // κ from the light's radiance samples gathered into sources (compact ones
+  // keep their true size; near ones re-aimed at each receiver with their
+  // lobe's distance; ShadowSources in shadow_terms.h) instead of from the SG
+  // lobes; false: the SG lobes (paper eqs. 8-9).
+  bool kappa_from_samples = true;
+  int kappa_sample_bins = 128;             // Fibonacci bins the samples are gathered into (per kind: near, distant)
+  double kappa_sample_min_radius = 0.03;   // radians: no source narrower (the SSDF's own resolution)
   int kappa_step = 2;  // κ at every kappa_step-th pixel, bilinear in between (1: every pixel)
   // κ grid nodes whose surrounding grid cells hold only object pixels (no
   // background pixel is multiplied by them) are neither found nor

@@ -10,6 +10,7 @@
 #include "render/insert/object_shading.h"
 #include "render/insert/occlusion.h"
 #include "render/insert/shadow_pass.h"
+#include "render/insert/shadow_terms.h"
 #include "render/insert/vertex_gamma.h"
 
 namespace nerfar {
@@ -19,6 +20,7 @@ struct LightPrepCache {
   std::vector<double> key;
   std::vector<LightPrep> preps;
   std::vector<PrefilteredRadiance> specular;  // per object (InsertOptions::prefiltered_specular), same key
+  std::vector<ShadowSources> shadow_sources;  // per object (InsertOptions::kappa_from_samples), same key
 };
 
 ImageF ExpandLayer(const ImageF& layer, const PixelRect& rect, int width, int height, float fill) {
@@ -157,6 +159,7 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
     if (!preps_) preps_ = std::make_unique<LightPrepCache>();
     if (key != preps_->key) {
       preps_->specular.clear();
+      preps_->shadow_sources.clear();
       preps_->preps = std::vector<LightPrep>(n_objects);
       preps_->key = std::move(key);
     }
@@ -183,6 +186,18 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
             options_.specular_parallax_iterations);
     }
   }
+  // κ's light as sources from the same samples, with the preps.
+  std::vector<ShadowSources>& shadow_sources = preps_->shadow_sources;
+  if (!options_.kappa_from_samples) shadow_sources.clear();
+  if (options_.kappa_from_samples && shadow_sources.size() != n_objects) {
+    shadow_sources.resize(n_objects);
+    for (size_t o = 0; o < n_objects; ++o) {
+      const RadianceSamples* samples = objects[o].light_override ? objects[o].light_samples : &lights_[o].samples();
+      if (samples != nullptr)
+        shadow_sources[o] = BuildShadowSources(*samples, used_lights_[o], parallax[o], objects,
+                                               options_.kappa_sample_bins, options_.kappa_sample_min_radius);
+    }
+  }
   // Self-shadow γ per mesh vertex, kept while the objects and the light
   // stand still (it does not depend on the view).
   const bool per_vertex = options_.self_shadow && options_.self_shadow_per_vertex;
@@ -201,7 +216,9 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
 
   // 5. Shadows κ on the scene where an object can shadow.
   t0 = InsertClock::now();
-  RenderShadows({scene_, options_, camera, T_world_camera, objects, spheres, used_lights_, g, receivers}, preps,
+  RenderShadows({scene_, options_, camera, T_world_camera, objects, spheres, used_lights_, g, receivers,
+                 options_.kappa_from_samples ? &shadow_sources : nullptr},
+                preps,
                 kappa_cache_, frame, layers, times);
   times.kappa_ms = MsSince(t0);
 

@@ -341,7 +341,7 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
                                    cache->receivers.min_opacity == static_cast<float>(options.receiver_min_opacity);
       const bool cell_normals = cache != nullptr && receivers.distance == nullptr && options.receiver_normal_per_cell;
       const float reuse_tolerance = static_cast<float>(options.kappa_reuse_tolerance_radii * smallest);
-      const KappaContext context{&casters, &spheres, &preps, &lights, reach, one_minus_eps};
+      const KappaContext context{&casters, &spheres, &preps, &lights, reach, one_minus_eps, in.sources};
       const uint64_t pass = ++g_kappa_passes;
       // κ at receiver x (normal n): exact, or trilinear in the world lattice.
       const auto exact_or_lattice_kappa = [&](const Vec3f& x, const Vec3f& n, ThreadScratch& sc, size_t row) -> float {

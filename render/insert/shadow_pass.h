@@ -46,6 +46,8 @@ struct KappaCache {
 };
 
 // The frame's inputs to the shadow pass (loans for the call).
+struct ShadowSources;
+
 struct ShadowPassInputs {
   const SceneField& scene;
   const InsertOptions& options;
@@ -56,6 +58,7 @@ struct ShadowPassInputs {
   const std::vector<SgMixture>& lights;  // each object's light this frame
   const ObjectGBuffer& gbuffer;          // object pixels keep their composite
   const ReceiverOverride& receivers;
+  const std::vector<ShadowSources>* sources = nullptr;  // per object, κ from samples (KappaContext::sources)
 };
 
 // κ over the casters' reach rectangle into layers.kappa / kappa_rect /

@@ -62,6 +62,205 @@ void GammaFromSsd(const std::vector<Vec3f>& axes, const std::vector<SgTableRow>&
   }
 }
 
+double DiscVisibleFraction(double s, double r) {
+  if (!(r > 0.0)) return s >= 0.0 ? 1.0 : 0.0;
+  const double t = std::clamp(s / r, -1.0, 1.0);
+  // Blocked: the circular segment beyond the chord at t, (acos t − t√(1−t²))/π of the disc.
+  return std::clamp(1.0 - (std::acos(t) - t * std::sqrt(std::max(0.0, 1.0 - t * t))) / kPi, 0.0, 1.0);
+}
+
+ShadowSources BuildShadowSources(const RadianceSamples& samples, const SgMixture& light, const LightParallax& parallax,
+                                 const std::vector<InsertObject>& objects, int bins, double min_radius,
+                                 double energy_cut) {
+  ShadowSources out;
+  out.center = Vec3f(parallax.center);
+  out.min_radius = static_cast<float>(std::max(0.0, min_radius));
+  const std::vector<Vec3> bin_dirs = FibonacciSphere(std::max(bins, 4));
+  const size_t nb = bin_dirs.size();
+  const bool has_distances = parallax.distance.size() == light.size() && !light.empty();
+  // Per bin and kind (0 distant, 1 near): energy, Σ e·direction, Σ e/d,
+  // then Σ e·(angle² + pixel radius²/2) about the mean direction.
+  struct Acc {
+    double e = 0, inv = 0, m2 = 0;
+    Vec3 d;
+  };
+  std::vector<Acc> acc(2 * nb);
+  std::vector<uint32_t> slot(samples.size(), UINT32_MAX);
+  std::vector<double> energy(samples.size(), 0.0);
+  double total = 0.0;
+  for (size_t i = 0; i < samples.size(); ++i) {
+    const double y = LuminanceOf(samples.radiance[i]) * samples.solid_angles[i];
+    const Vec3 d = Normalized(samples.directions[i]);
+    if (!(y > 0.0) || !std::isfinite(y) || !(Length(d) > 0.5)) continue;
+    size_t b = 0;
+    double best = -2.0;
+    for (size_t k = 0; k < nb; ++k) {
+      const double c = Dot(d, bin_dirs[k]);
+      if (c > best) best = c, b = k;
+    }
+    double distance = std::numeric_limits<double>::infinity();
+    if (has_distances) {
+      size_t lobe = 0;
+      double brightest = -1.0;
+      for (size_t k = 0; k < light.size(); ++k) {
+        const double v =
+            LuminanceOf(light[k].amplitude) * std::exp(light[k].sharpness * (Dot(Normalized(light[k].axis), d) - 1.0));
+        if (v > brightest) brightest = v, lobe = k;
+      }
+      // Re-aimed as ReaimLight does: a finite distance on a lobe at least
+      // half-way past the parallax's minimum sharpness.
+      const double w = std::clamp((light[lobe].sharpness - parallax.min_sharpness) / parallax.min_sharpness, 0.0, 1.0);
+      if (std::isfinite(parallax.distance[lobe]) && parallax.distance[lobe] > 0.0 && w >= 0.5)
+        distance = parallax.distance[lobe];
+    }
+    const size_t s = 2 * b + (std::isfinite(distance) ? 1 : 0);
+    acc[s].e += y;
+    acc[s].d += d * y;
+    if (std::isfinite(distance)) acc[s].inv += y / distance;
+    slot[i] = static_cast<uint32_t>(s);
+    energy[i] = y;
+    total += y;
+  }
+  if (!(total > 0.0)) return out;
+  std::vector<Vec3> mean(acc.size());
+  for (size_t s = 0; s < acc.size(); ++s) mean[s] = acc[s].e > 0.0 ? Normalized(acc[s].d) : Vec3{0, 0, 1};
+  for (size_t i = 0; i < samples.size(); ++i) {
+    if (slot[i] == UINT32_MAX) continue;
+    const double angle = std::acos(std::clamp(Dot(Normalized(samples.directions[i]), mean[slot[i]]), -1.0, 1.0));
+    acc[slot[i]].m2 += energy[i] * (angle * angle + 0.5 * samples.solid_angles[i] / kPi);
+  }
+  std::vector<Vec3f> distant_axes;
+  for (size_t s = 0; s < acc.size(); ++s) {
+    const Acc& a = acc[s];
+    if (!(a.e > energy_cut * total)) continue;
+    ShadowSource src;
+    src.direction = Vec3f(mean[s]);
+    src.energy = static_cast<float>(a.e);
+    // A uniform disc of radius R has an RMS angle of R/√2.
+    src.radius = static_cast<float>(std::max(min_radius, std::sqrt(2.0 * a.m2 / a.e)));
+    if (s % 2 == 1 && a.inv > 0.0) {
+      src.distance = static_cast<float>(a.e / a.inv);
+      out.near.push_back(src);
+    } else {
+      src.distance = std::numeric_limits<float>::infinity();
+      out.distant.push_back(src);
+      distant_axes.push_back(src.direction);
+    }
+  }
+  out.distant_queries.resize(objects.size());
+  out.visibilities.resize(objects.size(), nullptr);
+  for (size_t j = 0; j < objects.size(); ++j) {
+    out.visibilities[j] = objects[j].visibility;
+    if (objects[j].visibility && !distant_axes.empty())
+      out.distant_queries[j] = objects[j].visibility->Prepare(distant_axes);
+  }
+  return out;
+}
+
+namespace {
+
+// κ at x (normal n) from the owner's sources (see ShadowSources).
+float KappaFromSources(const KappaContext& context, const ShadowSources& src, const Vec3f& x, const Vec3f& n,
+                       KappaScratch& sc, bool* queried) {
+  const std::vector<size_t>& casters = *context.casters;
+  const std::vector<WorldSphere>& spheres = *context.spheres;
+  const size_t nd = src.distant.size(), nn = src.near.size(), m = nd + nn;
+  sc.src_dir.resize(m);
+  sc.src_radius.resize(m);
+  sc.src_weight.resize(m);
+  // Each source as seen from x: direction, angular radius, weight e'·cos.
+  double total = 0.0;
+  for (size_t i = 0; i < m; ++i) {
+    const ShadowSource& s = i < nd ? src.distant[i] : src.near[i - nd];
+    Vec3f u = s.direction;
+    float radius = s.radius, energy = s.energy;
+    if (i >= nd) {
+      const Vec3f to = src.center + s.direction * s.distance - x;
+      const float d = Length(to);
+      if (d > 0.0f && std::isfinite(d)) {
+        u = to / d;
+        const float ratio = std::clamp(d / s.distance, 0.25f, 4.0f);
+        radius = s.radius / ratio;
+        energy = s.energy / (ratio * ratio);
+      }
+    }
+    const float c = Dot(u, n);
+    sc.src_dir[i] = u;
+    sc.src_radius[i] = std::max(radius, src.min_radius);
+    sc.src_weight[i] = c > 0.0f ? energy * c : 0.0f;
+    total += sc.src_weight[i];
+  }
+  if (!(total > 0.0)) return 1.0f;
+  // Lower bound of S from the bounding spheres: sources it clears are
+  // wholly visible; if even blocking all the others leaves κ ≥ 1 − ε,
+  // nothing needs the SSDF.
+  double maybe_blocked = 0.0;
+  sc.src_ssd.assign(m, std::numeric_limits<float>::infinity());
+  sc.src_alpha.assign(m, 0.0f);
+  for (size_t i = 0; i < m; ++i) {
+    if (!(sc.src_weight[i] > 0.0f)) continue;
+    float bound = std::numeric_limits<float>::infinity();
+    for (size_t j : casters)
+      bound = std::min(bound, BallSsdLowerBound(spheres[j].center, spheres[j].radius, x, sc.src_dir[i]));
+    if (bound < sc.src_radius[i]) {
+      maybe_blocked += sc.src_weight[i];
+      sc.src_ssd[i] = -std::numeric_limits<float>::infinity();  // to be queried
+    }
+  }
+  if (1.0 - maybe_blocked / total >= context.one_minus_eps) return 1.0f;
+  if (queried) *queried = true;
+  // The near sources to query, in one prepared set per caster.
+  sc.near_dirs.clear();
+  sc.near_index.clear();
+  for (size_t i = nd; i < m; ++i)
+    if (sc.src_ssd[i] == -std::numeric_limits<float>::infinity()) {
+      sc.near_dirs.push_back(sc.src_dir[i]);
+      sc.near_index.push_back(static_cast<uint32_t>(i));
+    }
+  bool any_distant = false;
+  for (size_t i = 0; i < nd && !any_distant; ++i)
+    any_distant = sc.src_ssd[i] == -std::numeric_limits<float>::infinity();
+  std::vector<float>& best = sc.src_best;
+  best.assign(m, std::numeric_limits<float>::infinity());
+  for (size_t j : casters) {
+    const float dist = Length(x - spheres[j].center);
+    const float alpha =
+        dist > spheres[j].radius ? std::asin(std::min(1.0f, spheres[j].radius / dist)) : 0.5f * float(kPi);
+    if (any_distant && j < src.distant_queries.size() && src.distant_queries[j]) {
+      sc.distant_ssd.resize(nd);
+      src.distant_queries[j]->Ssd(&x, 1, sc.distant_ssd.data());
+      for (size_t i = 0; i < nd; ++i)
+        if (sc.distant_ssd[i] < best[i]) best[i] = sc.distant_ssd[i], sc.src_alpha[i] = alpha;
+    }
+    if (!sc.near_dirs.empty() && j < src.visibilities.size() && src.visibilities[j]) {
+      sc.near_ssd.resize(sc.near_dirs.size());
+      src.visibilities[j]->Prepare(sc.near_dirs)->Ssd(&x, 1, sc.near_ssd.data());
+      for (size_t q = 0; q < sc.near_dirs.size(); ++q) {
+        const size_t i = sc.near_index[q];
+        if (sc.near_ssd[q] < best[i]) best[i] = sc.near_ssd[q], sc.src_alpha[i] = alpha;
+      }
+    }
+  }
+  double visible = 0.0;
+  for (size_t i = 0; i < m; ++i) {
+    if (!(sc.src_weight[i] > 0.0f)) continue;
+    if (sc.src_ssd[i] != -std::numeric_limits<float>::infinity() || !std::isfinite(best[i])) {
+      visible += sc.src_weight[i];
+      continue;
+    }
+    const double r = sc.src_radius[i];
+    double blocked = 1.0 - DiscVisibleFraction(best[i], r);
+    // An occluder that looks smaller than the source blocks at most its own disc.
+    const double a = sc.src_alpha[i];
+    if (a < r) blocked = std::min(blocked, (a * a) / (r * r));
+    visible += sc.src_weight[i] * (1.0 - blocked);
+  }
+  const double k = visible / total;
+  return std::isfinite(k) ? static_cast<float>(std::clamp(k, 0.0, 1.0)) : 1.0f;
+}
+
+}  // namespace
+
 float KappaAt(const KappaContext& context, const Vec3f& x, const Vec3f& n, KappaScratch& sc, bool* queried) {
   const std::vector<size_t>& casters = *context.casters;
   const std::vector<WorldSphere>& spheres = *context.spheres;
@@ -76,6 +275,8 @@ float KappaAt(const KappaContext& context, const Vec3f& x, const Vec3f& n, Kappa
     }
   }
   if (!(best <= context.reach)) return 1.0f;
+  if (context.sources && owner < context.sources->size() && !(*context.sources)[owner].empty())
+    return KappaFromSources(context, (*context.sources)[owner], x, n, sc, queried);
   const LightPrep& p = (*context.preps)[owner];
   const size_t m = p.axes.size();
   if (m == 0) return 1.0f;

@@ -8,9 +8,11 @@
 
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <memory>
 
 #include "render/insert/inserter.h"
+#include "render/insert/shadow_terms.h"
 #include "render/insert/ssdf_visibility.h"
 #include "render/sg/sphere.h"
 #include "render/ssdf/ssdf.h"
@@ -203,6 +205,153 @@ TEST(KappaMesh, TwoObjectsShadowAsTheUnionOfTheirFields) {
   // Same bound as for one object (see above), now against visibility of both
   // meshes together.
   EXPECT_LT(both.normalised_error, 0.3) << "shadow " << both.shadow << " over " << both.count << " receivers";
+}
+
+// κ from the light's samples (InsertOptions::kappa_from_samples) under a
+// small near area light: a bulb (sphere of radius 3 cm, radiance 200) 25 cm
+// from a box 6 cm wide standing on the table, plus a dim sky. The
+// reference traces, from every receiver, 60000 Fibonacci directions
+// (spacing 0.0145 rad, ~200 on the bulb, whose radius there is ~0.12 rad)
+// against the bulb and the box's true triangles: the bulb is seen from the
+// receiver itself, so its parallax (it is only 25 cm away) is exact.
+struct NearBulb {
+  Vec3 center;  // the light centre (the box's bounding-sphere centre)
+  Vec3 bulb;
+  double bulb_radius = 0.03, radiance = 200.0, sky = 0.05;
+  // Radiance seen from x along d (d unit).
+  double Radiance(const Vec3& x, const Vec3& d) const {
+    const Vec3 oc = x - bulb;
+    const double b = Dot(oc, d), c = Dot(oc, oc) - bulb_radius * bulb_radius;
+    if (b < 0 && b * b > c) return radiance;
+    return d.z > 0 ? sky : 0.0;
+  }
+};
+
+double BruteForceNearKappa(const NearBulb& light, const WorldMesh& mesh, const Vec3& x) {
+  static const std::vector<Vec3> dirs = FibonacciSphere(60000);
+  double seen = 0, all = 0;
+  for (const Vec3& d : dirs) {
+    if (d.z <= 0) continue;
+    const double w = light.Radiance(x, d) * d.z;
+    if (!(w > 0)) continue;
+    all += w;
+    if (!mesh.Blocks(x, d)) seen += w;
+  }
+  return all > 0 ? seen / all : 1.0;
+}
+
+struct NearComparison {
+  double normalised_error = 0, signed_error = 0, shadow = 0;
+  size_t count = 0, umbra = 0;
+};
+
+NearComparison CompareNear(bool from_samples) {
+  const Bakes& b = GetBakes();
+  const Pose T{RotationFromAxisAngle({0, 0, 1}, 0.4), {0.0, 0.0, 0.03}};
+  const double scale = 0.05;  // the box is 6 cm wide, standing on the table
+  const SsdfVisibility v(b.box_field, T, scale);
+  const WorldMesh world(b.box, T, scale);
+  NearBulb light;
+  light.center = world.center;
+  const double distance = 0.25;
+  light.bulb = light.center + Normalized(Vec3{-0.5, 0.3, 1.0}) * distance;
+  // The light at the centre: its samples (what κ from samples reads) and
+  // an SG light with the bulb's lobe 25 cm away (what gives the samples
+  // their distance, and κ from the SG lobes).
+  RadianceSamples samples;
+  samples.directions = FibonacciSphere(8192);
+  for (const Vec3& d : samples.directions) {
+    const double l = light.Radiance(light.center, d);
+    samples.radiance.push_back({l, l, l});
+    samples.solid_angles.push_back(4.0 * kPi / 8192.0);
+  }
+  const double bulb_solid = 2.0 * kPi * (1.0 - std::sqrt(1.0 - std::pow(light.bulb_radius / distance, 2)));
+  Sg bulb;
+  bulb.axis = Normalized(light.bulb - light.center);
+  bulb.sharpness = 1.0 / (bulb_solid / kPi);  // about the bulb's width
+  const double a = light.radiance * bulb_solid / SgUnitIntegral(bulb.sharpness);
+  bulb.amplitude = {a, a, a};
+  Sg sky;
+  sky.axis = {0, 0, 1};
+  sky.sharpness = 1.0;
+  sky.amplitude = {0.08, 0.08, 0.08};
+  const SgMixture sg = {bulb, sky};
+  const std::vector<double> distances = {distance, std::numeric_limits<double>::infinity()};
+  InsertObject o = Object(b.box, v, T, scale, &sg);
+  o.light_samples = &samples;
+  o.light_distances = &distances;
+  o.light_center = light.center;
+
+  const AnalyticScene scene(TableOnly());
+  const CameraIntrinsics camera = testing::TestCamera(80, 60);
+  const Pose cam = LookAt({0.25, -0.3, 0.35}, {0.03, -0.02, 0.0});
+  InsertOptions options;
+  options.kappa_step = 1;
+  options.shadow_epsilon = 1e-4;
+  options.kappa_cache_spacing_radii = 0.0;
+  options.kappa_from_samples = from_samples;
+  Inserter inserter(scene, {}, options);
+  ImageF frame(camera.width, camera.height, 3, 1.0f);
+  InsertLayers layers;
+  inserter.Render(camera, cam, {o}, frame, &layers);
+  NearComparison c;
+  double num = 0, bias = 0;
+  for (int y = layers.kappa_rect.y0; y < layers.kappa_rect.y1; y += 2) {
+    for (int x = layers.kappa_rect.x0; x < layers.kappa_rect.x1; x += 2) {
+      const ObjectGBuffer& g = layers.gbuffer;
+      if (g.rect.Contains(x, y) && g.object[g.Index(x, y)] >= 0) continue;
+      const Vec3 d(CameraRayDirection(camera, cam, x, y));
+      if (d.z >= 0) continue;
+      const Vec3 p = cam.translation + d * (-cam.translation.z / d.z);
+      const double truth = BruteForceNearKappa(light, world, p);
+      const double kappa = layers.kappa.at(x - layers.kappa_rect.x0, y - layers.kappa_rect.y0);
+      EXPECT_TRUE(kappa >= 0.0 && kappa <= 1.0) << kappa;
+      num += std::abs(kappa - truth);
+      bias += kappa - truth;
+      c.shadow += 1.0 - truth;
+      c.umbra += truth < 0.3;
+      ++c.count;
+    }
+  }
+  c.normalised_error = c.shadow > 0 ? num / c.shadow : 0.0;
+  c.signed_error = c.shadow > 0 ? bias / c.shadow : 0.0;
+  std::printf(
+      "near bulb, kappa from %s vs ray-traced: normalised error %.3f (signed %.3f) over %zu receivers (%zu in umbra)\n",
+      from_samples ? "samples" : "SG lobes", c.normalised_error, c.signed_error, c.count, c.umbra);
+  return c;
+}
+
+TEST(KappaMesh, NearBulbFromSamplesMatchesRayTracedVisibility) {
+  const NearComparison samples = CompareNear(true), lobes = CompareNear(false);
+  ASSERT_GT(samples.count, 300u);
+  ASSERT_GT(samples.umbra, 10u);  // the umbra is in view
+  // Measured 0.151 (signed −0.024) from samples, 0.264 (signed −0.116)
+  // from the SG lobes. Bound 0.2: the target is 0.3 and the
+  // field's own error (16² directions, the half-space model of a
+  // source's disc) is ~0.15 against exact visibility on this box; the
+  // source model must not add more than a third on top.
+  EXPECT_LT(samples.normalised_error, 0.2);
+  // κ from samples keeps the bulb's true size and re-aims it from each
+  // receiver: it must beat the SG lobes here (the reason it exists).
+  EXPECT_LT(samples.normalised_error, lobes.normalised_error);
+}
+
+TEST(KappaMesh, DiscVisibleFractionIsTheCircularSegment) {
+  // Against counting points of a 401 × 401 grid over the unit disc (area
+  // error ~1/401 of the disc's edge: < 2e-3 of the disc).
+  for (double s : {-1.5, -1.0, -0.6, -0.2, 0.0, 0.3, 0.7, 1.0, 2.0}) {
+    size_t in = 0, seen = 0;
+    for (int i = 0; i <= 400; ++i)
+      for (int j = 0; j <= 400; ++j) {
+        const double u = -1.0 + i / 200.0, w = -1.0 + j / 200.0;
+        if (u * u + w * w > 1.0) continue;
+        ++in;
+        seen += u < s;  // the blocked half-space begins at distance s from the centre
+      }
+    EXPECT_NEAR(DiscVisibleFraction(s * 0.1, 0.1), double(seen) / double(in), 2e-3) << s;
+  }
+  EXPECT_EQ(DiscVisibleFraction(0.01, 0.0), 1.0);
+  EXPECT_EQ(DiscVisibleFraction(-0.01, 0.0), 0.0);
 }
 
 }  // namespace
