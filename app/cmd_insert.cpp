@@ -200,10 +200,13 @@ int RunInsert(const CommandArgs& args) {
   bool sg_specular = false;
   parser.Flag("--sg-specular", &sg_specular,
               "specular from the SG light (paper eq. 5) instead of the prefiltered incident-light samples");
-  bool no_specular_parallax = false;
+  bool no_specular_parallax = false, specular_parallax = false;
+  parser.Flag("--specular-parallax", &specular_parallax,
+              "prefiltered reflections looked up from each pixel's point towards where its reflected ray meets the "
+              "scene's distance seen from the light centre (default in accurate only)");
   parser.Flag("--no-specular-parallax", &no_specular_parallax,
               "prefiltered reflections looked up along the reflected direction, as if all they reflect were distant "
-              "(default: from each pixel's point towards where its reflected ray meets the scene's distance)");
+              "(the default in fast and balanced)");
   parser.Flag("--paper-gamma", &paper_gamma,
               "self-shadow γ = f_h(S)/f_h(π/2) as in the paper (default: horizon-relative)");
   parser.Option("--light-probe", &light_probe, "FILE", "light every object with this panorama fitted with SGs instead");
@@ -277,6 +280,7 @@ int RunInsert(const CommandArgs& args) {
   if (no_shadows) options.shadows = false;
   if (paper_gamma) options.self_shadow_horizon = false;
   if (sg_specular) options.prefiltered_specular = false;
+  if (specular_parallax) options.specular_parallax = true;
   if (no_specular_parallax) options.specular_parallax = false;
   {
     Problems p("nerfar insert options");

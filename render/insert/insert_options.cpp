@@ -40,6 +40,7 @@ InsertOptions InsertOptions::Preset(const std::string& name) {
   } else if (name == "balanced") {
   } else if (name == "accurate") {
     o.light.directions = 2048;
+    o.specular_parallax = true;
     o.shadow_reach_radii = 20.0;
     o.shadow_epsilon = 5e-4;
     o.kappa_step = 1;

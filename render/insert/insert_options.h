@@ -42,8 +42,11 @@ struct InsertOptions {
   // surface point meets the scene's distance seen from the light's centre
   // (PrefilteredRadiance::SetParallax; near walls, the table, neighbouring
   // objects), in this many fixed-point steps; false: along the reflected
-  // direction, as if everything reflected were distant.
-  bool specular_parallax = true;
+  // direction, as if everything reflected were distant. On in accurate
+  // only: the look-up's instructions per pixel rise 354 -> 854 (callgrind,
+  // 3 steps), ~+3.5 ms at 720p on top of a balanced shade already over its
+  // 6 ms budget (docs/BENCHMARKS.md, shading session 7).
+  bool specular_parallax = false;
   int specular_parallax_iterations = 3;
 
   // Object edges blended with the background by the fraction of each pixel
