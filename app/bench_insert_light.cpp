@@ -42,6 +42,10 @@ void BenchInsertRealNerfLight(const BenchOptions& options, std::vector<BenchFigu
   NerfSceneOptions scene_options;
   if (const char* render_env = std::getenv("NERFAR_BENCH_INSERT_LIGHT_RENDER"))
     scene_options.light_render = NerfRenderOptions::Preset(render_env);
+  // NERFAR_BENCH_INSERT_SEE_THROUGH=0: semi-transparent content kept whole
+  // (no views aimed at it; seen radiance of surfaces only, as before session 7).
+  if (const char* see_env = std::getenv("NERFAR_BENCH_INSERT_SEE_THROUGH"))
+    scene_options.seen.see_through = std::string(see_env) != "0";
   const std::string model_name = std::filesystem::path(model).filename().string();
   TriangleMesh mesh;
   std::string mesh_name = "monkey_diffuse";

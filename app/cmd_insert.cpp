@@ -129,6 +129,7 @@ int RunInsert(const CommandArgs& args) {
   double shadow_reach = -1, self_shadow_offset = -1, receiver_min_opacity = -1;
   bool no_self_shadow = false, no_shadows = false, paper_gamma = false, truth_geometry = false;
   bool light_from_centre = false, no_seen_radiance = false, expected_depth = false;
+  bool no_see_through = false;
   double normal_probe_voxels = -1;
   ArgParser parser("insert", "Insert virtual objects into a captured scene: light, shade, occlude, shadow, composite.");
   parser.Option(
@@ -181,6 +182,9 @@ int RunInsert(const CommandArgs& args) {
   parser.Flag("--no-seen-radiance", &no_seen_radiance,
               "incident light takes the NeRF's own colour of surfaces seen from below the capture band (default: "
               "the brightest radiance seen from the band nearby)");
+  parser.Flag("--no-see-through", &no_see_through,
+              "incident light keeps the NeRF's semi-transparent content whole (default: only the share that views "
+              "from the capture band find matter; the rest lets the environment behind it through)");
   parser.Flag("--expected-depth", &expected_depth,
               "NeRF depth (κ receivers, lobe distances) as the opacity-weighted mean, not where transmittance "
               "crosses 1/2");
@@ -267,6 +271,7 @@ int RunInsert(const CommandArgs& args) {
   if (light_from_centre) options.light.start_outside_object = false;
   NerfSceneOptions nerf_options;
   if (no_seen_radiance) nerf_options.light_seen_radiance = false;
+  if (no_see_through) nerf_options.seen.see_through = false;
   if (expected_depth) nerf_options.surface_depth = false;
   if (normal_probe_voxels != -1) nerf_options.normal_probe_voxels = normal_probe_voxels;
   if (parallax_min_sharpness != -1) options.light.parallax_min_sharpness = parallax_min_sharpness;

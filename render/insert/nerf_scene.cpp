@@ -29,6 +29,10 @@ std::vector<std::string> NerfSceneOptions::Validate() const {
     check(seen.views >= 1 && seen.views <= 1024, "seen.views: out of range (expected 1 to 1024)");
     check(seen.reach_m > 0.0 && std::isfinite(seen.reach_m), "seen.reach_m: must be a finite number > 0");
     check(seen.min_opacity >= 0.0 && seen.min_opacity <= 1.0, "seen.min_opacity: must be in [0, 1]");
+    check(seen.see_through_min_opacity >= 0.0 && seen.see_through_min_opacity <= 1.0,
+          "seen.see_through_min_opacity: must be in [0, 1]");
+    check(seen.see_through_reach_m > 0.0 && std::isfinite(seen.see_through_reach_m),
+          "seen.see_through_reach_m: must be a finite number > 0");
   }
   return problems;
 }

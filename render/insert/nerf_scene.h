@@ -38,7 +38,15 @@ struct NerfSceneOptions {
   // underside is otherwise whatever training left there, usually too dark.
   // false: the NeRF's own colour.
   bool light_seen_radiance = true;
-  SeenRadianceOptions seen;  // capture band, views per point, reach
+  // Capture band, views per point, reach; see-through content on: the
+  // light's rays keep only the share of semi-transparent content that views
+  // from the band find matter (seen_radiance.h), the rest lets the
+  // environment behind it through.
+  SeenRadianceOptions seen = [] {
+    SeenRadianceOptions s;
+    s.see_through = true;
+    return s;
+  }();
   // Step and early stop of the incident-light rays and of their seen-radiance
   // views (RenderLightRays). Default "live" (2-voxel steps, stop at
   // transmittance 3e-2: ~4.5x fewer samples than `render`): the light is

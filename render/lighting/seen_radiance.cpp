@@ -1,6 +1,8 @@
 #include "render/lighting/seen_radiance.h"
 
+#include <algorithm>
 #include <cmath>
+#include <limits>
 #include <unordered_map>
 
 #include "calib/core/error.h"
@@ -39,7 +41,9 @@ size_t ApplySeenRadiance(const NerfField& field, const std::vector<NerfRay>& ray
   const float voxel = field.voxel_m;
   for (size_t r = 0; r < rays.size(); ++r) {
     const NerfRayResult& res = results[r];
-    if (!(res.opacity > options.min_opacity) || !(res.surface_depth > 0)) continue;
+    const double min_opacity =
+        options.see_through ? std::min(options.min_opacity, options.see_through_min_opacity) : options.min_opacity;
+    if (!(res.opacity > min_opacity) || !(res.surface_depth > 0)) continue;
     if (-rays[r].dir.z >= z_min) continue;  // seen from the capture side: the NeRF's own colour
     const Vec3f x = rays[r].origin + rays[r].dir * res.surface_depth;
     const Vec3f g = (x - Vec3f(field.aabb.min)) * (1.0f / voxel);
@@ -54,6 +58,8 @@ size_t ApplySeenRadiance(const NerfField& field, const std::vector<NerfRay>& ray
   std::vector<Vec3f> seen(points.size());
   std::vector<unsigned char> reached(points.size(), 0);  // bytes: written from several threads
   std::vector<uint64_t> point_samples(points.size(), 0);
+  // Views that meet a surface at the point, and views that pass it (see-through).
+  std::vector<int> meet(points.size(), 0), pass(points.size(), 0);
   ParallelFor(
       points.size(),
       [&](size_t p) {
@@ -63,7 +69,19 @@ size_t ApplySeenRadiance(const NerfField& field, const std::vector<NerfRay>& ray
           if (!IntersectAabb(field.aabb, ray.origin, ray.dir, ray.t_near, ray.t_far)) continue;
           const NerfRayResult res = field.RenderRay(ray, render);
           point_samples[p] += res.samples;
-          if (!(res.opacity > options.min_opacity) || std::fabs(res.surface_depth - kFar) > options.reach_m) continue;
+          // The point lies kFar along the view. The vote (see-through): a
+          // view still more than half transparent past the point sees
+          // through it, one whose surface lies at it (within
+          // see_through_reach_m) meets matter, one stopped before it is
+          // hidden and says nothing.
+          const bool opaque = res.opacity > options.min_opacity;
+          const float offset = opaque ? res.surface_depth - kFar : std::numeric_limits<float>::infinity();
+          if (offset > options.see_through_reach_m)
+            ++pass[p];
+          else if (offset >= -options.see_through_reach_m)
+            ++meet[p];
+          // The seen radiance: a surface within reach_m of the point.
+          if (!opaque || std::fabs(offset) > options.reach_m) continue;
           const Vec3f radiance = res.color * (1.0f / res.opacity);
           const double y = LuminanceOf(Vec3(radiance));
           if (y > best) {
@@ -78,11 +96,23 @@ size_t ApplySeenRadiance(const NerfField& field, const std::vector<NerfRay>& ray
     for (uint64_t s : point_samples) *samples += s;
   size_t changed = 0;
   for (size_t r = 0; r < rays.size(); ++r) {
-    if (ray_slot[r] == SIZE_MAX || !reached[ray_slot[r]]) continue;
-    const Vec3f color = seen[ray_slot[r]] * results[r].opacity;
-    if (!(LuminanceOf(Vec3(color)) > LuminanceOf(Vec3(results[r].color)))) continue;
-    results[r].color = color;
-    ++changed;
+    const size_t p = ray_slot[r];
+    if (p == SIZE_MAX) continue;
+    bool change = false;
+    if (reached[p] && results[r].opacity > options.min_opacity) {
+      const Vec3f color = seen[p] * results[r].opacity;
+      if (LuminanceOf(Vec3(color)) > LuminanceOf(Vec3(results[r].color))) {
+        results[r].color = color;
+        change = true;
+      }
+    }
+    if (options.see_through && pass[p] > 0) {
+      // The share of the informative views that find matter at the point.
+      const float share = static_cast<float>(meet[p]) / static_cast<float>(meet[p] + pass[p]);
+      results[r].opacity *= share;
+      change = true;
+    }
+    changed += change ? 1 : 0;
   }
   return changed;
 }

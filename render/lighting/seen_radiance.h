@@ -14,6 +14,23 @@
 // the panel's front) and surfaces as matte where the NeRF cannot say
 // otherwise; it brightens a dark surface next to a brighter one within
 // reach_m (measured on both shared scenes: docs/BENCHMARKS.md "env").
+//
+// See-through content (SeenRadianceOptions::see_through, on for the
+// incident light's rays): semi-transparent content (glass, fog, floaters)
+// is the NeRF's explanation of what the captures saw through it, and its
+// colour and opacity hold only along the directions the captures looked.
+// The same views from the capture band, aimed at the point where such a
+// ray's content lies, tell how much of it is matter: a view that finds its
+// surface at the point (within see_through_reach_m) sees matter there; a
+// view that passes the point while still more than half transparent sees
+// through it (views hidden before they reach it say nothing). The ray's
+// opacity is scaled by the share s = surface views / (surface + see-through
+// views), its colour (the content's own radiance, already opacity-weighted)
+// is kept: a caller blending Ĉ + (1 − Ô)·L_behind then lets the light behind
+// the content through by the share the views see through, while a glowing
+// halo or a lamp's glass still adds its own light. Fog that every view sees
+// through no longer hides what lies behind it; a surface that every view
+// meets is kept as it was. (Measured: docs/BENCHMARKS.md "see-through".)
 #pragma once
 
 #include <cstdint>
@@ -34,6 +51,20 @@ struct SeenRadianceOptions {
   double reach_m = 0.05;
   // Only rays whose opacity exceeds this are treated (a surface, not fog).
   double min_opacity = 0.5;
+  // See-through content (above): rays from below the capture band whose
+  // opacity exceeds see_through_min_opacity keep the share of their colour
+  // and opacity that the views find matter. Off by default (the environment
+  // estimate's near field keeps the NeRF's opacity); NerfSceneOptions turns
+  // it on for the incident light.
+  bool see_through = false;
+  // Content fainter than this is left alone (it changes the light by less
+  // than this fraction; skipping it saves the views).
+  double see_through_min_opacity = 0.05;
+  // A view meets matter at the point when its surface lies within this
+  // distance of it (2 steps of the live light march on the shared scenes'
+  // 5 mm voxels: where two marches place one surface). Farther before it the
+  // view is hidden, farther past it (or never half opaque) it sees through.
+  double see_through_reach_m = 0.02;
 };
 
 // For every ray (origin, dir) with its rendered result whose surface point
@@ -43,7 +74,12 @@ struct SeenRadianceOptions {
 // unit opacity) of the views from the capture hemisphere that reach x, times
 // the ray's opacity, when that is brighter than the ray's own colour; rays
 // whose point no view reaches keep their colour. Points are grouped by
-// voxel (one look-up per voxel). Returns how many rays were changed.
+// voxel (one look-up per voxel). With options.see_through, rays from below
+// the band with opacity above see_through_min_opacity (the point being
+// where their transmittance crosses 1/2, or their mean depth when they stay
+// under 1/2 opaque) also have their opacity scaled by the share of the
+// informative views that meet a surface there (the header's note). Returns
+// how many rays were changed.
 // `samples` (optional) is increased by the density samples the views took.
 size_t ApplySeenRadiance(const NerfField& field, const std::vector<NerfRay>& rays, std::vector<NerfRayResult>& results,
                          const SeenRadianceOptions& options, const NerfRenderOptions& render = {},
