@@ -121,7 +121,7 @@ int RunInsert(const CommandArgs& args) {
   double kappa_refine_delta = -1;
   bool no_cell_normals = false, no_parallax = false;
   bool no_kappa_snap = false, kappa_under_objects = false, kappa_refine_whole = false;
-  bool kappa_sg = false;
+  bool kappa_samples = false;
   int kappa_sample_bins = -1;
   double parallax_min_sharpness = -1;
   int light_refine_rays = -1;
@@ -167,7 +167,8 @@ int RunInsert(const CommandArgs& args) {
   parser.Option("--receiver-reuse", &receiver_reuse, "T",
                 "κ receivers taken from the last frame's within T bounding radii of their planes (fast/balanced: "
                 "0.02; 0: every receiver marched)");
-  parser.Flag("--kappa-sg", &kappa_sg, "shadow ratio κ from the SG lobes instead of the light's samples");
+  parser.Flag("--kappa-samples", &kappa_samples,
+              "shadow ratio κ from the light's samples gathered into sources instead of the SG lobes");
   parser.Option("--kappa-sample-bins", &kappa_sample_bins, "N",
                 "directions the light's samples are gathered into for κ (default: the preset's)");
   parser.Flag("--no-parallax", &no_parallax,
@@ -266,7 +267,7 @@ int RunInsert(const CommandArgs& args) {
   if (kappa_under_objects) options.kappa_skip_covered = false;
   if (kappa_refine_whole) options.kappa_refine_by_halves = false;
   if (no_parallax) options.light.parallax = false;
-  if (kappa_sg) options.kappa_from_samples = false;
+  if (kappa_samples) options.kappa_from_samples = true;
   if (kappa_sample_bins != -1) options.kappa_sample_bins = kappa_sample_bins;  // validated
   if (light_from_centre) options.light.start_outside_object = false;
   NerfSceneOptions nerf_options;

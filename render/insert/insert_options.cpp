@@ -30,10 +30,6 @@ InsertOptions InsertOptions::Preset(const std::string& name) {
     // Re-aiming near lobes prepares the SSDF query per κ evaluation: ~2-3×
     // the κ work of a frame whose object or light changed (lamps, balanced).
     o.light.parallax = false;
-    // κ from the light's samples takes 2-2.5× the κ time under a sky of
-    // many distant sources (window, GT inputs) and gains most from near
-    // sources re-aimed, which fast does not re-aim: the SG lobes.
-    o.kappa_from_samples = false;
     // Refining the incident light's fast-changing directions costs 3-4.5×
     // the light rays on the shared scenes' NeRFs (docs/BENCHMARKS.md).
     o.light.refine_rays = 0;

@@ -76,8 +76,12 @@ struct InsertOptions {
   // κ from the light's radiance samples gathered into sources (compact ones
   // keep their true size; near ones re-aimed at each receiver with their
   // lobe's distance; ShadowSources in shadow_terms.h) instead of from the SG
-  // lobes; false: the SG lobes (paper eqs. 8-9).
-  bool kappa_from_samples = true;
+  // lobes; false (every preset): the SG lobes (paper eqs. 8-9). Off: with
+  // ground-truth inputs it lowers the shadow error on three of four pairs,
+  // but end to end on lamps / monkey_diffuse it raises the median 0.82 ->
+  // 1.00 (docs/BENCHMARKS.md, session 7), and it costs 2-2.5× the κ time
+  // under a sky of many distant sources.
+  bool kappa_from_samples = false;
   int kappa_sample_bins = 128;             // Fibonacci bins the samples are gathered into (per kind: near, distant)
   double kappa_sample_min_radius = 0.03;   // radians: no source narrower (the SSDF's own resolution)
   int kappa_step = 2;  // κ at every kappa_step-th pixel, bilinear in between (1: every pixel)
