@@ -302,32 +302,42 @@ bool LightParallax::Active(const SgMixture& light) const {
   return false;
 }
 
+std::vector<double> NearInverseDistances(const SgMixture& light, const std::vector<Vec3>& directions,
+                                         const std::vector<float>& opacity, const std::vector<float>& depth,
+                                         const std::vector<Vec3>& near_radiance) {
+  const size_t n = std::min({directions.size(), opacity.size(), depth.size()});
+  const bool shares = !light.empty() && near_radiance.size() >= n;
+  std::vector<double> inverse(n, 0.0);
+  for (size_t i = 0; i < n; ++i) {
+    // A surface where the opacity reaches one half (as for κ receivers):
+    // thin fog in front of the distant light does not make it near.
+    if (!(opacity[i] >= kSurfaceOpacity && depth[i] > 0.0f && std::isfinite(depth[i]))) continue;
+    double share = 1.0;  // the near share of the direction's light
+    if (shares) {
+      const double all = LuminanceOf(Evaluate(light, directions[i]));
+      const double near = LuminanceOf(near_radiance[i]);
+      share = all > 0.0 && std::isfinite(near) ? std::clamp(near / all, 0.0, 1.0) : 0.0;
+    }
+    inverse[i] = share / depth[i];
+  }
+  return inverse;
+}
+
 std::vector<double> LobeDistances(const SgMixture& light, const std::vector<Vec3>& directions,
                                   const std::vector<float>& opacity, const std::vector<float>& depth,
                                   const std::vector<Vec3>& near_radiance) {
   std::vector<double> distance(light.size(), std::numeric_limits<double>::infinity());
-  const size_t n = std::min({directions.size(), opacity.size(), depth.size()});
-  // The near share of each direction's light (1 without near_radiance).
-  std::vector<double> share(n, 1.0);
-  if (near_radiance.size() >= n)
-    for (size_t i = 0; i < n; ++i) {
-      const double all = LuminanceOf(Evaluate(light, directions[i]));
-      const double near = LuminanceOf(near_radiance[i]);
-      share[i] = all > 0.0 && std::isfinite(near) ? std::clamp(near / all, 0.0, 1.0) : 0.0;
-    }
+  const std::vector<double> near_inverse = NearInverseDistances(light, directions, opacity, depth, near_radiance);
   for (size_t k = 0; k < light.size(); ++k) {
     const Sg& lobe = light[k];
     const double mu = LuminanceOf(lobe.amplitude);
     if (!(mu > 0.0) || !std::isfinite(mu)) continue;
     double weight = 0.0, inverse = 0.0;
-    for (size_t i = 0; i < n; ++i) {
+    for (size_t i = 0; i < near_inverse.size(); ++i) {
       const double w = std::exp(lobe.sharpness * (Dot(lobe.axis, directions[i]) - 1.0));
       if (!(w > 1e-6)) continue;  // beyond ~3.7 widths: no say
       weight += w;
-      // A surface where the opacity reaches one half (as for κ receivers):
-      // thin fog in front of the distant light does not make it near.
-      if (opacity[i] >= kSurfaceOpacity && depth[i] > 0.0f && std::isfinite(depth[i]))
-        inverse += w * share[i] / depth[i];
+      inverse += w * near_inverse[i];
     }
     if (weight > 0.0 && inverse > 0.0) distance[k] = weight / inverse;
   }

@@ -127,6 +127,15 @@ std::vector<double> LobeDistances(const SgMixture& light, const std::vector<Vec3
                                   const std::vector<float>& opacity, const std::vector<float>& depth,
                                   const std::vector<Vec3>& near_radiance = {});
 
+// LobeDistances' rule per direction (also the reflections' distances,
+// ReflectionDistances): the inverse distance s / depth where the ray met a
+// surface (opacity ≥ 1/2 at a finite positive depth, as κ's receivers),
+// else 0; s = min(1, Y(near_radiance) / Y(light)), 1 when `light` is empty
+// or near_radiance has fewer entries than the directions.
+std::vector<double> NearInverseDistances(const SgMixture& light, const std::vector<Vec3>& directions,
+                                         const std::vector<float>& opacity, const std::vector<float>& depth,
+                                         const std::vector<Vec3>& near_radiance = {});
+
 // The light of `parallax` as seen from point p (see LightParallax). The
 // ratio of new to old distance is clamped to [1/4, 4] so that a point next
 // to a source does not turn it into a spike. Lobes without a finite distance,

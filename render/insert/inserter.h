@@ -63,7 +63,8 @@ struct InsertObject {
 // environment), with s = min(1, Y(near_radiance) / Y(light)) the share of
 // the light there that the scene's own radiance explains (a bright distant
 // window seen past dim near fog stays distant); s = 1 without
-// near_radiance or light. Defined with the shading (object_shading.cpp).
+// near_radiance or light (NearInverseDistances). Defined with the shading
+// (object_shading.cpp).
 DistanceMap ReflectionDistances(const std::vector<Vec3>& directions, const std::vector<float>& opacity,
                                 const std::vector<float>& depth, const std::vector<Vec3>& near_radiance = {},
                                 const SgMixture* light = nullptr);

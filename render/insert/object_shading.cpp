@@ -6,6 +6,7 @@
 #include <limits>
 
 #include "calib/core/parallel.h"
+#include "render/insert/incident_light.h"
 #include "render/insert/shadow_terms.h"
 
 namespace nerfar {
@@ -52,20 +53,12 @@ SgMaterial PixelMaterial(const InsertObject& object, const std::array<float, 2>&
 DistanceMap ReflectionDistances(const std::vector<Vec3>& directions, const std::vector<float>& opacity,
                                 const std::vector<float>& depth, const std::vector<Vec3>& near_radiance,
                                 const SgMixture* light) {
-  constexpr float kSurfaceOpacity = 0.5f;
-  const size_t n = std::min({directions.size(), opacity.size(), depth.size()});
-  std::vector<float> distance(n, std::numeric_limits<float>::infinity());
-  const bool shares = light != nullptr && !light->empty() && near_radiance.size() >= n;
-  for (size_t i = 0; i < n; ++i) {
-    if (!(opacity[i] >= kSurfaceOpacity && std::isfinite(depth[i]) && depth[i] > 0.0f)) continue;
-    double share = 1.0;
-    if (shares) {
-      const double all = LuminanceOf(Evaluate(*light, directions[i])), near = LuminanceOf(near_radiance[i]);
-      share = all > 0.0 && std::isfinite(near) ? std::clamp(near / all, 0.0, 1.0) : 0.0;
-    }
-    if (share > 0.0) distance[i] = static_cast<float>(depth[i] / share);
-  }
-  return DistanceMap(std::vector<Vec3>(directions.begin(), directions.begin() + n), distance);
+  const std::vector<double> inverse =
+      NearInverseDistances(light != nullptr ? *light : SgMixture{}, directions, opacity, depth, near_radiance);
+  std::vector<float> distance(inverse.size(), std::numeric_limits<float>::infinity());
+  for (size_t i = 0; i < inverse.size(); ++i)
+    if (inverse[i] > 0.0) distance[i] = static_cast<float>(1.0 / inverse[i]);
+  return DistanceMap(std::vector<Vec3>(directions.begin(), directions.begin() + inverse.size()), distance);
 }
 
 void ShadeObjects(const std::vector<InsertObject>& objects, const std::vector<WorldSphere>& spheres,
