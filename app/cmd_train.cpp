@@ -1,7 +1,10 @@
 // nerfar train DATASET -o scene.nerf [--preset P] [--minutes M] [--set key=value]...
 // Trains the HDR NeRF; checkpoints beside the output (OUTPUT.ckpt) every few
 // seconds and on Ctrl-C; running the same command again resumes from it.
+// --stop-at-step N writes the model of step N and keeps the checkpoint, so the
+// coarse levels of a long schedule can be looked at before it is resumed.
 #include <algorithm>
+#include <cmath>
 #include <csignal>
 #include <cstdio>
 #include <filesystem>
@@ -32,6 +35,7 @@ std::string Fixed(double v, int digits) {
 int RunTrain(const CommandArgs& args) {
   std::string dataset, output, preset = "balanced";
   double minutes = 0, checkpoint_seconds = 60;
+  int stop_at_step = 0;
   std::vector<std::string> sets;
   bool restart = false;
   ArgParser parser("train", "Train the HDR NeRF of a dataset (transforms.json + linear EXR images).");
@@ -41,6 +45,9 @@ int RunTrain(const CommandArgs& args) {
   parser.Option("--minutes", &minutes, "M", "wall-clock budget: the schedule is compressed to end in M minutes");
   parser.Option("--set", &sets, "KEY=VALUE", "override one training option (repeatable; see below)");
   parser.Option("--checkpoint-seconds", &checkpoint_seconds, "S", "seconds between checkpoints (default 60)");
+  parser.Option("--stop-at-step", &stop_at_step, "N",
+                "stop after step N: write the model of that step and keep the checkpoint (the command without "
+                "this option resumes)");
   parser.Flag("--restart", &restart, "ignore an existing checkpoint and start over");
   parser.Epilog("Options (--set): " + NerfTrainOptions::Preset("balanced").ToJson() +
                 "\nCtrl-C stops after the current step and keeps a checkpoint; the same command resumes.\n"
@@ -49,6 +56,7 @@ int RunTrain(const CommandArgs& args) {
   if (output.empty()) throw InputError("nerfar train: -o FILE is required (see 'nerfar train --help')");
   if (minutes < 0) throw InputError("nerfar train: --minutes must be >= 0");
   if (checkpoint_seconds <= 0) throw InputError("nerfar train: --checkpoint-seconds must be > 0");
+  if (stop_at_step < 0) throw InputError("nerfar train: --stop-at-step must be >= 0 (0: none)");
 
   NerfTrainOptions options = NerfTrainOptions::Preset(preset);
   for (const std::string& s : sets) options.Set(s);
@@ -86,7 +94,8 @@ int RunTrain(const CommandArgs& args) {
   double last_checkpoint = trainer.elapsed_seconds(), last_eval = -1e9, eval_gap = 20.0;
   double loss = 0, psnr = std::nan("");
   try {
-    while (!trainer.Done() && !g_stop) {
+    const auto stop_here = [&] { return stop_at_step > 0 && trainer.step() >= stop_at_step; };
+    while (!trainer.Done() && !g_stop && !stop_here()) {
       loss = trainer.Step();
       const double now = trainer.elapsed_seconds();
       // Held-out PSNR every 30 s, but never more than ~5 % of the time (a
@@ -118,16 +127,23 @@ int RunTrain(const CommandArgs& args) {
             " (run the same command to resume)");
     return 130;
   }
+  const bool partial = !trainer.Done();  // --stop-at-step: keep the checkpoint to resume
+  if (partial) trainer.SaveCheckpoint(checkpoint);
   const NerfField field = trainer.FinalField();
   SaveNerf(output, field);
-  const double final_psnr = trainer.HeldOutPsnr(0);
+  // A partial model is scored by 'nerfar render' when wanted; not here.
+  const double final_psnr = partial ? std::nan("") : trainer.HeldOutPsnr(0);
   progress.Finish("step " + std::to_string(trainer.step()) + " loss " + Fixed(loss, 5));
   std::error_code size_error;
   const auto bytes = std::filesystem::file_size(output, size_error);
   std::printf("trained %s: %d steps in %s, held-out psnr_tm %.2f dB (%zu views), %.1f MB, %.2f%% cells occupied\n",
               output.c_str(), trainer.step(), FormatDuration(trainer.elapsed_seconds()).c_str(), final_psnr,
               data.held_out.size(), size_error ? 0.0 : double(bytes) / 1e6, 100.0 * field.OccupiedFraction());
-  std::filesystem::remove(checkpoint, error);
+  if (partial)
+    LogInfo("train: stopped at step " + std::to_string(trainer.step()) + " as asked; checkpoint " + checkpoint +
+            " kept (run without --stop-at-step to resume)");
+  else
+    std::filesystem::remove(checkpoint, error);
   return 0;
 }
 
