@@ -230,8 +230,23 @@ struct NearBulb {
   Vec3 center;  // the light centre (the box's bounding-sphere centre)
   Vec3 bulb;
   double bulb_radius = 0.03, radiance = 200.0, sky = 0.05;
+  // With panel: a one-sided rectangle at `bulb` instead of the ball (the
+  // lamps scene's panel: 12 × 8 cm, facing `panel_normal`).
+  bool panel = false;
+  Vec3 panel_normal, panel_u, panel_v;
+  double panel_half_u = 0.06, panel_half_v = 0.04;
   // Radiance seen from x along d (d unit).
   double Radiance(const Vec3& x, const Vec3& d) const {
+    if (panel) {
+      const double dn = Dot(d, panel_normal);
+      if (dn < 0) {  // only its front (towards +normal) emits
+        const double t = Dot(bulb - x, panel_normal) / dn;
+        const Vec3 q = x + d * t - bulb;
+        if (t > 0 && std::abs(Dot(q, panel_u)) <= panel_half_u && std::abs(Dot(q, panel_v)) <= panel_half_v)
+          return radiance;
+      }
+      return d.z > 0 ? sky : 0.0;
+    }
     const Vec3 oc = x - bulb;
     const double b = Dot(oc, d), c = Dot(oc, oc) - bulb_radius * bulb_radius;
     if (b < 0 && b * b > c) return radiance;
@@ -252,7 +267,9 @@ double BruteForceNearKappa(const NearBulb& light, const WorldMesh& mesh, const V
   return all > 0 ? seen / all : 1.0;
 }
 
-KappaComparison CompareNear(bool from_samples) {
+// `panel`: the rectangle instead of the ball; the light's lobes and samples
+// are given `distance_scale` × the true distance (1: exact).
+KappaComparison CompareNear(bool from_samples, bool panel = false, double distance_scale = 1.0) {
   const Bakes& b = GetBakes();
   const Pose T{RotationFromAxisAngle({0, 0, 1}, 0.4), {0.0, 0.0, 0.03}};
   const double scale = 0.05;  // the box is 6 cm wide, standing on the table
@@ -262,6 +279,13 @@ KappaComparison CompareNear(bool from_samples) {
   light.center = world.center;
   const double distance = 0.25;
   light.bulb = light.center + Normalized(Vec3{-0.5, 0.3, 1.0}) * distance;
+  if (panel) {
+    light.panel = true;
+    light.radiance = 60.0;  // about the ball's power: 0.0096 m² against π·0.03²
+    light.panel_normal = Normalized(light.center - light.bulb);  // facing the object
+    light.panel_u = Normalized(Cross(light.panel_normal, Vec3{0, 0, 1}));
+    light.panel_v = Cross(light.panel_u, light.panel_normal);
+  }
   // The light at the centre: its samples (what κ from samples reads) and
   // an SG light with the bulb's lobe 25 cm away (what gives the samples
   // their distance, and κ from the SG lobes).
@@ -272,7 +296,8 @@ KappaComparison CompareNear(bool from_samples) {
     samples.radiance.push_back({l, l, l});
     samples.solid_angles.push_back(4.0 * kPi / 8192.0);
   }
-  const double bulb_solid = 2.0 * kPi * (1.0 - std::sqrt(1.0 - std::pow(light.bulb_radius / distance, 2)));
+  const double bulb_solid = panel ? 4.0 * light.panel_half_u * light.panel_half_v / (distance * distance)
+                                  : 2.0 * kPi * (1.0 - std::sqrt(1.0 - std::pow(light.bulb_radius / distance, 2)));
   Sg bulb;
   bulb.axis = Normalized(light.bulb - light.center);
   bulb.sharpness = 1.0 / (bulb_solid / kPi);  // about the bulb's width
@@ -283,7 +308,7 @@ KappaComparison CompareNear(bool from_samples) {
   sky.sharpness = 1.0;
   sky.amplitude = {0.08, 0.08, 0.08};
   const SgMixture sg = {bulb, sky};
-  const std::vector<double> distances = {distance, std::numeric_limits<double>::infinity()};
+  const std::vector<double> distances = {distance * distance_scale, std::numeric_limits<double>::infinity()};
   InsertObject o = Object(b.box, v, T, scale, &sg);
   o.light_samples = &samples;
   o.light_distances = &distances;
@@ -304,8 +329,10 @@ KappaComparison CompareNear(bool from_samples) {
   const KappaComparison c =
       CompareKappaLayer(layers, camera, cam, 0.3, [&](const Vec3& p) { return BruteForceNearKappa(light, world, p); });
   std::printf(
-      "near bulb, kappa from %s vs ray-traced: normalised error %.3f (signed %.3f) over %zu receivers (%zu in umbra)\n",
-      from_samples ? "samples" : "SG lobes", c.normalised_error, c.signed_error, c.count, c.umbra);
+      "near %s at %.1f x its distance, kappa from %s vs ray-traced: normalised error %.3f (signed %.3f) over %zu "
+      "receivers (%zu in umbra)\n",
+      panel ? "panel" : "bulb", distance_scale, from_samples ? "samples" : "SG lobes", c.normalised_error,
+      c.signed_error, c.count, c.umbra);
   return c;
 }
 
@@ -322,6 +349,28 @@ TEST(KappaMesh, NearBulbFromSamplesMatchesRayTracedVisibility) {
   // κ from samples keeps the bulb's true size and re-aims it from each
   // receiver: it must beat the SG lobes here (the reason it exists).
   EXPECT_LT(samples.normalised_error, lobes.normalised_error);
+}
+
+// The lamps scene's panel: an extended one-sided source 25 cm away, as
+// ground truth the panel seen from each receiver. κ from samples, the
+// panel re-aimed from each receiver from its true distance, must stay close
+// to the traced κ; given twice that distance (as the lobe distances of the
+// ground-truth-input runs do when the NeRF explains only part of a lamp's
+// radiance, see BENCHMARKS) it must not: the shadow needs the true
+// distance. (A single SG lobe is no model of this panel — λ ≈ 20, one
+// lobe for a 12 × 8 cm rectangle — so κ from SG lobes is not held to it.)
+TEST(KappaMesh, NearPanelNeedsItsTrueDistance) {
+  const KappaComparison exact = CompareNear(true, true), far = CompareNear(true, true, 2.0);
+  ASSERT_GT(exact.count, 300u);
+  ASSERT_GT(exact.umbra, 10u);  // the umbra is in view
+  // Measured 0.122 (signed −0.059). Bound 0.2 as for the bulb above (the
+  // field's own error ~0.15 on this box).
+  EXPECT_LT(exact.normalised_error, 0.2);
+  // Measured 0.233, signed +0.228: twice the distance leaves the shadow
+  // too light, the symptom of the lamps scene's ground-truth-input runs.
+  // Bounds well inside those figures (the test is deterministic).
+  EXPECT_GT(far.normalised_error, exact.normalised_error + 0.08);
+  EXPECT_GT(far.signed_error, 0.15);
 }
 
 TEST(KappaMesh, DiscVisibleFractionIsTheCircularSegment) {
