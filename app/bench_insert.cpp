@@ -7,6 +7,7 @@
 // The scene is a NeRF grid (render/nerf's NerfField, 1 cm voxels) filled
 // from an exact tabletop (table slab, a sphere), so the occlusion and κ stages
 // pay the real cost of marching a NeRF with empty-space skipping.
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
@@ -200,6 +201,12 @@ void TimeHandHeld(const NerfScene& scene, const SgMixture& environment, const In
       part_shade.push_back(ta.shade_ms);
     }
     if (handheld_only) {
+      if (f > 0)
+        LogInfo("hand-held frame " + std::to_string(f) + ": κ " + std::to_string(ta.kappa_ms) + " ms, receivers " +
+                std::to_string(ta.kappa_receivers) + ", look-ups " + std::to_string(ta.kappa_lookups) + ", new nodes " +
+                std::to_string(ta.kappa_evaluated) + ", marched " + std::to_string(ta.kappa_marched) + ", rect " +
+                std::to_string(la.kappa_rect.area()) + " px, multiplied " + std::to_string(ta.kappa_multiplied) +
+                " px");
       if (f > 0) kappa.push_back(ta.kappa_ms), frame_ms.push_back(ta.total_ms);
       if (f > 0) n_marched.push_back(double(ta.kappa_marched)), n_reused.push_back(double(ta.kappa_reused));
       continue;
@@ -308,7 +315,11 @@ StageMedians TimePreset(const NerfScene& scene, const SgMixture& environment, co
   m.frame_moving = MedianOf(moving);
   m.kappa_camera_moved = MedianOf(kappa_cam);
   m.frame_camera_moved = MedianOf(still_cam);
-  TimeHandHeld(scene, environment, object, camera, T_world_camera, options, 6, m);
+  // NERFAR_BENCH_INSERT_HANDHELD_FRAMES=N: N hand-held frames (default 6,
+  // the first builds the caches; more give a profiler more samples).
+  const char* frames_env = std::getenv("NERFAR_BENCH_INSERT_HANDHELD_FRAMES");
+  const int frames = frames_env != nullptr ? std::clamp(std::atoi(frames_env), 2, 1000) : 6;
+  TimeHandHeld(scene, environment, object, camera, T_world_camera, options, frames, m);
   return m;
 }
 
@@ -405,8 +416,16 @@ std::vector<BenchFigure> BenchInsert(const BenchOptions& options) {
   std::string mesh_name;
   const TriangleMesh mesh = BenchMesh(options.scenes_dir, &mesh_name);
   const double t_bake = NowSeconds();
-  const SsdfField field = BakeSsdf(mesh, SsdfBakeOptions::Preset("fast"), std::nullopt);
-  LogInfo("bench insert: baked the object's SSDF (fast) in " + FormatDuration(NowSeconds() - t_bake));
+  // NERFAR_BENCH_INSERT_SSDF_CACHE=PATH (for profiling under valgrind): the
+  // object's SSDF read from PATH when it exists, else baked and written there.
+  const char* ssdf_cache = std::getenv("NERFAR_BENCH_INSERT_SSDF_CACHE");
+  std::error_code exists_error;
+  const bool cached_ssdf = ssdf_cache != nullptr && fs::is_regular_file(ssdf_cache, exists_error);
+  const SsdfField field =
+      cached_ssdf ? ReadSsdf(ssdf_cache) : BakeSsdf(mesh, SsdfBakeOptions::Preset("fast"), std::nullopt);
+  if (ssdf_cache != nullptr && !cached_ssdf) WriteSsdf(ssdf_cache, field);
+  LogInfo("bench insert: " + std::string(cached_ssdf ? "read" : "baked") + " the object's SSDF (fast) in " +
+          FormatDuration(NowSeconds() - t_bake));
   const BoundingSphere bs = ComputeBoundingSphere(mesh);
   const Pose T_world_object{Mat3::Identity(), {0.1, -0.05, -bs.center.z + (ComputeBounds(mesh).max.z - bs.center.z)}};
   const SsdfVisibility visibility(field, T_world_object, 1.0);
@@ -452,7 +471,7 @@ std::vector<BenchFigure> BenchInsert(const BenchOptions& options) {
     // knobs set over the preset (to attribute one preset's cost against
     // another's): kappa_step, kappa_coarse_factor, shadow_reach_radii,
     // shadow_epsilon, kappa_cache_spacing_radii, occlusion_step, parallax,
-    // kappa_refine_delta, kappa_refine_by_halves.
+    // kappa_refine_delta.
     if (const char* knobs = std::getenv("NERFAR_BENCH_INSERT_KNOBS")) {
       std::string list = knobs;
       for (size_t begin = 0; begin < list.size();) {
@@ -466,12 +485,14 @@ std::vector<BenchFigure> BenchInsert(const BenchOptions& options) {
         if (name == "kappa_step") insert_options.kappa_step = int(v);
         if (name == "kappa_coarse_factor") insert_options.kappa_coarse_factor = int(v);
         if (name == "kappa_refine_delta") insert_options.kappa_refine_delta = v;
-        if (name == "kappa_refine_by_halves") insert_options.kappa_refine_by_halves = v != 0;
         if (name == "shadow_reach_radii") insert_options.shadow_reach_radii = v;
         if (name == "shadow_epsilon") insert_options.shadow_epsilon = v;
         if (name == "kappa_cache_spacing_radii") insert_options.kappa_cache_spacing_radii = v;
         if (name == "occlusion_step") insert_options.occlusion_step = int(v);
         if (name == "parallax") insert_options.light.parallax = v != 0;
+        if (name == "shade_step") insert_options.shade_step = int(v);
+        if (name == "shade_refine_delta") insert_options.shade_refine_delta = v;
+        if (name == "shade_refine_angle_deg") insert_options.shade_refine_angle_deg = v;
       }
     }
     const StageMedians m = TimePreset(scene, environment, object, camera, T_world_camera, insert_options, repeats);

@@ -120,7 +120,7 @@ int RunInsert(const CommandArgs& args) {
   double kappa_cache = -1, receiver_reuse = -1;
   double kappa_refine_delta = -1;
   bool no_cell_normals = false, no_parallax = false;
-  bool no_kappa_snap = false, kappa_under_objects = false, kappa_refine_whole = false;
+  bool no_kappa_snap = false, kappa_under_objects = false;
   bool kappa_samples = false;
   int kappa_sample_bins = -1;
   double parallax_min_sharpness = -1;
@@ -193,8 +193,6 @@ int RunInsert(const CommandArgs& args) {
                 "NeRF receiver normals from the surface found V voxels to each side (default 3; 0: density "
                 "gradient only)");
   parser.Flag("--no-kappa-snap", &no_kappa_snap, "keep κ in [1 - ε, 1) as computed (default: taken as 1)");
-  parser.Flag("--kappa-refine-whole", &kappa_refine_whole,
-              "a differing coarse κ cell gets every node at once (default: refined by halves)");
   parser.Flag("--kappa-under-objects", &kappa_under_objects,
               "κ also at grid nodes only the objects' pixels cover (default: skipped)");
   parser.Flag("--no-cell-normals", &no_cell_normals,
@@ -265,7 +263,6 @@ int RunInsert(const CommandArgs& args) {
   if (no_cell_normals) options.receiver_normal_per_cell = false;
   if (no_kappa_snap) options.shadow_epsilon_snap = false;
   if (kappa_under_objects) options.kappa_skip_covered = false;
-  if (kappa_refine_whole) options.kappa_refine_by_halves = false;
   if (no_parallax) options.light.parallax = false;
   if (kappa_samples) options.kappa_from_samples = true;
   if (kappa_sample_bins != -1) options.kappa_sample_bins = kappa_sample_bins;  // validated

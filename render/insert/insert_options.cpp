@@ -128,7 +128,6 @@ std::string InsertOptions::ToJson() const {
   j["kappa_reuse_tolerance_radii"] = kappa_reuse_tolerance_radii;
   j["kappa_step"] = kappa_step;
   j["kappa_coarse_factor"] = kappa_coarse_factor;
-  j["kappa_refine_by_halves"] = kappa_refine_by_halves;
   j["kappa_refine_delta"] = kappa_refine_delta;
   j["receiver_min_opacity"] = receiver_min_opacity;
   return j.dump();

@@ -92,16 +92,14 @@ struct InsertOptions {
   // under the objects too.
   bool kappa_skip_covered = true;
   // κ first at every kappa_coarse_factor-th node of that grid; a coarse cell
-  // whose corners differ by more than kappa_refine_delta gets all its nodes,
-  // the others are interpolated (1: every node of the grid).
+  // whose corners differ by more than kappa_refine_delta is refined by
+  // halves: it gets the nodes that halve it (edge midpoints, centre), and
+  // each half is tested again with its own corners, down to neighbouring
+  // nodes (a smooth gradient stops at the first half it passes; an edge is
+  // followed to every node); cells that pass are interpolated (1: every node
+  // of the grid).
   int kappa_coarse_factor = 4;
   double kappa_refine_delta = 0.02;
-  // A differing cell is refined by halves: it gets the nodes that halve it
-  // (edge midpoints, centre), and each half is tested again with its own
-  // corners, down to neighbouring nodes (a smooth gradient stops at the
-  // first half it passes; an edge is followed to every node); false: every
-  // node of a differing coarse cell at once.
-  bool kappa_refine_by_halves = true;
   // Refined nodes inside a coarse cell whose four receivers lie on one plane
   // take their receiver where their ray meets that plane (no NeRF march, no
   // normal query); false: every refined node is marched.

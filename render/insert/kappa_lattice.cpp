@@ -1,6 +1,7 @@
 #include "render/insert/kappa_lattice.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <limits>
 
@@ -32,47 +33,78 @@ Vec3f CellNormal(uint32_t cell) {
   return Normalized(n);
 }
 
-bool KappaLattice::Find(uint64_t node, float* value) {
+bool KappaLattice::FindFresh(uint64_t node, float* value) {
   Shard& s = shards_[ShardOf(node)];
-  const auto it = s.frozen.find(node);  // read-only during the frame: no lock
-  if (it != s.frozen.end()) {
-    *value = it->second;
-    return true;
-  }
   std::lock_guard<std::mutex> lock(s.mutex);
-  const auto jt = s.fresh.find(node);
-  if (jt == s.fresh.end()) return false;
-  *value = jt->second;
+  const auto it = s.fresh.find(node);
+  if (it == s.fresh.end()) return false;
+  *value = it->second;
   return true;
 }
 
 void KappaLattice::Insert(uint64_t node, float value) {
+  if (node == kEmptyKey) return;
   Shard& s = shards_[ShardOf(node)];
   std::lock_guard<std::mutex> lock(s.mutex);
   s.fresh.emplace(node, value);
 }
 
+void KappaLattice::FrozenPut(uint64_t key, float value) {
+  for (size_t slot = FrozenSlot(key);; slot = (slot + 1) & frozen_mask_) {
+    FrozenEntry& e = frozen_[slot];
+    if (e.key == key) return;  // a node's value never changes under one key
+    if (e.key == kEmptyKey) {
+      e = {key, value};
+      ++frozen_size_;
+      return;
+    }
+  }
+}
+
 void KappaLattice::Publish() {
+  size_t fresh = 0;
+  for (Shard& s : shards_) fresh += s.fresh.size();
+  if (fresh == 0) return;
+  // At most half full: grow to the next power of two and re-insert.
+  if (2 * (frozen_size_ + fresh) > frozen_.size()) {
+    size_t capacity = 1024;
+    while (capacity < 4 * (frozen_size_ + fresh)) capacity *= 2;
+    std::vector<FrozenEntry> old = std::move(frozen_);
+    frozen_.assign(capacity, FrozenEntry{});
+    frozen_mask_ = capacity - 1;
+    frozen_shift_ = 64 - std::countr_zero(capacity);
+    frozen_size_ = 0;
+    for (const FrozenEntry& e : old)
+      if (e.key != kEmptyKey) FrozenPut(e.key, e.value);
+  }
   for (Shard& s : shards_) {
-    if (s.fresh.empty()) continue;
-    s.frozen.insert(s.fresh.begin(), s.fresh.end());
+    for (const auto& [key, value] : s.fresh) FrozenPut(key, value);
     s.fresh.clear();
   }
 }
 
 size_t KappaLattice::Size() {
-  size_t n = 0;
+  size_t n = frozen_size_;
   for (Shard& s : shards_) {
     std::lock_guard<std::mutex> lock(s.mutex);
-    n += s.frozen.size() + s.fresh.size();
+    n += s.fresh.size();
   }
   return n;
 }
 
 void KappaLattice::Clear() {
+  // A small table is kept and emptied (a moving object clears it every
+  // frame); a large one is given back.
+  if (frozen_.size() > (size_t(1) << 16)) {
+    frozen_ = {};
+    frozen_mask_ = 0;
+    frozen_shift_ = 64;
+  } else {
+    std::fill(frozen_.begin(), frozen_.end(), FrozenEntry{});
+  }
+  frozen_size_ = 0;
   for (Shard& s : shards_) {
     std::lock_guard<std::mutex> lock(s.mutex);
-    s.frozen.clear();
     s.fresh.clear();
   }
   std::lock_guard<std::mutex> lock(box_mutex_);

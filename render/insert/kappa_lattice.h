@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <mutex>
 #include <unordered_map>
+#include <vector>
 
 #include "calib/core/math.h"
 
@@ -42,16 +43,30 @@ struct LatticeMemo {
   static size_t Slot(uint64_t key) { return (key * 0x9E3779B97F4A7C15ull) >> 54; }
 };
 
-// The shared lattice. Each shard holds a read-only snapshot (`frozen`, the
-// nodes of earlier frames: read without a lock, nothing writes it during a
-// frame) and the nodes computed this frame (`fresh`, under the shard's
-// mutex); Publish() (single-threaded, at the start of a frame) moves the
-// fresh nodes into the snapshot. Also the world box of the nodes computed
-// with κ < 1 − ε (all others hold κ ≥ 1 − ε).
+// The shared lattice. The nodes of earlier frames are a read-only snapshot
+// (`frozen`: an open-addressing table of (key, value) pairs, linear probing,
+// at most half full, so that a look-up is mostly one cache line; read
+// without a lock, nothing writes it during a frame); the nodes computed this
+// frame are in per-shard maps under the shard's mutex (`fresh`); Publish()
+// (single-threaded, at the start of a frame) moves the fresh nodes into the
+// snapshot. Also the world box of the nodes computed with κ < 1 − ε (all
+// others hold κ ≥ 1 − ε).
 class KappaLattice {
  public:
   KappaLattice() { ResetBox(); }
-  bool Find(uint64_t node, float* value);
+  bool Find(uint64_t node, float* value) {
+    if (!frozen_.empty()) {
+      for (size_t slot = FrozenSlot(node);; slot = (slot + 1) & frozen_mask_) {
+        const FrozenEntry& e = frozen_[slot];
+        if (e.key == node) {
+          *value = e.value;
+          return true;
+        }
+        if (e.key == kEmptyKey) break;
+      }
+    }
+    return FindFresh(node, value);
+  }
   void Insert(uint64_t node, float value);
   void Publish();  // single-threaded, between frames
   size_t Size();
@@ -61,9 +76,21 @@ class KappaLattice {
   Vec3f shadow_max() const { return shadow_max_; }
 
  private:
+  // No LatticeKey is all ones in practice (node (2^17 − 1)³ in the last
+  // normal cell); such a key would just never be kept.
+  static constexpr uint64_t kEmptyKey = ~uint64_t(0);
+  struct FrozenEntry {
+    uint64_t key = kEmptyKey;
+    float value = 0.0f;
+  };
+  size_t FrozenSlot(uint64_t key) const { return size_t((key * 0x9E3779B97F4A7C15ull) >> frozen_shift_); }
+  void FrozenPut(uint64_t key, float value);
+  bool FindFresh(uint64_t node, float* value);
+  std::vector<FrozenEntry> frozen_;  // empty, or a power of two ≥ 2 × frozen_size_
+  size_t frozen_mask_ = 0, frozen_size_ = 0;
+  int frozen_shift_ = 64;
   static constexpr size_t kShards = 64;
   struct Shard {
-    std::unordered_map<uint64_t, float> frozen;
     std::mutex mutex;
     std::unordered_map<uint64_t, float> fresh;
   };

@@ -89,8 +89,8 @@ void FillRamp(float* out, float a, float slope, int n) {
 }
 
 // κ over `rect` from the grid (nodes at columns xs, rows ys; values in
-// `grid`, row-major) into `layer` (over rect, 1 where the grid's cell holds
-// 1 at all four nodes), and `frame` multiplied by it where no object of `g`
+// `grid`, row-major) into `layer` (over rect, every pixel written: 1 where
+// the grid's cell holds 1 at all four nodes), and `frame` multiplied by it where no object of `g`
 // covers the pixel. passed[r]: pixels of row r in cells not skipped.
 void MultiplyKappa(const std::vector<int>& xs, const std::vector<int>& ys, const std::vector<float>& grid,
                    const PixelRect& rect, const ObjectGBuffer& g, ImageF& layer, ImageF& frame,
@@ -133,14 +133,18 @@ void MultiplyKappa(const std::vector<int>& xs, const std::vector<int>& ys, const
           ox1 = std::min(g.rect.x1, rect.x1);
           ids = &g.object[g.Index(g.rect.x0, y)];
         }
-        // The layer first, cell by cell; the passed cells merged into runs.
+        // The layer first, cell by cell (every pixel of the row written once:
+        // 1 between the passed cells); the passed cells merged into runs.
         runs.clear();
+        int x_done = rect.x0;
         for (const uint32_t ix : open[iy]) {
           const size_t ix1 = nx >= 2 ? ix + 1 : ix;
           const float a = g0[ix] + wy * (g1[ix] - g0[ix]), b = g0[ix1] + wy * (g1[ix1] - g0[ix1]);
           const int x_begin = nx >= 2 ? xs[ix] : rect.x0;
           const int x_end = nx >= 2 && ix + 2 < nx ? xs[ix1] : rect.x1;
           const float slope = nx >= 2 ? (b - a) / float(xs[ix1] - xs[ix]) : 0.0f;
+          std::fill(out_row + (x_done - rect.x0), out_row + (x_begin - rect.x0), 1.0f);
+          x_done = x_end;
           FillRamp(out_row + (x_begin - rect.x0), a, slope, x_end - x_begin);
           passed[r] += static_cast<size_t>(x_end - x_begin);
           if (!runs.empty() && runs.back().second == x_begin)
@@ -148,6 +152,7 @@ void MultiplyKappa(const std::vector<int>& xs, const std::vector<int>& ys, const
           else
             runs.emplace_back(x_begin, x_end);
         }
+        std::fill(out_row + (x_done - rect.x0), out_row + (rect.x1 - rect.x0), 1.0f);
         // Then the background, run by run (κ = 1 multiplies by exactly 1:
         // skipped cells need nothing), around the objects' pixels.
         for (const auto& [x_begin, x_end] : runs) {
@@ -241,7 +246,6 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
                                  double(options.kappa_step),
                                  double(options.kappa_coarse_factor),
                                  options.kappa_refine_delta,
-                                 options.kappa_refine_by_halves ? 1.0 : 0.0,
                                  options.kappa_plane_upsampling ? 1.0 : 0.0,
                                  options.receiver_min_opacity,
                                  options.shadow_epsilon_snap ? 1.0 : 0.0,
@@ -302,7 +306,12 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
       }
     }
     layers.kappa_rect = rect;
-    layers.kappa = ImageF(rect.width(), rect.height(), 1, 1.0f);
+    // Every pixel is written by MultiplyKappa (in parallel, once): no fill.
+    layers.kappa = ImageF();
+    layers.kappa.width = rect.width();
+    layers.kappa.height = rect.height();
+    layers.kappa.channels = 1;
+    layers.kappa.pixels.resize(static_cast<size_t>(rect.area()));
     // The same camera exactly, the same rectangle, nothing moved: the last
     // frame's κ layer holds (NeRF receivers only).
     const bool reuse = cache != nullptr && receivers.distance == nullptr && !rect.empty() && view == cache->last_view &&
@@ -587,10 +596,10 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
         }
         // Cells of the grid by node index ranges [x0, x1] × [y0, y1], refined
         // level by level: a cell whose corners differ by more than
-        // kappa_refine_delta gets its own nodes — with
-        // kappa_refine_by_halves those that halve it (edge midpoints and
+        // kappa_refine_delta gets the nodes that halve it (edge midpoints and
         // centre), each half then tested the same way with its own corners
-        // down to cells one node apart; without, every node at once. Cells
+        // down to cells one node apart (a soft gradient stops at the first
+        // half whose corners agree; an edge is followed to every node). Cells
         // that pass are interpolated from their corners (`smooth`, per level:
         // a finer level's values win on the edges they share).
         struct Cell {
@@ -611,7 +620,6 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
         std::vector<uint8_t> known(nx * ny, 0);  // κ set (or scheduled) at the node
         for (size_t r : cy)
           for (size_t q : cx) known[r * nx + q] = 1;
-        const bool halves = options.kappa_refine_by_halves;
         std::vector<std::vector<size_t>> new_cols(ny), refine_cols(ny);
         // Nodes inside a planar coarse cell take their receiver on the plane.
         struct PlaneNode {
@@ -621,9 +629,9 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
         };
         std::vector<std::vector<PlaneNode>> plane_nodes(ny);
         while (!refine.empty()) {
-          // This level's nodes per row: a cell's halving nodes, or all its
-          // nodes; hidden ones only where no finer cell compares them (the
-          // cell's halves hold no node inside).
+          // This level's nodes per row: each cell's halving nodes; hidden ones
+          // only where no finer cell compares them (the cell's halves hold no
+          // node inside).
           std::vector<size_t> rows;
           const auto schedule = [&](uint32_t q, uint32_t r, bool skip_hidden) {
             const size_t node = size_t(r) * nx + q;
@@ -633,11 +641,6 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
             new_cols[r].push_back(q);
           };
           for (const Cell& c : refine) {
-            if (!halves) {
-              for (uint32_t r = c.y0; r <= c.y1; ++r)
-                for (uint32_t q = c.x0; q <= c.x1; ++q) schedule(q, r, true);
-              continue;
-            }
             const bool last = c.x1 - c.x0 <= 2 && c.y1 - c.y0 <= 2;
             const uint32_t px[3] = {c.x0, (c.x0 + c.x1) / 2, c.x1}, py[3] = {c.y0, (c.y0 + c.y1) / 2, c.y1};
             for (uint32_t r : py)
@@ -705,19 +708,17 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
           kappa_ms += MsSince(t_stage);
           // The halves of this level's cells (those with nodes inside).
           std::vector<Cell> next;
-          if (halves) {
-            smooth.emplace_back();
-            for (const Cell& c : refine) {
-              const uint32_t xm = (c.x0 + c.x1) / 2, ym = (c.y0 + c.y1) / 2;
-              const bool split_x = c.x1 - c.x0 >= 2, split_y = c.y1 - c.y0 >= 2;
-              for (int b = 0; b < (split_y ? 2 : 1); ++b)
-                for (int a = 0; a < (split_x ? 2 : 1); ++a) {
-                  const Cell h{split_x ? (a ? xm : c.x0) : c.x0, split_y ? (b ? ym : c.y0) : c.y0,
-                               split_x ? (a ? c.x1 : xm) : c.x1, split_y ? (b ? c.y1 : ym) : c.y1};
-                  if (h.x1 - h.x0 <= 1 && h.y1 - h.y0 <= 1) continue;  // every node a corner
-                  (differ(h) ? next : smooth.back()).push_back(h);
-                }
-            }
+          smooth.emplace_back();
+          for (const Cell& c : refine) {
+            const uint32_t xm = (c.x0 + c.x1) / 2, ym = (c.y0 + c.y1) / 2;
+            const bool split_x = c.x1 - c.x0 >= 2, split_y = c.y1 - c.y0 >= 2;
+            for (int b = 0; b < (split_y ? 2 : 1); ++b)
+              for (int a = 0; a < (split_x ? 2 : 1); ++a) {
+                const Cell h{split_x ? (a ? xm : c.x0) : c.x0, split_y ? (b ? ym : c.y0) : c.y0,
+                             split_x ? (a ? c.x1 : xm) : c.x1, split_y ? (b ? c.y1 : ym) : c.y1};
+                if (h.x1 - h.x0 <= 1 && h.y1 - h.y0 <= 1) continue;  // every node a corner
+                (differ(h) ? next : smooth.back()).push_back(h);
+              }
           }
           refine = std::move(next);
         }

@@ -2,13 +2,17 @@
 // nodes under the objects skipped (kappa_skip_covered) against κ at every
 // node, κ ≥ 1 − ε taken as 1 (shadow_epsilon_snap) against κ as computed,
 // the background multiplied by exactly the κ layer (the vectorised ramp
-// and multiply) on a frame whose width is no multiple of 4, and coarse
-// cells refined by halves against every node and the whole-cell rule.
+// and multiply) on a frame whose width is no multiple of 4, coarse cells
+// refined by halves against every node, and the κ lattice's table against a
+// plain map.
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <map>
+#include <random>
 
 #include "render/insert/inserter.h"
+#include "render/insert/kappa_lattice.h"
 #include "tests/insert/insert_fixtures.h"
 #include "tests/insert/kappa_compare.h"
 #include "tests/insert/test_camera.h"
@@ -160,12 +164,12 @@ TEST(KappaSpeedPaths, BackgroundIsMultipliedByExactlyTheLayer) {
   }
 }
 
-// Refinement by halves against κ at every node (exact κ, no lattice, so
-// that only the refinement differs) and against the whole-cell rule: a
-// differing coarse cell gets its halving nodes first and only halves whose
-// corners still differ by more than δ go on, so fewer κ are evaluated, and
-// the layer stays as close to every node's as the whole-cell rule's.
-TEST(KappaSpeedPaths, RefineByHalvesStaysAsCloseToEveryNodeWithFewerKappa) {
+// Coarse-to-fine κ (refinement by halves) against κ at every node (exact κ,
+// no lattice, so that only the refinement differs): a differing coarse cell
+// gets its halving nodes first and only halves whose corners still differ
+// by more than δ go on, so far fewer κ are evaluated, and the layer stays
+// close to every node's.
+TEST(KappaSpeedPaths, RefineByHalvesStaysCloseToEveryNodeWithFewerKappa) {
   const ShadowScene s;
   InsertOptions every;
   every.kappa_step = 1;
@@ -176,32 +180,84 @@ TEST(KappaSpeedPaths, RefineByHalvesStaysAsCloseToEveryNodeWithFewerKappa) {
   InsertLayers l_every;
   const InsertTimings t_every = s.Render(every, f_every, l_every);
   for (const int coarse : {4, 8}) {
-    InsertOptions whole = every;
-    whole.kappa_coarse_factor = coarse;
-    whole.kappa_refine_by_halves = false;
-    InsertOptions halves = whole;
-    halves.kappa_refine_by_halves = true;
-    ImageF fw, fh;
-    InsertLayers lw, lh;
-    const InsertTimings tw = s.Render(whole, fw, lw), th = s.Render(halves, fh, lh);
-    ASSERT_EQ(lw.kappa_rect.area(), l_every.kappa_rect.area());
+    InsertOptions halves = every;
+    halves.kappa_coarse_factor = coarse;
+    ImageF fh;
+    InsertLayers lh;
+    const InsertTimings th = s.Render(halves, fh, lh);
     ASSERT_EQ(lh.kappa_rect.area(), l_every.kappa_rect.area());
-    const testing::KappaDifference dw = testing::CompareKappa(lw.kappa, l_every.kappa);
     const testing::KappaDifference dh = testing::CompareKappa(lh.kappa, l_every.kappa);
-    ASSERT_GT(dw.shadow, 50.0);
-    // Fewer κ than the whole-cell rule, which takes fewer than every node.
-    EXPECT_LT(tw.kappa_evaluated, t_every.kappa_evaluated) << "coarse " << coarse;
-    EXPECT_LT(th.kappa_evaluated, tw.kappa_evaluated) << "coarse " << coarse;
+    ASSERT_GT(dh.shadow, 50.0);
+    // Fewer than half of every node's κ (a shadow edge is followed to every
+    // node, the rest of the reach is not).
+    EXPECT_LT(2 * th.kappa_evaluated, t_every.kappa_evaluated) << "coarse " << coarse;
     // Interpolation only where a cell's corners agree within δ (0.02): the
     // summed difference from every node's κ stays a small part of the
-    // shadow (measured 0.0021 / 0.0050 of it for coarse 4 / 8, against the
-    // whole-cell rule's 0.0018 / 0.0041), within 0.002 of the whole-cell
-    // rule's and under 0.01; the worst pixel within δ (measured 0.0018 /
-    // 0.0029, as the whole-cell rule's).
-    EXPECT_LT(dh.Relative(), dw.Relative() + 0.002) << "coarse " << coarse;
+    // shadow (measured 0.0021 / 0.0050 of it for coarse 4 / 8, as the old
+    // whole-cell rule's 0.0018 / 0.0041), under 0.01; the worst pixel
+    // within δ (measured 0.0018 / 0.0029).
     EXPECT_LT(dh.Relative(), 0.01) << "coarse " << coarse;
-    EXPECT_LT(dh.max, whole.kappa_refine_delta) << "coarse " << coarse;
+    EXPECT_LT(dh.max, halves.kappa_refine_delta) << "coarse " << coarse;
   }
+}
+
+// The lattice's table (the earlier frames' nodes in an open-addressing
+// snapshot, this frame's in locked maps) against a plain map: over frames
+// of new nodes (the snapshot grows and is rehashed several times), every
+// node inserted is found with exactly its value, before Publish (from the
+// frame's maps) and after (from the snapshot); keys never inserted are not
+// found; Clear forgets every node; a key whose nodes collide in the table
+// (neighbouring nodes and normal cells) is kept apart.
+TEST(KappaSpeedPaths, LatticeTableHoldsExactlyWhatWasInserted) {
+  KappaLattice lattice;
+  std::map<uint64_t, float> reference;
+  std::mt19937 rng(7);
+  std::uniform_int_distribution<int> coordinate(-300, 300), cell(0, kNormalCells * kNormalCells - 1);
+  std::uniform_real_distribution<float> value(0.0f, 1.0f);
+  const auto check_all = [&](const char* when) {
+    for (const auto& [key, v] : reference) {
+      float found = -1.0f;
+      ASSERT_TRUE(lattice.Find(key, &found)) << when;
+      ASSERT_EQ(found, v) << when;
+    }
+    ASSERT_EQ(lattice.Size(), reference.size()) << when;
+  };
+  for (int frame = 0; frame < 12; ++frame) {
+    lattice.Publish();
+    check_all("after Publish");
+    // A block of neighbouring nodes (what a frame's receivers touch) plus
+    // scattered ones; some keys again (a node's value never changes).
+    const int n = 500 << (frame / 3);
+    for (int i = 0; i < n; ++i) {
+      const bool block = i % 2 == 0;
+      const int64_t x = block ? frame * 40 + i % 20 : coordinate(rng), y = block ? (i / 20) % 20 : coordinate(rng);
+      const int64_t z = block ? i / 400 : coordinate(rng);
+      const uint64_t key = LatticeKey(x, y, z, block ? uint32_t(i % 3) : uint32_t(cell(rng)));
+      const auto it = reference.find(key);
+      const float v = it != reference.end() ? it->second : value(rng);
+      lattice.Insert(key, v);
+      reference[key] = v;
+    }
+    check_all("before Publish");
+  }
+  // Keys never inserted (another normal cell of every 7th node) are absent.
+  size_t absent = 0;
+  for (const auto& [key, v] : reference) {
+    const uint64_t other = (key & ~uint64_t(1023)) | ((key + 517) & 1023);
+    if (reference.count(other)) continue;
+    float found = -1.0f;
+    EXPECT_FALSE(lattice.Find(other, &found));
+    if (++absent > 2000) break;
+  }
+  EXPECT_GT(absent, 1000u);
+  lattice.Clear();
+  EXPECT_EQ(lattice.Size(), 0u);
+  float found = -1.0f;
+  EXPECT_FALSE(lattice.Find(reference.begin()->first, &found));
+  lattice.Insert(reference.begin()->first, 0.25f);
+  lattice.Publish();
+  ASSERT_TRUE(lattice.Find(reference.begin()->first, &found));
+  EXPECT_EQ(found, 0.25f);
 }
 
 }  // namespace
