@@ -43,6 +43,7 @@ std::vector<OptionField> Fields(EnvEstimateOptions& o) {
           {"near_field_pool_m", F::kDouble, &o.near_field_pool_m},
           {"near_field_seen_radiance", F::kBool, &o.near_field_seen_radiance},
           {"seen_radiance_views", F::kInt, &o.seen_radiance_views},
+          {"seen_radiance_face_views", F::kBool, &o.seen_radiance_face_views},
           {"step_voxels", F::kFloat, &o.render.step_voxels},
           {"min_transmittance", F::kFloat, &o.render.min_transmittance},
           {"ignore_near_field", F::kBool, &o.ignore_near_field},
@@ -70,6 +71,7 @@ SeenRadianceOptions SeenOptions(const EnvEstimateOptions& o) {
   SeenRadianceOptions seen;
   seen.min_elevation_deg = std::max(0.0, o.min_view_elevation_deg);
   seen.views = o.seen_radiance_views;
+  seen.face_views = o.seen_radiance_face_views;
   return seen;
 }
 

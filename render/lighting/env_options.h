@@ -75,7 +75,9 @@ struct EnvEstimateOptions {
   // (render/lighting/seen_radiance.h): a NeRF's emitters and surfaces are
   // untrained towards directions no camera saw.
   bool near_field_seen_radiance = true;
-  int seen_radiance_views = 12;    // views from the capture hemisphere per surface point
+  int seen_radiance_views = 12;  // views from the capture hemisphere per surface point
+  // The views aimed at the face each ray meets (SeenRadianceOptions::face_views); false: the whole band.
+  bool seen_radiance_face_views = true;
   NerfRenderOptions render;        // sample spacing etc. of every NeRF ray
   bool ignore_near_field = false;  // baseline: E_nerf = 0 and Ô = 0 (environment explains everything, PhySG-like)
   // --- fit

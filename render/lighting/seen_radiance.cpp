@@ -12,7 +12,39 @@
 namespace nerfar {
 namespace {
 constexpr float kFar = 4.0f;  // metres from the point to the start of a view's ray (outside any tabletop volume)
+// Face views are picked from a spiral of this many directions per view over
+// the band (a face that sees a tenth of the band still gets ~1.6 per view).
+constexpr int kFaceCandidatesPerView = 16;
+
+// `count` directions (from a point towards a camera) on a spiral over the
+// band's elevations [lo, hi] (radians): evenly in elevation, golden-angle
+// steps in azimuth.
+std::vector<Vec3f> BandSpiral(double lo, double hi, int count) {
+  std::vector<Vec3f> dirs;
+  const double golden = kPi * (3.0 - std::sqrt(5.0));
+  for (int k = 0; k < count; ++k) {
+    const double el = lo + (hi - lo) * (k + 0.5) / count, az = golden * k;
+    dirs.push_back(Vec3f(Vec3{std::cos(el) * std::cos(az), std::cos(el) * std::sin(az), std::sin(el)}));
+  }
+  return dirs;
+}
 }  // namespace
+
+Vec3f AveragedGradientNormal(const NerfField& field, const Vec3f& p) {
+  // Normalising each gradient first keeps σ's range (1e-13 to 1e6 per
+  // metre) from letting one sample decide alone; the seven smooth the
+  // trilinear field's piecewise gradient.
+  const float h = field.voxel_m;
+  const Vec3f offsets[7] = {{0, 0, 0}, {h, 0, 0}, {-h, 0, 0}, {0, h, 0}, {0, -h, 0}, {0, 0, h}, {0, 0, -h}};
+  Vec3f g{};
+  for (const Vec3f& o : offsets) {
+    const Vec3f d = field.DensityGradient(p + o);
+    const float len = Length(d);
+    if (len > 0.0f && std::isfinite(len)) g += d * (1.0f / len);
+  }
+  const float len = Length(g);
+  return len > 0.0f && std::isfinite(len) ? g * (-1.0f / len) : Vec3f{};
+}
 
 size_t ApplySeenRadiance(const NerfField& field, const std::vector<NerfRay>& rays, std::vector<NerfRayResult>& results,
                          const SeenRadianceOptions& options, const NerfRenderOptions& render, uint64_t* samples) {
@@ -20,14 +52,15 @@ size_t ApplySeenRadiance(const NerfField& field, const std::vector<NerfRay>& ray
   const double z_min = std::sin(options.min_elevation_deg * kPi / 180);
   // The view directions (from the point towards the camera): a spiral over
   // the capture band, the same for every point.
-  std::vector<Vec3f> view_dirs;
   const double lo = options.min_elevation_deg * kPi / 180, hi = options.max_elevation_deg * kPi / 180;
-  const double golden = kPi * (3.0 - std::sqrt(5.0));
-  for (int k = 0; k < options.views; ++k) {
-    const double el = lo + (hi - lo) * (k + 0.5) / options.views, az = golden * k;
-    view_dirs.push_back(Vec3f(Vec3{std::cos(el) * std::cos(az), std::cos(el) * std::sin(az), std::sin(el)}));
-  }
-  // Rays to treat, grouped by the voxel of their surface point.
+  const std::vector<Vec3f> view_dirs = BandSpiral(lo, hi, options.views);
+  // Candidates of the face views: a denser spiral, the same for every point.
+  const std::vector<Vec3f> face_candidates =
+      options.face_views ? BandSpiral(lo, hi, kFaceCandidatesPerView * options.views) : std::vector<Vec3f>{};
+  // Rays to treat, grouped by the cell (group_m, or one voxel) of their
+  // surface point and by kind: rays opaque enough for the seen radiance never
+  // share a point with fainter (see-through) ones, whose point may lie off
+  // any surface.
   struct Key {
     int64_t v;
     bool operator==(const Key& o) const { return v == o.v; }
@@ -36,9 +69,11 @@ size_t ApplySeenRadiance(const NerfField& field, const std::vector<NerfRay>& ray
     size_t operator()(const Key& k) const { return std::hash<int64_t>()(k.v); }
   };
   std::unordered_map<Key, size_t, KeyHash> slot_of;
-  std::vector<Vec3f> points;  // one per voxel: the first ray's surface point
+  std::vector<Vec3f> points;                 // one per cell: the first ray's surface point
+  std::vector<Vec3f> point_dirs;             // the first ray's direction (turns the face normal towards it)
+  std::vector<unsigned char> point_surface;  // some ray there is opaque enough for the seen radiance
   std::vector<size_t> ray_slot(rays.size(), SIZE_MAX);
-  const float voxel = field.voxel_m;
+  const float voxel = options.group_m > 0.0 ? static_cast<float>(options.group_m) : field.voxel_m;
   for (size_t r = 0; r < rays.size(); ++r) {
     const NerfRayResult& res = results[r];
     const double min_opacity =
@@ -49,10 +84,15 @@ size_t ApplySeenRadiance(const NerfField& field, const std::vector<NerfRay>& ray
     const Vec3f g = (x - Vec3f(field.aabb.min)) * (1.0f / voxel);
     const int64_t i = static_cast<int64_t>(std::floor(g.x)), j = static_cast<int64_t>(std::floor(g.y)),
                   k = static_cast<int64_t>(std::floor(g.z));
-    const Key key{(i * 4096 + j) * 4096 + k};
+    const Key key{((i * 4096 + j) * 4096 + k) * 2 + (res.opacity > options.min_opacity ? 1 : 0)};
     const auto it = slot_of.emplace(key, points.size()).first;
-    if (it->second == points.size()) points.push_back(x);
+    if (it->second == points.size()) {
+      points.push_back(x);
+      point_dirs.push_back(rays[r].dir);
+      point_surface.push_back(0);
+    }
     ray_slot[r] = it->second;
+    if (res.opacity > options.min_opacity) point_surface[it->second] = 1;
   }
   // The seen radiance of each point: mean colour over the views that reach it.
   std::vector<Vec3f> seen(points.size());
@@ -64,6 +104,37 @@ size_t ApplySeenRadiance(const NerfField& field, const std::vector<NerfRay>& ray
       points.size(),
       [&](size_t p) {
         double best = -1;
+        // Face views first: the band's directions in front of the point's face.
+        if (options.face_views && point_surface[p]) {
+          Vec3f n = AveragedGradientNormal(field, points[p]);
+          if (Dot(n, point_dirs[p]) > 0.0f) n = -n;  // the face the ray meets
+          std::vector<const Vec3f*> facing;
+          if (Dot(n, n) > 0.5f)
+            for (const Vec3f& u : face_candidates)
+              if (Dot(u, n) >= options.face_min_cosine) facing.push_back(&u);
+          const size_t count = std::min(facing.size(), static_cast<size_t>(options.views));
+          for (size_t i = 0; i < count; ++i) {
+            // Evenly over the facing candidates (they run up the band's elevations).
+            const Vec3f& u = *facing[(2 * i + 1) * facing.size() / (2 * count)];
+            NerfRay ray{points[p] + u * kFar, -u, 0, 0};
+            if (!IntersectAabb(field.aabb, ray.origin, ray.dir, ray.t_near, ray.t_far)) continue;
+            const NerfRayResult res = field.RenderRay(ray, render);
+            point_samples[p] += res.samples;
+            if (!(res.opacity > options.min_opacity) || !(std::fabs(res.surface_depth - kFar) <= options.face_reach_m))
+              continue;
+            const Vec3f radiance = res.color * (1.0f / res.opacity);
+            const double y = LuminanceOf(Vec3(radiance));
+            if (y > best) {
+              best = y;
+              seen[p] = radiance;
+              reached[p] = 1;
+            }
+          }
+        }
+        // The whole band: the see-through votes, and the seen radiance of a
+        // point no face view saw.
+        const bool face_seen = reached[p] != 0;
+        if (face_seen && !options.see_through) return;
         for (const Vec3f& u : view_dirs) {
           NerfRay ray{points[p] + u * kFar, -u, 0, 0};  // from outside the volume, towards the point
           if (!IntersectAabb(field.aabb, ray.origin, ray.dir, ray.t_near, ray.t_far)) continue;
@@ -81,7 +152,7 @@ size_t ApplySeenRadiance(const NerfField& field, const std::vector<NerfRay>& ray
           else if (offset >= -options.see_through_reach_m)
             ++meet[p];
           // The seen radiance: a surface within reach_m of the point.
-          if (!opaque || std::fabs(offset) > options.reach_m) continue;
+          if (face_seen || !opaque || std::fabs(offset) > options.reach_m) continue;
           const Vec3f radiance = res.color * (1.0f / res.opacity);
           const double y = LuminanceOf(Vec3(radiance));
           if (y > best) {

@@ -31,6 +31,20 @@
 // halo or a lamp's glass still adds its own light. Fog that every view sees
 // through no longer hides what lies behind it; a surface that every view
 // meets is kept as it was. (Measured: docs/BENCHMARKS.md "see-through".)
+//
+// Face views (SeenRadianceOptions::face_views): the views are aimed at the
+// face of the surface the ray meets. A point's normal (the NeRF's averaged
+// density gradient, turned towards the ray's origin) picks the directions of
+// the capture band that see that face (n·u >= face_min_cosine); views along
+// them that find their surface within face_reach_m of the point see the
+// point itself, and the brightest of them is its seen radiance. Only when no
+// view of the band sees the face (a lamp's underside, whose normal points
+// below the band) does the whole-band rule above decide. Why: an emitter
+// that faces away from the band (a panel tilted towards the table) is seen
+// by the captures only from the few low directions in front of it; views
+// spread over the whole band mostly meet its dark backing, and a wide reach
+// lets the views from above that meet a bulb lend its radiance to the pole
+// and stand under it. Measured: docs/BENCHMARKS.md "face views".
 #pragma once
 
 #include <cstdint>
@@ -65,7 +79,28 @@ struct SeenRadianceOptions {
   // 5 mm voxels: where two marches place one surface). Farther before it the
   // view is hidden, farther past it (or never half opaque) it sees through.
   double see_through_reach_m = 0.02;
+  // Rays whose points fall in one cell of this size (metres, a grid from the
+  // field's box corner) share the views aimed at the first one's point:
+  // fewer views where rays crowd (a refined direction's 16 sub-rays meet a
+  // lamp within a few centimetres). 0: one cell per voxel of the field.
+  double group_m = 0.0;
+  // Face views (above): aim the views at the face the ray meets. false: the
+  // whole band for every point (the rule before session 8).
+  bool face_views = true;
+  // A band direction u sees the face of normal n when n·u is at least this
+  // (0.1: up to 84° from the normal; the shared lamps captures see the
+  // panel's front at cosines 0.02-0.33).
+  double face_min_cosine = 0.1;
+  // A face view sees the point when its surface lies within this distance
+  // of it (4 voxels of the shared scenes' 5 mm grids: two live march steps
+  // each way). Tighter than reach_m: a view that meets another surface
+  // (a bulb 3 cm above the pole point it was aimed at) says nothing here.
+  double face_reach_m = 0.02;
 };
+
+// The unit normal at p of the field's surface: unit density gradients
+// averaged at p and ±1 voxel along each axis, negated (zero where undefined).
+Vec3f AveragedGradientNormal(const NerfField& field, const Vec3f& p);
 
 // For every ray (origin, dir) with its rendered result whose surface point
 // x = o + surface_depth·d is seen from below the capture hemisphere (the
@@ -74,12 +109,15 @@ struct SeenRadianceOptions {
 // unit opacity) of the views from the capture hemisphere that reach x, times
 // the ray's opacity, when that is brighter than the ray's own colour; rays
 // whose point no view reaches keep their colour. Points are grouped by
-// voxel (one look-up per voxel). With options.see_through, rays from below
+// voxel, or by cells of options.group_m, and by whether their opacity
+// exceeds min_opacity (one look-up per cell and kind). With options.see_through, rays from below
 // the band with opacity above see_through_min_opacity (the point being
 // where their transmittance crosses 1/2, or their mean depth when they stay
 // under 1/2 opaque) also have their opacity scaled by the share of the
-// informative views that meet a surface there (the header's note). Returns
-// how many rays were changed.
+// informative views that meet a surface there (the header's note). With
+// options.face_views the seen radiance comes from the views of the point's
+// own face when any of them sees it (the header's note). Returns how many
+// rays were changed.
 // `samples` (optional) is increased by the density samples the views took.
 size_t ApplySeenRadiance(const NerfField& field, const std::vector<NerfRay>& rays, std::vector<NerfRayResult>& results,
                          const SeenRadianceOptions& options, const NerfRenderOptions& render = {},
