@@ -130,6 +130,7 @@ int RunInsert(const CommandArgs& args) {
   bool no_self_shadow = false, no_shadows = false, paper_gamma = false, truth_geometry = false;
   bool light_from_centre = false, no_seen_radiance = false, expected_depth = false;
   bool no_see_through = false;
+  bool seen_whole_band = false;
   double normal_probe_voxels = -1;
   ArgParser parser("insert", "Insert virtual objects into a captured scene: light, shade, occlude, shadow, composite.");
   parser.Option(
@@ -192,6 +193,9 @@ int RunInsert(const CommandArgs& args) {
   parser.Option("--normal-probe-voxels", &normal_probe_voxels, "V",
                 "NeRF receiver normals from the surface found V voxels to each side (default 3; 0: density "
                 "gradient only)");
+  parser.Flag("--seen-whole-band", &seen_whole_band,
+              "seen radiance from views over the whole capture band (default: the views that see the face the "
+              "light ray meets, the band only where none does)");
   parser.Flag("--no-kappa-snap", &no_kappa_snap, "keep κ in [1 - ε, 1) as computed (default: taken as 1)");
   parser.Flag("--kappa-under-objects", &kappa_under_objects,
               "κ also at grid nodes only the objects' pixels cover (default: skipped)");
@@ -270,6 +274,7 @@ int RunInsert(const CommandArgs& args) {
   NerfSceneOptions nerf_options;
   if (no_seen_radiance) nerf_options.light_seen_radiance = false;
   if (no_see_through) nerf_options.seen.see_through = false;
+  if (seen_whole_band) nerf_options.seen.face_views = false;
   if (expected_depth) nerf_options.surface_depth = false;
   if (normal_probe_voxels != -1) nerf_options.normal_probe_voxels = normal_probe_voxels;
   if (parallax_min_sharpness != -1) options.light.parallax_min_sharpness = parallax_min_sharpness;
