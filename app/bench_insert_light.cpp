@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "app/bench.h"
+#include "calib/core/error.h"
 #include "calib/core/log.h"
 #include "calib/core/parallel.h"
 #include "calib/object.h"
@@ -39,13 +40,26 @@ void BenchInsertRealNerfLight(const BenchOptions& options, std::vector<BenchFigu
   if (copy) nerf.UpdateRenderCopy();  // what nerfar render reads (NerfRenderCopy)
   // NERFAR_BENCH_INSERT_LIGHT_RENDER=full|live|preview: the light rays' march
   // (NerfSceneOptions::light_render; default live).
-  NerfSceneOptions scene_options;
-  if (const char* render_env = std::getenv("NERFAR_BENCH_INSERT_LIGHT_RENDER"))
-    scene_options.light_render = NerfRenderOptions::Preset(render_env);
+  // The preset's NerfSceneOptions (NerfSceneOptions::Preset), these overriding it:
+  const char* render_env = std::getenv("NERFAR_BENCH_INSERT_LIGHT_RENDER");
   // NERFAR_BENCH_INSERT_SEE_THROUGH=0: semi-transparent content kept whole
   // (no views aimed at it; seen radiance of surfaces only, as before session 7).
-  if (const char* see_env = std::getenv("NERFAR_BENCH_INSERT_SEE_THROUGH"))
-    scene_options.seen.see_through = std::string(see_env) != "0";
+  const char* see_env = std::getenv("NERFAR_BENCH_INSERT_SEE_THROUGH");
+  // NERFAR_BENCH_INSERT_SEEN_VIEWS=V, NERFAR_BENCH_INSERT_SEEN_GROUP_CM=C:
+  // views per point, cell of shared views (nerfar insert --seen-views, --seen-group-cm).
+  const char* views_env = std::getenv("NERFAR_BENCH_INSERT_SEEN_VIEWS");
+  const char* group_env = std::getenv("NERFAR_BENCH_INSERT_SEEN_GROUP_CM");
+  const auto scene_options_for = [&](const std::string& preset) {
+    NerfSceneOptions o = NerfSceneOptions::Preset(preset);
+    if (render_env) o.light_render = NerfRenderOptions::Preset(render_env);
+    if (see_env) o.seen.see_through = std::string(see_env) != "0";
+    if (views_env) o.seen.views = std::atoi(views_env);
+    if (group_env) o.seen.group_m = std::atof(group_env) / 100.0;
+    Problems problems("NERFAR_BENCH_INSERT_* light options");
+    for (const std::string& p : o.Validate()) problems.Add("", p);
+    problems.ThrowIfAny();
+    return o;
+  };
   const std::string model_name = std::filesystem::path(model).filename().string();
   TriangleMesh mesh;
   std::string mesh_name = "monkey_diffuse";
@@ -86,7 +100,8 @@ void BenchInsertRealNerfLight(const BenchOptions& options, std::vector<BenchFigu
   for (const char* preset : {"fast", "balanced", "accurate"}) {
     if (presets.find(preset) == std::string::npos) continue;
     const InsertOptions insert_options = InsertOptions::Preset(preset);
-    std::vector<double> sample_ms, fit_ms, samples, refined;
+    const NerfSceneOptions scene_options = scene_options_for(preset);
+    std::vector<double> sample_ms, fit_ms, samples, view_samples, refined;
     for (int r = 0; r < 3; ++r) {
       const NerfScene scene(nerf, scene_options);
       IncidentLight light;
@@ -94,6 +109,7 @@ void BenchInsertRealNerfLight(const BenchOptions& options, std::vector<BenchFigu
       sample_ms.push_back(u.sample_ms);
       fit_ms.push_back(u.fit_ms);
       samples.push_back(static_cast<double>(scene.LightSamples()));
+      view_samples.push_back(static_cast<double>(scene.LightViewSamples()));
       refined.push_back(static_cast<double>(light.refined()));
     }
     const auto median = [](std::vector<double> v) {
@@ -102,12 +118,17 @@ void BenchInsertRealNerfLight(const BenchOptions& options, std::vector<BenchFigu
     };
     const std::string note = std::string(preset) + ", " + where +
                              "; N=" + std::to_string(insert_options.light.directions) +
-                             ", refine_rays=" + std::to_string(insert_options.light.refine_rays);
+                             ", refine_rays=" + std::to_string(insert_options.light.refine_rays) +
+                             ", views=" + std::to_string(scene_options.seen.views) +
+                             ", group=" + std::to_string(scene_options.seen.group_m * 100.0).substr(0, 4) + " cm" +
+                             (scene_options.seen.see_through ? "" : ", no see-through");
     const std::string p = std::string("real_") + preset + "_";
     figures.push_back({p + "light_ms", median(sample_ms), "ms", note});
     figures.push_back(
         {p + "fit_cold_ms", median(fit_ms), "ms", note + "; M=" + std::to_string(insert_options.light.fit.lobes)});
     figures.push_back({p + "light_samples", median(samples), "samples", note + "; density samples, views included"});
+    figures.push_back({p + "light_view_samples", median(view_samples), "samples",
+                       note + "; of light_samples, the seen-radiance views"});
     figures.push_back({p + "light_refined", median(refined), "directions", note});
     LogInfo("bench insert: real NeRF light (" + std::string(preset) + "): " + std::to_string(median(sample_ms)) +
             " ms, " + std::to_string(median(samples)) + " samples");

@@ -130,6 +130,8 @@ int RunInsert(const CommandArgs& args) {
   bool no_self_shadow = false, no_shadows = false, paper_gamma = false, truth_geometry = false;
   bool light_from_centre = false, no_seen_radiance = false, expected_depth = false;
   bool no_see_through = false;
+  int seen_views = -1;
+  double seen_group_cm = -1;
   bool seen_whole_band = false;
   double normal_probe_voxels = -1;
   ArgParser parser("insert", "Insert virtual objects into a captured scene: light, shade, occlude, shadow, composite.");
@@ -187,6 +189,11 @@ int RunInsert(const CommandArgs& args) {
   parser.Flag("--no-see-through", &no_see_through,
               "incident light keeps the NeRF's semi-transparent content whole (default: only the share that views "
               "from the capture band find matter; the rest lets the environment behind it through)");
+  parser.Option("--seen-views", &seen_views, "V",
+                "views aimed from the capture band at each point a light ray meets from below (default 12)");
+  parser.Option("--seen-group-cm", &seen_group_cm, "C",
+                "light rays whose points lie in one C cm cell share their views (fast: 2, balanced: 1, accurate: "
+                "0 = one NeRF voxel)");
   parser.Flag("--expected-depth", &expected_depth,
               "NeRF depth (κ receivers, lobe distances) as the opacity-weighted mean, not where transmittance "
               "crosses 1/2");
@@ -271,7 +278,9 @@ int RunInsert(const CommandArgs& args) {
   if (kappa_samples) options.kappa_from_samples = true;
   if (kappa_sample_bins != -1) options.kappa_sample_bins = kappa_sample_bins;  // validated
   if (light_from_centre) options.light.start_outside_object = false;
-  NerfSceneOptions nerf_options;
+  NerfSceneOptions nerf_options = NerfSceneOptions::Preset(preset);
+  if (seen_views != -1) nerf_options.seen.views = seen_views;  // validated
+  if (seen_group_cm != -1) nerf_options.seen.group_m = seen_group_cm / 100.0;
   if (no_seen_radiance) nerf_options.light_seen_radiance = false;
   if (no_see_through) nerf_options.seen.see_through = false;
   if (seen_whole_band) nerf_options.seen.face_views = false;

@@ -7,6 +7,18 @@
 
 namespace nerfar {
 
+NerfSceneOptions NerfSceneOptions::Preset(const std::string& name) {
+  NerfSceneOptions o;
+  if (name == "fast") {
+    o.seen.group_m = 0.02;
+  } else if (name == "balanced") {
+    o.seen.group_m = 0.01;
+  } else if (name != "accurate") {
+    ThrowInputError("preset", "unknown preset '" + name + "' (expected fast, balanced or accurate)");
+  }
+  return o;
+}
+
 std::vector<std::string> NerfSceneOptions::Validate() const {
   std::vector<std::string> problems;
   const auto check = [&](bool ok, const std::string& what) {
@@ -33,6 +45,7 @@ std::vector<std::string> NerfSceneOptions::Validate() const {
           "seen.see_through_min_opacity: must be in [0, 1]");
     check(seen.see_through_reach_m > 0.0 && std::isfinite(seen.see_through_reach_m),
           "seen.see_through_reach_m: must be a finite number > 0");
+    check(seen.group_m >= 0.0 && seen.group_m <= 1.0, "seen.group_m: out of range (expected 0 to 1 metre)");
   }
   return problems;
 }
@@ -59,9 +72,11 @@ void NerfScene::Render(const SceneRays& rays, SceneSamples& out, bool light) con
         n, [&](size_t i) { results[i] = field_.RenderRay(nerf_rays[i], options_.light_render); }, 32);
     uint64_t samples = 0;
     for (const NerfRayResult& r : results) samples += r.samples;
+    uint64_t view_samples = 0;
     if (options_.light_seen_radiance && n > 0)
-      ApplySeenRadiance(field_, nerf_rays, results, options_.seen, options_.light_render, &samples);
-    light_samples_ += samples;
+      ApplySeenRadiance(field_, nerf_rays, results, options_.seen, options_.light_render, &view_samples);
+    light_samples_ += samples + view_samples;
+    light_view_samples_ += view_samples;
   } else {
     // The callers already split work over threads: render serially here.
     for (size_t i = 0; i < n; ++i) results[i] = field_.RenderRay(nerf_rays[i], options_.render);

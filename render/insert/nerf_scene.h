@@ -54,6 +54,16 @@ struct NerfSceneOptions {
   // half-voxel step resolves (measured: docs/BENCHMARKS.md "incident light on
   // a real NeRF"). NerfRenderOptions::Preset("full") gives `render`'s march.
   NerfRenderOptions light_render = NerfRenderOptions::Preset("live");
+  // The insertion presets (render/insert/insert_options.h), as they set the
+  // incident light's views: "accurate" is the default above (the views of
+  // each voxel's points their own); "balanced" shares the views of the light
+  // rays whose points fall in one 1 cm cell (seen.group_m: a refined
+  // direction's 16 sub-rays meet one lamp within a few centimetres), "fast"
+  // in one 2 cm cell. End to end within 0.1 dB / 0.01 of the unshared views
+  // (docs/BENCHMARKS.md "incident light on a real NeRF"); fewer views per
+  // point were measured and dropped (6 or 8: the lamps' light error +0.03 to
+  // +0.06). Any other name: InputError.
+  static NerfSceneOptions Preset(const std::string& name);
   // Every problem as "field: what is wrong (what was expected)".
   std::vector<std::string> Validate() const;
 };
@@ -71,6 +81,8 @@ class NerfScene final : public SceneField {
   // Density samples taken by RenderLightRays since construction, the
   // seen-radiance views included (the cost's floor: samples x ns each).
   uint64_t LightSamples() const { return light_samples_.load(); }
+  // Of those, the ones the seen-radiance views took.
+  uint64_t LightViewSamples() const { return light_view_samples_.load(); }
   void Normals(const std::vector<Vec3f>& points, std::vector<Vec3f>& normals) const override;
   const NerfSceneOptions& options() const { return options_; }
 
@@ -80,7 +92,7 @@ class NerfScene final : public SceneField {
   Vec3f GradientNormal(const Vec3f& p) const;
   const NerfField& field_;
   NerfSceneOptions options_;
-  mutable std::atomic<uint64_t> light_samples_{0};
+  mutable std::atomic<uint64_t> light_samples_{0}, light_view_samples_{0};
 };
 
 }  // namespace nerfar
