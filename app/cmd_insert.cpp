@@ -154,6 +154,9 @@ int RunInsert(const CommandArgs& args) {
   parser.Option("--light-directions", &light_directions, "N", "rays from the object centre (balanced: 1024)");
   parser.Option("--sg-lobes", &sg_lobes, "M", "SG lobes of the incident light (balanced: 32)");
   parser.Option("--kappa-step", &kappa_step, "S", "κ every S pixels, interpolated between (balanced: 2)");
+  int shade_step = -1;
+  parser.Option("--shade-step", &shade_step, "S",
+                "diffuse and self-shadow every S pixels of the object, interpolated where smooth (balanced: 2)");
   parser.Option("--kappa-refine-delta", &kappa_refine_delta, "D",
                 "coarse κ cells whose corners differ by more than D get every node (balanced: 0.02, fast: 0.04)");
   parser.Option("--shadow-reach", &shadow_reach, "R", "κ within R bounding radii of an object (balanced: 12)");
@@ -266,6 +269,7 @@ int RunInsert(const CommandArgs& args) {
   if (light_directions != -1) options.light.directions = light_directions;
   if (sg_lobes != -1) options.light.fit.lobes = sg_lobes;
   if (kappa_step != -1) options.kappa_step = kappa_step;
+  if (shade_step != -1) options.shade_step = shade_step;
   if (kappa_refine_delta != -1) options.kappa_refine_delta = kappa_refine_delta;  // validated
   if (occlusion_step != -1) options.occlusion_step = occlusion_step;
   if (kappa_cache >= 0) options.kappa_cache_spacing_radii = kappa_cache;

@@ -37,6 +37,7 @@ InsertOptions InsertOptions::Preset(const std::string& name) {
   } else if (name == "accurate") {
     o.light.directions = 2048;
     o.specular_parallax = true;
+    o.shade_step = 1;
     o.shadow_reach_radii = 20.0;
     o.shadow_epsilon = 5e-4;
     o.kappa_step = 1;
@@ -68,6 +69,11 @@ std::vector<std::string> InsertOptions::Validate() const {
   check(specular_levels >= 2 && specular_levels <= 64, "specular_levels: out of range (expected 2 to 64)");
   check(specular_parallax_iterations >= 1 && specular_parallax_iterations <= 16,
         "specular_parallax_iterations: out of range (expected 1 to 16)");
+  check(shade_step >= 1 && shade_step <= 8, "shade_step: out of range (expected 1 to 8)");
+  check(std::isfinite(shade_refine_delta) && shade_refine_delta >= 0,
+        "shade_refine_delta: out of range (expected a finite value >= 0)");
+  check(std::isfinite(shade_refine_angle_deg) && shade_refine_angle_deg >= 0 && shade_refine_angle_deg <= 90,
+        "shade_refine_angle_deg: out of range (expected 0 to 90)");
   check(kappa_sample_bins >= 4 && kappa_sample_bins <= 4096, "kappa_sample_bins: out of range (expected 4 to 4096)");
   check(std::isfinite(kappa_sample_min_radius) && kappa_sample_min_radius >= 0 && kappa_sample_min_radius <= 1,
         "kappa_sample_min_radius: out of range (expected 0 to 1 radians)");
@@ -115,6 +121,9 @@ std::string InsertOptions::ToJson() const {
   j["specular_levels"] = specular_levels;
   j["specular_parallax"] = specular_parallax;
   j["specular_parallax_iterations"] = specular_parallax_iterations;
+  j["shade_step"] = shade_step;
+  j["shade_refine_delta"] = shade_refine_delta;
+  j["shade_refine_angle_deg"] = shade_refine_angle_deg;
   j["antialias_edges"] = antialias_edges;
   j["kappa_from_samples"] = kappa_from_samples;
   j["kappa_sample_bins"] = kappa_sample_bins;

@@ -48,6 +48,18 @@ struct InsertOptions {
   // 6 ms budget (docs/BENCHMARKS.md, shading session 7).
   bool specular_parallax = false;
   int specular_parallax_iterations = 3;
+  // With a prefiltered map: the smooth part of the shading (the diffuse
+  // radiance and the specular's self-shadow ratio, both from the SG light
+  // with γ) at every shade_step-th pixel of the objects' box, bilinear in
+  // between; the map's specular stays per pixel. A pixel is shaded exactly
+  // where its cell's four nodes are not all on its object, a node's normal
+  // is more than shade_refine_angle_deg from the pixel's, or the nodes'
+  // values differ by more than shade_refine_delta (diffuse: relative to its
+  // brightest channel; ratio: absolute). 1: every pixel exactly (objects
+  // with a roughness or metallic map always are).
+  int shade_step = 2;
+  double shade_refine_delta = 0.1;
+  double shade_refine_angle_deg = 20.0;
 
   // Object edges blended with the background by the fraction of each pixel
   // the objects cover (4×4 sub-samples of the rasteriser), as a camera's

@@ -61,108 +61,334 @@ DistanceMap ReflectionDistances(const std::vector<Vec3>& directions, const std::
   return DistanceMap(std::vector<Vec3>(directions.begin(), directions.begin() + inverse.size()), distance);
 }
 
+namespace {
+
+// The call's inputs, shared by every chunk.
+struct ShadeInputs {
+  const std::vector<InsertObject>& objects;
+  const std::vector<WorldSphere>& spheres;
+  const std::vector<LightPrep>& preps;
+  const std::vector<VertexGamma>* vertex_gamma;
+  const std::vector<std::vector<Vec3f>>& vertex_normals;
+  const InsertOptions& options;
+  const ObjectGBuffer& g;
+  const Vec3f& eye;
+  const std::vector<PrefilteredRadiance>& specular;
+  const PrefilteredRadiance* Map(int32_t o) const {
+    return size_t(o) < specular.size() && !specular[o].empty() ? &specular[o] : nullptr;
+  }
+};
+
+// The smooth part of a pixel's radiance under a prefiltered map: the diffuse
+// radiance for a white base colour (times the pixel's base colour gives the
+// diffuse term) and the specular's self-shadow ratio V (times the map's
+// specular gives the specular term).
+struct DiffuseAndVisibility {
+  float d[3] = {0, 0, 0};
+  float visibility = 1;
+};
+
+// Per-chunk buffers (reused across the runs of a chunk).
+struct RunScratch {
+  std::vector<float> ssd, ssd_min, gamma;
+  std::vector<SgMaterial> materials;
+  std::vector<Vec3f> normals, views, points, rgb, shadowed, specular_rgb;
+  std::vector<uint32_t> pixels;
+  // One chunk's pixels by path (ShadeObjects, step 2).
+  std::vector<uint32_t> sg_pixels, map_pixels, exact_pixels;
+  std::vector<DiffuseAndVisibility> values, exact_values;
+  std::vector<size_t> exact_slot;
+  std::vector<Vec3f> sg_rgb;
+};
+// Per thread, kept between chunks and frames (no allocation per chunk).
+RunScratch& ThreadScratch() {
+  thread_local RunScratch scratch;
+  return scratch;
+}
+
+// Material, normal, view, world point and, with `gamma`, γ (per vertex
+// interpolated, or per pixel from the SSDF fields) of `count` pixels of
+// object o.
+void GatherRun(const ShadeInputs& in, int32_t o, const uint32_t* pixels, size_t count, RunScratch& s,
+               bool gamma = true) {
+  const ObjectGBuffer& g = in.g;
+  const LightPrep& p = in.preps[o];
+  const size_t m = gamma ? p.axes.size() : 0;
+  s.gamma.assign(count * m, 1.0f);
+  s.materials.clear();
+  s.normals.clear();
+  s.views.clear();
+  s.points.clear();
+  const VertexGamma* vg = in.vertex_gamma ? &(*in.vertex_gamma)[o] : nullptr;
+  for (size_t k = 0; k < count; ++k) {
+    const uint32_t i = pixels[k];
+    const Vec3f n = g.normal[i];
+    float* gp = s.gamma.data() + k * m;
+    const auto& tri = in.objects[o].mesh->triangles[g.triangle[i]];
+    const float b1 = g.bary[i][0], b2 = g.bary[i][1], b0 = 1.0f - b1 - b2;
+    const std::vector<Vec3f>& vn = in.vertex_normals[o];
+    // Per vertex unless the rasteriser flipped the normal (a back face
+    // seen): the vertices' γ belong to the other side.
+    if (m == 0) {
+    } else if (vg && !vg->gamma.empty() && Dot(vn[tri[0]] * b0 + vn[tri[1]] * b1 + vn[tri[2]] * b2, n) > 0.0f) {
+      const float* g0 = &vg->gamma[size_t(tri[0]) * m];
+      const float* g1 = &vg->gamma[size_t(tri[1]) * m];
+      const float* g2 = &vg->gamma[size_t(tri[2]) * m];
+      for (size_t l = 0; l < m; ++l) gp[l] = b0 * g0[l] + b1 * g1[l] + b2 * g2[l];
+    } else if (in.options.self_shadow) {
+      const Vec3f point =
+          g.position[i] + n * static_cast<float>(in.options.self_shadow_offset_radii * in.spheres[o].radius);
+      s.ssd_min.assign(m, std::numeric_limits<float>::infinity());
+      s.ssd.resize(m);
+      for (size_t j = 0; j < in.objects.size(); ++j) {
+        if (!p.queries[j]) continue;
+        p.queries[j]->Ssd(&point, 1, s.ssd.data());
+        for (size_t l = 0; l < m; ++l) s.ssd_min[l] = std::min(s.ssd_min[l], s.ssd[l]);
+      }
+      GammaFromSsd(p.axes, p.gamma_rows, n, s.ssd_min.data(), in.options.self_shadow_horizon, gp);
+    }
+    s.materials.push_back(PixelMaterial(in.objects[o], g.uv[i]));
+    s.normals.push_back(n);
+    s.views.push_back(Normalized(in.eye - g.position[i]));
+    s.points.push_back(g.position[i]);
+  }
+}
+
+// Radiance of `count` pixels of object o with SGs alone (no map).
+void ShadeRunSg(const ShadeInputs& in, int32_t o, const uint32_t* pixels, size_t count, RunScratch& s, Vec3f* out) {
+  GatherRun(in, o, pixels, count, s);
+  std::fill(out, out + count, Vec3f{});
+  const LightPrep& p = in.preps[o];
+  if (p.axes.empty()) return;
+  p.shader->Shade(s.materials.data(), s.normals.data(), s.views.data(), s.gamma.data(), static_cast<int>(count), out,
+                  SgTerms::kAll);
+}
+
+// D and V (DiffuseAndVisibility) of `count` pixels of object o. With a map,
+// V is the SG specular's luminance with γ over that without, summed in the
+// diffuse pass (the same lobe loop) when any γ of the run is below 1: the
+// SG light knows where the lobes are shadowed, the map what they reflect.
+void ShadeRunDiffuseAndVisibility(const ShadeInputs& in, int32_t o, const uint32_t* pixels, size_t count, RunScratch& s,
+                                  DiffuseAndVisibility* out) {
+  GatherRun(in, o, pixels, count, s);
+  for (size_t k = 0; k < count; ++k) out[k] = DiffuseAndVisibility{};
+  const LightPrep& p = in.preps[o];
+  if (p.axes.empty()) return;
+  for (SgMaterial& material : s.materials) material.base_color = Vec3(1, 1, 1);
+  s.rgb.assign(count, Vec3f{});
+  const bool any_shadow = std::any_of(s.gamma.begin(), s.gamma.end(), [](float x) { return x < 1.0f; });
+  if (any_shadow) {
+    s.shadowed.assign(count, Vec3f{});
+    p.shader->Shade(s.materials.data(), s.normals.data(), s.views.data(), s.gamma.data(), static_cast<int>(count),
+                    s.rgb.data(), SgTerms::kDiffuseAndVisibility, s.shadowed.data());
+  } else {
+    p.shader->Shade(s.materials.data(), s.normals.data(), s.views.data(), s.gamma.data(), static_cast<int>(count),
+                    s.rgb.data(), SgTerms::kDiffuse);
+  }
+  for (size_t k = 0; k < count; ++k) {
+    out[k].d[0] = s.rgb[k].x, out[k].d[1] = s.rgb[k].y, out[k].d[2] = s.rgb[k].z;
+    if (any_shadow && s.shadowed[k].y > 0.0f && std::isfinite(s.shadowed[k].y))
+      out[k].visibility = std::clamp(s.shadowed[k].x / s.shadowed[k].y, 0.0f, 1.0f);
+  }
+}
+
+// Calls f(o, first, count) for each run of consecutive entries of `pixels`
+// that belong to one object.
+template <class F>
+void ForEachRun(const ObjectGBuffer& g, const std::vector<uint32_t>& pixels, F&& f) {
+  for (size_t run = 0; run < pixels.size();) {
+    const int32_t o = g.object[pixels[run]];
+    size_t run_end = run + 1;
+    while (run_end < pixels.size() && g.object[pixels[run_end]] == o) ++run_end;
+    f(o, run, run_end - run);
+    run = run_end;
+  }
+}
+
+void Store(const Vec3f& rgb, size_t px, ImageF& object) {
+  const Vec3f value = Finite(rgb) ? rgb : Vec3f{};
+  object.pixels[px * 3 + 0] = std::max(value.x, 0.0f);
+  object.pixels[px * 3 + 1] = std::max(value.y, 0.0f);
+  object.pixels[px * 3 + 2] = std::max(value.z, 0.0f);
+}
+
+// The coarse grid of D and V (InsertOptions::shade_step): nodes every
+// `step` pixels of the G-buffer's rectangle, from its corner.
+struct ShadeGrid {
+  int step = 1, columns = 0, rows = 0;
+  std::vector<int32_t> object;  // per node: the object shaded there, −1: none (uncovered or not on the grid path)
+  std::vector<DiffuseAndVisibility> values;
+  std::vector<float> mean_brightest;  // per object: mean over its nodes of D's brightest channel
+  size_t Node(int column, int row) const { return size_t(row) * size_t(columns) + size_t(column); }
+};
+
+// Whether the grid may stand in for a pixel of object o with normal n in
+// the cell whose top-left node is (cx, cy), and if so its D and V: the four
+// nodes are that object's, their normals within the cell test's angle of
+// the pixel's (a pixel of another surface behind, a crease or a fold in
+// the cell: shaded exactly), and their D and V agree to shade_refine_delta
+// (relative to the brightest D channel; V absolute). Bilinear in the
+// pixel's position between the nodes.
+bool InterpolateFromGrid(const ShadeGrid& grid, const ObjectGBuffer& g, int32_t o, int x, int y, const Vec3f& n,
+                         float min_cos, float delta, DiffuseAndVisibility* out) {
+  const int step = grid.step;
+  const int rx = x - g.rect.x0, ry = y - g.rect.y0;
+  const int cx = rx / step, cy = ry / step;
+  if (cx + 1 >= grid.columns || cy + 1 >= grid.rows) return false;
+  const size_t nodes[4] = {grid.Node(cx, cy), grid.Node(cx + 1, cy), grid.Node(cx, cy + 1), grid.Node(cx + 1, cy + 1)};
+  float lo[4], hi[4];
+  for (int c = 0; c < 4; ++c) lo[c] = std::numeric_limits<float>::infinity(), hi[c] = -lo[c];
+  for (int k = 0; k < 4; ++k) {
+    if (grid.object[nodes[k]] != o) return false;
+    const int nx = g.rect.x0 + (cx + (k & 1)) * step, ny = g.rect.y0 + (cy + (k >> 1)) * step;
+    if (Dot(g.normal[g.Index(nx, ny)], n) < min_cos) return false;
+    const DiffuseAndVisibility& v = grid.values[nodes[k]];
+    for (int c = 0; c < 3; ++c) lo[c] = std::min(lo[c], v.d[c]), hi[c] = std::max(hi[c], v.d[c]);
+    lo[3] = std::min(lo[3], v.visibility), hi[3] = std::max(hi[3], v.visibility);
+  }
+  // Relative to the brighter of the cell and the object's mean: a dark
+  // cell (the terminator, a shadowed fold) is held to the object's scale.
+  const float brightest = std::max({hi[0], hi[1], hi[2], grid.mean_brightest[o]});
+  for (int c = 0; c < 3; ++c)
+    if (!(hi[c] - lo[c] <= delta * brightest)) return false;
+  if (!(hi[3] - lo[3] <= delta)) return false;
+  const float fx = float(rx - cx * step) / float(step), fy = float(ry - cy * step) / float(step);
+  const float w[4] = {(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy};
+  *out = DiffuseAndVisibility{};
+  out->visibility = 0;
+  for (int k = 0; k < 4; ++k) {
+    const DiffuseAndVisibility& v = grid.values[nodes[k]];
+    for (int c = 0; c < 3; ++c) out->d[c] += w[k] * v.d[c];
+    out->visibility += w[k] * v.visibility;
+  }
+  return true;
+}
+
+}  // namespace
+
 void ShadeObjects(const std::vector<InsertObject>& objects, const std::vector<WorldSphere>& spheres,
                   const std::vector<LightPrep>& preps, const std::vector<VertexGamma>* vertex_gamma,
                   const std::vector<std::vector<Vec3f>>& vertex_normals, const InsertOptions& options,
                   const ObjectGBuffer& g, const std::vector<uint32_t>& covered, const Vec3f& eye, ImageF& object,
                   const std::vector<PrefilteredRadiance>& specular) {
-  const size_t n_objects = objects.size();
+  const ShadeInputs in{objects, spheres, preps, vertex_gamma, vertex_normals, options, g, eye, specular};
   constexpr size_t kChunk = 256;
-  const size_t chunks = (covered.size() + kChunk - 1) / kChunk;
-  // γ per pixel (interpolated or queried), then render/sg's many-pixel Shade
-  // over each run of pixels of one object in the chunk.
-  ParallelFor(
-      chunks,
-      [&](size_t c) {
-        const size_t begin = c * kChunk, end = std::min(covered.size(), begin + kChunk);
-        std::vector<float> ssd, ssd_min;
-        std::vector<float> gamma;
-        std::vector<SgMaterial> materials;
-        std::vector<Vec3f> normals, views, points, rgb, shadowed, specular_rgb;
-        materials.reserve(end - begin);
-        normals.reserve(end - begin);
-        views.reserve(end - begin);
-        Vec3f point;
-        for (size_t run = begin; run < end;) {
-          const int32_t o = g.object[covered[run]];
-          size_t run_end = run + 1;
-          while (run_end < end && g.object[covered[run_end]] == o) ++run_end;
-          const LightPrep& p = preps[o];
-          const size_t m = p.axes.size();
-          const size_t count = run_end - run;
-          gamma.assign(count * m, 1.0f);
-          materials.clear();
-          normals.clear();
-          views.clear();
-          points.clear();
-          const VertexGamma* vg = vertex_gamma ? &(*vertex_gamma)[o] : nullptr;
-          for (size_t k = run; k < run_end; ++k) {
-            const uint32_t i = covered[k];
-            const Vec3f n = g.normal[i];
-            float* gp = gamma.data() + (k - run) * m;
-            const auto& tri = objects[o].mesh->triangles[g.triangle[i]];
-            const float b1 = g.bary[i][0], b2 = g.bary[i][1], b0 = 1.0f - b1 - b2;
-            // Per vertex unless the rasteriser flipped the normal (a back face
-            // seen): the vertices' γ belong to the other side.
-            if (vg && !vg->gamma.empty() &&
-                Dot(vertex_normals[o][tri[0]] * b0 + vertex_normals[o][tri[1]] * b1 + vertex_normals[o][tri[2]] * b2,
-                    n) > 0.0f) {
-              const float* g0 = &vg->gamma[size_t(tri[0]) * m];
-              const float* g1 = &vg->gamma[size_t(tri[1]) * m];
-              const float* g2 = &vg->gamma[size_t(tri[2]) * m];
-              for (size_t l = 0; l < m; ++l) gp[l] = b0 * g0[l] + b1 * g1[l] + b2 * g2[l];
-            } else if (options.self_shadow && m > 0) {
-              point = g.position[i] + n * static_cast<float>(options.self_shadow_offset_radii * spheres[o].radius);
-              ssd_min.assign(m, std::numeric_limits<float>::infinity());
-              ssd.resize(m);
-              for (size_t j = 0; j < n_objects; ++j) {
-                if (!p.queries[j]) continue;
-                p.queries[j]->Ssd(&point, 1, ssd.data());
-                for (size_t l = 0; l < m; ++l) ssd_min[l] = std::min(ssd_min[l], ssd[l]);
-              }
-              GammaFromSsd(p.axes, p.gamma_rows, n, ssd_min.data(), options.self_shadow_horizon, gp);
-            }
-            materials.push_back(PixelMaterial(objects[o], g.uv[i]));
-            normals.push_back(n);
-            views.push_back(Normalized(eye - g.position[i]));
-            points.push_back(g.position[i]);
-          }
-          rgb.assign(count, Vec3f{});
-          const PrefilteredRadiance* map = size_t(o) < specular.size() && !specular[o].empty() ? &specular[o] : nullptr;
-          // With a map, the specular's self-shadow is the SG specular's
-          // luminance with γ over that without, summed in the diffuse pass
-          // (the same lobe loop) when any γ of the run is below 1.
-          const bool any_shadow = map && std::any_of(gamma.begin(), gamma.end(), [](float x) { return x < 1.0f; });
-          if (m > 0 && any_shadow) {
-            shadowed.assign(count, Vec3f{});
-            p.shader->Shade(materials.data(), normals.data(), views.data(), gamma.data(), static_cast<int>(count),
-                            rgb.data(), SgTerms::kDiffuseAndVisibility, shadowed.data());
-          } else if (m > 0) {
-            p.shader->Shade(materials.data(), normals.data(), views.data(), gamma.data(), static_cast<int>(count),
-                            rgb.data(), map ? SgTerms::kDiffuse : SgTerms::kAll);
-          }
-          if (map) {
-            specular_rgb.resize(count);
-            map->ShadeSpecular(materials.data(), normals.data(), views.data(), points.data(), count,
-                               specular_rgb.data());
-            for (size_t k = 0; k < count; ++k) {
-              float visibility = 1.0f;
-              if (m > 0 && any_shadow && shadowed[k].y > 0.0f && std::isfinite(shadowed[k].y))
-                visibility = std::clamp(shadowed[k].x / shadowed[k].y, 0.0f, 1.0f);
-              rgb[k] += specular_rgb[k] * visibility;
-            }
-          }
-          for (size_t k = run; k < run_end; ++k) {
-            const size_t px = covered[k];  // same layout as the G-buffer
-            const Vec3f value = Finite(rgb[k - run]) ? rgb[k - run] : Vec3f{};
-            object.pixels[px * 3 + 0] = std::max(value.x, 0.0f);
-            object.pixels[px * 3 + 1] = std::max(value.y, 0.0f);
-            object.pixels[px * 3 + 2] = std::max(value.z, 0.0f);
-          }
-          run = run_end;
-        }
-      },
-      1);
+  // The grid path: objects with a map and one roughness and metallic over
+  // the whole object (an albedo map is applied per pixel after the grid).
+  const int step = std::max(1, options.shade_step);
+  std::vector<char> on_grid(objects.size(), 0);
+  bool any_on_grid = false;
+  for (size_t o = 0; o < objects.size(); ++o) {
+    on_grid[o] = step > 1 && in.Map(int32_t(o)) != nullptr && !objects[o].roughness_map && !objects[o].metallic_map;
+    any_on_grid = any_on_grid || on_grid[o];
+  }
+  // 1. D and V at the grid's nodes.
+  ShadeGrid grid;
+  if (any_on_grid) {
+    grid.step = step;
+    grid.columns = (g.rect.width() - 1) / step + 1;
+    grid.rows = (g.rect.height() - 1) / step + 1;
+    grid.object.assign(size_t(grid.columns) * size_t(grid.rows), -1);
+    grid.values.resize(grid.object.size());
+    std::vector<uint32_t> node_pixels;
+    for (int r = 0; r < grid.rows; ++r)
+      for (int c = 0; c < grid.columns; ++c) {
+        const size_t i = g.Index(g.rect.x0 + c * step, g.rect.y0 + r * step);
+        if (g.object[i] >= 0 && on_grid[g.object[i]]) node_pixels.push_back(static_cast<uint32_t>(i));
+      }
+    std::vector<DiffuseAndVisibility> node_values(node_pixels.size());
+    ParallelFor((node_pixels.size() + kChunk - 1) / kChunk,
+                [&](size_t c) {
+                  RunScratch& s = ThreadScratch();
+                  const size_t begin = c * kChunk, end = std::min(node_pixels.size(), begin + kChunk);
+                  s.pixels.assign(node_pixels.begin() + begin, node_pixels.begin() + end);
+                  ForEachRun(g, s.pixels, [&](int32_t o, size_t first, size_t count) {
+                    ShadeRunDiffuseAndVisibility(in, o, &node_pixels[begin + first], count, s,
+                                                 &node_values[begin + first]);
+                  });
+                },
+                1);
+    std::vector<double> sum(objects.size(), 0.0), count(objects.size(), 0.0);
+    for (size_t k = 0; k < node_pixels.size(); ++k) {
+      const int x = int(node_pixels[k] % size_t(g.rect.width())), y = int(node_pixels[k] / size_t(g.rect.width()));
+      const size_t node = grid.Node(x / step, y / step);
+      const int32_t o = g.object[node_pixels[k]];
+      const DiffuseAndVisibility& v = node_values[k];
+      grid.object[node] = o;
+      grid.values[node] = v;
+      const float brightest = std::max({v.d[0], v.d[1], v.d[2]});
+      if (std::isfinite(brightest)) sum[o] += brightest, count[o] += 1;
+    }
+    grid.mean_brightest.assign(objects.size(), 0.0f);
+    for (size_t o = 0; o < objects.size(); ++o)
+      if (count[o] > 0) grid.mean_brightest[o] = static_cast<float>(sum[o] / count[o]);
+  }
+  // 2. Every pixel: from the grid where it may stand in, else exactly.
+  const float min_cos = static_cast<float>(std::cos(options.shade_refine_angle_deg * kPi / 180.0));
+  const float delta = static_cast<float>(options.shade_refine_delta);
+  ParallelFor((covered.size() + kChunk - 1) / kChunk,
+              [&](size_t c) {
+                const size_t begin = c * kChunk, end = std::min(covered.size(), begin + kChunk);
+                RunScratch& s = ThreadScratch();
+                std::vector<uint32_t>& sg_pixels = s.sg_pixels;
+                std::vector<uint32_t>& map_pixels = s.map_pixels;
+                std::vector<uint32_t>& exact_pixels = s.exact_pixels;
+                std::vector<DiffuseAndVisibility>& values = s.values;
+                std::vector<DiffuseAndVisibility>& exact_values = s.exact_values;
+                std::vector<size_t>& exact_slot = s.exact_slot;
+                std::vector<Vec3f>& sg_rgb = s.sg_rgb;
+                sg_pixels.clear(), map_pixels.clear(), exact_pixels.clear();
+                values.clear(), exact_slot.clear();
+                for (size_t k = begin; k < end; ++k) {
+                  const uint32_t i = covered[k];
+                  const int32_t o = g.object[i];
+                  if (in.Map(o) == nullptr) {
+                    sg_pixels.push_back(i);
+                    continue;
+                  }
+                  map_pixels.push_back(i);
+                  values.emplace_back();
+                  if (on_grid[o]) {
+                    const int x = g.rect.x0 + int(i % size_t(g.rect.width())),
+                              y = g.rect.y0 + int(i / size_t(g.rect.width()));
+                    const int rx = x - g.rect.x0, ry = y - g.rect.y0;
+                    if (rx % step == 0 && ry % step == 0) {
+                      values.back() = grid.values[grid.Node(rx / step, ry / step)];
+                      continue;
+                    }
+                    if (InterpolateFromGrid(grid, g, o, x, y, g.normal[i], min_cos, delta, &values.back())) continue;
+                  }
+                  exact_pixels.push_back(i);
+                  exact_slot.push_back(values.size() - 1);
+                }
+                // SG-only objects.
+                ForEachRun(g, sg_pixels, [&](int32_t o, size_t first, size_t count) {
+                  sg_rgb.resize(count);
+                  ShadeRunSg(in, o, &sg_pixels[first], count, s, sg_rgb.data());
+                  for (size_t k = 0; k < count; ++k) Store(sg_rgb[k], sg_pixels[first + k], object);
+                });
+                // D and V where the grid could not stand in.
+                exact_values.resize(exact_pixels.size());
+                ForEachRun(g, exact_pixels, [&](int32_t o, size_t first, size_t count) {
+                  ShadeRunDiffuseAndVisibility(in, o, &exact_pixels[first], count, s, &exact_values[first]);
+                });
+                for (size_t k = 0; k < exact_pixels.size(); ++k) values[exact_slot[k]] = exact_values[k];
+                // The map's specular per pixel: radiance = base ⊙ D + specular · V.
+                ForEachRun(g, map_pixels, [&](int32_t o, size_t first, size_t count) {
+                  const uint32_t* pixels = &map_pixels[first];
+                  GatherRun(in, o, pixels, count, s, /*gamma=*/false);
+                  s.specular_rgb.resize(count);
+                  in.Map(o)->ShadeSpecular(s.materials.data(), s.normals.data(), s.views.data(), s.points.data(), count,
+                                           s.specular_rgb.data());
+                  for (size_t k = 0; k < count; ++k) {
+                    const DiffuseAndVisibility& v = values[first + k];
+                    const Vec3& base = s.materials[k].base_color;
+                    const Vec3f rgb(float(base.x) * v.d[0], float(base.y) * v.d[1], float(base.z) * v.d[2]);
+                    Store(rgb + s.specular_rgb[k] * v.visibility, pixels[k], object);
+                  }
+                });
+              },
+              1);
 }
 
 }  // namespace nerfar
