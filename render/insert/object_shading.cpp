@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 
 #include "calib/core/parallel.h"
@@ -219,6 +220,8 @@ struct ShadeGrid {
   std::vector<int32_t> object;  // per node: the object shaded there, −1: none (uncovered or not on the grid path)
   std::vector<DiffuseAndVisibility> values;
   std::vector<float> mean_brightest;  // per object: mean over its nodes of D's brightest channel
+  std::vector<Vec3f> normal;          // per node: the G-buffer's normal there
+  std::vector<uint8_t> cell_agrees;   // per cell (columns − 1 per row): CellAgrees
   size_t Node(int column, int row) const { return size_t(row) * size_t(columns) + size_t(column); }
 };
 
@@ -227,31 +230,19 @@ struct ShadeGrid {
 // nodes are that object's, their normals within the cell test's angle of
 // the pixel's (a pixel of another surface behind, a crease or a fold in
 // the cell: shaded exactly), and their D and V agree to shade_refine_delta
-// (relative to the brightest D channel; V absolute). Bilinear in the
-// pixel's position between the nodes.
+// (CellAgrees, once per cell). Bilinear in the pixel's position between
+// the nodes.
 bool InterpolateFromGrid(const ShadeGrid& grid, const ObjectGBuffer& g, int32_t o, int x, int y, const Vec3f& n,
-                         float min_cos, float delta, DiffuseAndVisibility* out) {
+                         float min_cos, DiffuseAndVisibility* out) {
   const int step = grid.step;
   const int rx = x - g.rect.x0, ry = y - g.rect.y0;
   const int cx = rx / step, cy = ry / step;
   if (cx + 1 >= grid.columns || cy + 1 >= grid.rows) return false;
-  const size_t nodes[4] = {grid.Node(cx, cy), grid.Node(cx + 1, cy), grid.Node(cx, cy + 1), grid.Node(cx + 1, cy + 1)};
-  float lo[4], hi[4];
-  for (int c = 0; c < 4; ++c) lo[c] = std::numeric_limits<float>::infinity(), hi[c] = -lo[c];
-  for (int k = 0; k < 4; ++k) {
-    if (grid.object[nodes[k]] != o) return false;
-    const int nx = g.rect.x0 + (cx + (k & 1)) * step, ny = g.rect.y0 + (cy + (k >> 1)) * step;
-    if (Dot(g.normal[g.Index(nx, ny)], n) < min_cos) return false;
-    const DiffuseAndVisibility& v = grid.values[nodes[k]];
-    for (int c = 0; c < 3; ++c) lo[c] = std::min(lo[c], v.d[c]), hi[c] = std::max(hi[c], v.d[c]);
-    lo[3] = std::min(lo[3], v.visibility), hi[3] = std::max(hi[3], v.visibility);
-  }
-  // Relative to the brighter of the cell and the object's mean: a dark
-  // cell (the terminator, a shadowed fold) is held to the object's scale.
-  const float brightest = std::max({hi[0], hi[1], hi[2], grid.mean_brightest[o]});
-  for (int c = 0; c < 3; ++c)
-    if (!(hi[c] - lo[c] <= delta * brightest)) return false;
-  if (!(hi[3] - lo[3] <= delta)) return false;
+  const size_t node = grid.Node(cx, cy);
+  if (!grid.cell_agrees[size_t(cy) * size_t(grid.columns - 1) + size_t(cx)] || grid.object[node] != o) return false;
+  const size_t nodes[4] = {node, node + 1, node + size_t(grid.columns), node + size_t(grid.columns) + 1};
+  for (int k = 0; k < 4; ++k)
+    if (Dot(grid.normal[nodes[k]], n) < min_cos) return false;
   const float fx = float(rx - cx * step) / float(step), fy = float(ry - cy * step) / float(step);
   const float w[4] = {(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy};
   *out = DiffuseAndVisibility{};
@@ -262,6 +253,29 @@ bool InterpolateFromGrid(const ShadeGrid& grid, const ObjectGBuffer& g, int32_t 
     out->visibility += w[k] * v.visibility;
   }
   return true;
+}
+
+// Whether the cell whose top-left node is (cx, cy) has four nodes of one
+// object whose D and V agree to delta (InterpolateFromGrid's value test).
+bool CellAgrees(const ShadeGrid& grid, int cx, int cy, float delta) {
+  const size_t node = grid.Node(cx, cy);
+  const size_t nodes[4] = {node, node + 1, node + size_t(grid.columns), node + size_t(grid.columns) + 1};
+  const int32_t o = grid.object[node];
+  if (o < 0) return false;
+  float lo[4], hi[4];
+  for (int c = 0; c < 4; ++c) lo[c] = std::numeric_limits<float>::infinity(), hi[c] = -lo[c];
+  for (int k = 0; k < 4; ++k) {
+    if (grid.object[nodes[k]] != o) return false;
+    const DiffuseAndVisibility& v = grid.values[nodes[k]];
+    for (int c = 0; c < 3; ++c) lo[c] = std::min(lo[c], v.d[c]), hi[c] = std::max(hi[c], v.d[c]);
+    lo[3] = std::min(lo[3], v.visibility), hi[3] = std::max(hi[3], v.visibility);
+  }
+  // Relative to the brighter of the cell and the object's mean: a dark
+  // cell (the terminator, a shadowed fold) is held to the object's scale.
+  const float brightest = std::max({hi[0], hi[1], hi[2], grid.mean_brightest[o]});
+  for (int c = 0; c < 3; ++c)
+    if (!(hi[c] - lo[c] <= delta * brightest)) return false;
+  return hi[3] - lo[3] <= delta;
 }
 
 }  // namespace
@@ -322,10 +336,26 @@ void ShadeObjects(const std::vector<InsertObject>& objects, const std::vector<Wo
     grid.mean_brightest.assign(objects.size(), 0.0f);
     for (size_t o = 0; o < objects.size(); ++o)
       if (count[o] > 0) grid.mean_brightest[o] = static_cast<float>(sum[o] / count[o]);
+    grid.normal.assign(grid.object.size(), Vec3f{});
+    grid.cell_agrees.assign(size_t(std::max(0, grid.columns - 1)) * size_t(std::max(0, grid.rows - 1)), 0);
+    const float delta = static_cast<float>(options.shade_refine_delta);
+    ParallelFor(
+        size_t(grid.rows),
+        [&](size_t r) {
+          for (int c = 0; c < grid.columns; ++c)
+            grid.normal[grid.Node(c, int(r))] = g.normal[g.Index(g.rect.x0 + c * step, g.rect.y0 + int(r) * step)];
+        },
+        8);
+    ParallelFor(
+        size_t(std::max(0, grid.rows - 1)),
+        [&](size_t r) {
+          for (int c = 0; c + 1 < grid.columns; ++c)
+            grid.cell_agrees[r * size_t(grid.columns - 1) + size_t(c)] = CellAgrees(grid, c, int(r), delta);
+        },
+        8);
   }
   // 2. Every pixel: from the grid where it may stand in, else exactly.
   const float min_cos = static_cast<float>(std::cos(options.shade_refine_angle_deg * kPi / 180.0));
-  const float delta = static_cast<float>(options.shade_refine_delta);
   ParallelFor((covered.size() + kChunk - 1) / kChunk,
               [&](size_t c) {
                 const size_t begin = c * kChunk, end = std::min(covered.size(), begin + kChunk);
@@ -356,7 +386,7 @@ void ShadeObjects(const std::vector<InsertObject>& objects, const std::vector<Wo
                       values.back() = grid.values[grid.Node(rx / step, ry / step)];
                       continue;
                     }
-                    if (InterpolateFromGrid(grid, g, o, x, y, g.normal[i], min_cos, delta, &values.back())) continue;
+                    if (InterpolateFromGrid(grid, g, o, x, y, g.normal[i], min_cos, &values.back())) continue;
                   }
                   exact_pixels.push_back(i);
                   exact_slot.push_back(values.size() - 1);
