@@ -298,7 +298,7 @@ void ShadeObjects(const std::vector<InsertObject>& objects, const std::vector<Wo
   }
   // 1. D and V at the grid's nodes.
   ShadeGrid grid;
-  if (any_on_grid) {
+  if (any_on_grid && !covered.empty() && g.rect.width() > 0 && g.rect.height() > 0) {
     grid.step = step;
     grid.columns = (g.rect.width() - 1) / step + 1;
     grid.rows = (g.rect.height() - 1) / step + 1;
