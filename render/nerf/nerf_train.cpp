@@ -112,7 +112,21 @@ NerfTrainOptions NerfTrainOptions::Preset(const std::string& name) {
     o.rays_per_step = 8192;
     o.coarse_voxel_m = 0.01;
     o.levels = 3;
-    o.last_level_start = 0.4;
+    // The coarse levels take balanced's step counts (1 cm: steps 0-562, 5 mm:
+    // 563-1124; level l starts at last_level_start · l / (levels - 1)), the
+    // rest is the 2.5 mm level. With 0.4 (1000 steps each) window's plain table
+    // was learnt on the coarse levels as a 2-3 cm translucent slab under its
+    // top that the finest level never removed: surface depth 12.57 mm, 31.99 dB
+    // (session 7). Session 8, window, live renders after step 1300 (under load
+    // 9-10): 0.225 gives 8.75 mm, 0.225 with foreground_weight 1 7.97 mm
+    // (31.16 / 31.30 dB); the old schedule at step 2262 had 11.79 mm. Full
+    // run with both (66 min at load 9-13): window 32.37 dB, surface depth
+    // 8.22 mm (balanced 30.51 dB, 7.09 mm); lamps after step 1300: 32.15 dB,
+    // 4.19 mm (balanced 30.86 dB, 5.51 mm).
+    o.last_level_start = 0.225;
+    // As fast (session 7): the foreground penalty at 1. With the old schedule
+    // alone it took window 12.57 -> 10.87 mm, 31.99 -> 32.22 dB.
+    o.foreground_weight = 1.0;
     o.step_voxels = 0.4;
   } else {
     throw InputError("preset '" + name + "' (expected fast, balanced or accurate)");

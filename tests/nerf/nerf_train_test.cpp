@@ -1,13 +1,15 @@
 // Tests of the trainer's priors (render/nerf/nerf_train): a surface seen only
 // from above must not extrapolate its colour below the view-independent value
 // towards directions no camera saw; a thin surface seen at grazing angles must
-// come out opaque, not translucent.
+// come out opaque, not translucent; the accurate preset's coarse levels take
+// the step counts of balanced's.
 #include "render/nerf/nerf_train.h"
 
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <cstdio>
+#include <string>
 #include <vector>
 
 #include "render/nerf/nerf_field.h"
@@ -165,6 +167,37 @@ TEST(NerfTrainOpacity, ForegroundPenaltyMakesAGrazingPlateOpaque) {
   // stronger penalty (measured 0.025 -> 0.004; the margin covers the seed-
   // and platform-level float differences of a 200-step fit).
   EXPECT_LT(1.0 - strong, 0.5 * (1.0 - weak));
+}
+
+// The steps a preset's schedule runs at each coarse level, counted by
+// training it (on the ring scene at a coarse voxel and a few rays per step, so
+// that a step costs little; the level schedule depends on the step count only).
+std::vector<int> CoarseLevelSteps(const std::string& preset) {
+  NerfTrainOptions o = NerfTrainOptions::Preset(preset);
+  o.rays_per_step = 16;
+  o.coarse_voxel_m = 0.04;
+  o.eval_views = 0;
+  o.max_seconds = 0;
+  NerfTrainer trainer(RingScene(), o);
+  std::vector<int> steps(size_t(o.levels), 0);
+  while (!trainer.Done() && trainer.level() < o.levels - 1) {
+    trainer.Step();
+    // The step just run was at the level the trainer is at now (levels change
+    // at the start of a step).
+    if (trainer.level() < o.levels - 1) ++steps[size_t(trainer.level())];
+  }
+  steps.pop_back();  // the finest level: not run here
+  return steps;
+}
+
+TEST(NerfTrainSchedule, AccurateCoarseLevelsTakeBalancedsStepCounts) {
+  // Hand count: balanced (2500 steps, finest level from 0.45, the middle one
+  // from 0.225) runs steps 0..562 at 1 cm (563 steps: 562 / 2500 < 0.225 <=
+  // 563 / 2500) and 563..1124 at 5 mm (562 steps: 1125 / 2500 = 0.45);
+  // accurate (5000 steps, 0.225 and 0.1125) the same 563 and 562.
+  const std::vector<int> expected = {563, 562};
+  EXPECT_EQ(CoarseLevelSteps("balanced"), expected);
+  EXPECT_EQ(CoarseLevelSteps("accurate"), expected);
 }
 
 }  // namespace
