@@ -90,28 +90,11 @@ void NerfScene::Render(const SceneRays& rays, SceneSamples& out, bool light) con
   }
 }
 
-Vec3f NerfScene::GradientNormal(const Vec3f& p) const {
-  // Unit gradients averaged at the point and ±1 voxel along each axis:
-  // smooths the trilinear field's piecewise gradient, and normalising each
-  // first keeps σ's range (1e-13 to 1e6 per metre) from letting one sample
-  // decide alone.
-  const float h = field_.voxel_m;
-  const Vec3f offsets[7] = {{0, 0, 0}, {h, 0, 0}, {-h, 0, 0}, {0, h, 0}, {0, -h, 0}, {0, 0, h}, {0, 0, -h}};
-  Vec3f g{};
-  for (const Vec3f& o : offsets) {
-    const Vec3f d = field_.DensityGradient(p + o);
-    const float len = Length(d);
-    if (len > 0.0f && std::isfinite(len)) g += d * (1.0f / len);
-  }
-  const float len = Length(g);
-  return len > 0.0f && std::isfinite(len) ? g * (-1.0f / len) : Vec3f{};
-}
-
 void NerfScene::Normals(const std::vector<Vec3f>& points, std::vector<Vec3f>& normals) const {
   normals.assign(points.size(), Vec3f{});
   const float h = static_cast<float>(options_.normal_probe_voxels) * field_.voxel_m;
   for (size_t i = 0; i < points.size(); ++i) {
-    const Vec3f n0 = GradientNormal(points[i]);
+    const Vec3f n0 = AveragedGradientNormal(field_, points[i]);
     normals[i] = n0;
     if (!(h > 0.0f) || Dot(n0, n0) < 0.5f) continue;
     // Tangent basis of the gradient's plane.

@@ -88,8 +88,6 @@ class NerfScene final : public SceneField {
 
  private:
   void Render(const SceneRays& rays, SceneSamples& out, bool light) const;
-  // The averaged density-gradient normal at p (zero where undefined).
-  Vec3f GradientNormal(const Vec3f& p) const;
   const NerfField& field_;
   NerfSceneOptions options_;
   mutable std::atomic<uint64_t> light_samples_{0}, light_view_samples_{0};
