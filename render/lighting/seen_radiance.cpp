@@ -104,6 +104,25 @@ size_t ApplySeenRadiance(const NerfField& field, const std::vector<NerfRay>& ray
       points.size(),
       [&](size_t p) {
         double best = -1;
+        // One view from outside the volume towards the point, along -u
+        // (false where it misses the volume).
+        const auto look = [&](const Vec3f& u, NerfRayResult& res) {
+          NerfRay ray{points[p] + u * kFar, -u, 0, 0};
+          if (!IntersectAabb(field.aabb, ray.origin, ray.dir, ray.t_near, ray.t_far)) return false;
+          res = field.RenderRay(ray, render);
+          point_samples[p] += res.samples;
+          return true;
+        };
+        // The seen radiance: the brightest surface the views found at the point.
+        const auto keep_brightest = [&](const NerfRayResult& res) {
+          const Vec3f radiance = res.color * (1.0f / res.opacity);
+          const double y = LuminanceOf(Vec3(radiance));
+          if (y > best) {
+            best = y;
+            seen[p] = radiance;
+            reached[p] = 1;
+          }
+        };
         // Face views first: the band's directions in front of the point's face.
         if (options.face_views && point_surface[p]) {
           Vec3f n = AveragedGradientNormal(field, points[p]);
@@ -115,20 +134,10 @@ size_t ApplySeenRadiance(const NerfField& field, const std::vector<NerfRay>& ray
           const size_t count = std::min(facing.size(), static_cast<size_t>(options.views));
           for (size_t i = 0; i < count; ++i) {
             // Evenly over the facing candidates (they run up the band's elevations).
-            const Vec3f& u = *facing[(2 * i + 1) * facing.size() / (2 * count)];
-            NerfRay ray{points[p] + u * kFar, -u, 0, 0};
-            if (!IntersectAabb(field.aabb, ray.origin, ray.dir, ray.t_near, ray.t_far)) continue;
-            const NerfRayResult res = field.RenderRay(ray, render);
-            point_samples[p] += res.samples;
-            if (!(res.opacity > options.min_opacity) || !(std::fabs(res.surface_depth - kFar) <= options.face_reach_m))
-              continue;
-            const Vec3f radiance = res.color * (1.0f / res.opacity);
-            const double y = LuminanceOf(Vec3(radiance));
-            if (y > best) {
-              best = y;
-              seen[p] = radiance;
-              reached[p] = 1;
-            }
+            NerfRayResult res;
+            if (!look(*facing[(2 * i + 1) * facing.size() / (2 * count)], res)) continue;
+            if (res.opacity > options.min_opacity && std::fabs(res.surface_depth - kFar) <= options.face_reach_m)
+              keep_brightest(res);
           }
         }
         // The whole band: the see-through votes, and the seen radiance of a
@@ -136,10 +145,8 @@ size_t ApplySeenRadiance(const NerfField& field, const std::vector<NerfRay>& ray
         const bool face_seen = reached[p] != 0;
         if (face_seen && !options.see_through) return;
         for (const Vec3f& u : view_dirs) {
-          NerfRay ray{points[p] + u * kFar, -u, 0, 0};  // from outside the volume, towards the point
-          if (!IntersectAabb(field.aabb, ray.origin, ray.dir, ray.t_near, ray.t_far)) continue;
-          const NerfRayResult res = field.RenderRay(ray, render);
-          point_samples[p] += res.samples;
+          NerfRayResult res;
+          if (!look(u, res)) continue;
           // The point lies kFar along the view. The vote (see-through): a
           // view still more than half transparent past the point sees
           // through it, one whose surface lies at it (within
@@ -152,14 +159,7 @@ size_t ApplySeenRadiance(const NerfField& field, const std::vector<NerfRay>& ray
           else if (offset >= -options.see_through_reach_m)
             ++meet[p];
           // The seen radiance: a surface within reach_m of the point.
-          if (face_seen || !opaque || std::fabs(offset) > options.reach_m) continue;
-          const Vec3f radiance = res.color * (1.0f / res.opacity);
-          const double y = LuminanceOf(Vec3(radiance));
-          if (y > best) {
-            best = y;
-            seen[p] = radiance;
-            reached[p] = 1;
-          }
+          if (!face_seen && opaque && !(std::fabs(offset) > options.reach_m)) keep_brightest(res);
         }
       },
       8);
