@@ -136,14 +136,17 @@ TEST(Demo, QuickDemoEndToEndPutsTheTorusOnTheSurfaceUnderTheImageCentre) {
     ASSERT_EQ(ar.width, camera.width);
     const Image8 bare = stream->RenderFrame(static_cast<double>(last) / 30.0, last).image;  // the stream's 30 fps
     ASSERT_EQ(bare.width, ar.width);
-    int silhouette = 0, changed_inside = 0, changed_outside = 0;
+    int silhouette = 0, changed_inside = 0, changed_outside = 0, brighter_outside = 0;
     double sx = 0, sy = 0, cx = 0, cy = 0;
     const int hud_rows = 30;  // the HUD's two text lines at the top are not the scene
     for (int y = hud_rows; y < ar.height; ++y)
       for (int x = 0; x < ar.width; ++x) {
-        int d = 0;
-        for (int c = 0; c < 3; ++c)
-          d = std::max(d, std::abs(ar.at(x, y, c) - bare.at(x, y, std::min(c, bare.channels - 1))));
+        int d = 0, brighter = 0;
+        for (int c = 0; c < 3; ++c) {
+          const int diff = ar.at(x, y, c) - bare.at(x, y, std::min(c, bare.channels - 1));
+          d = std::max(d, std::abs(diff));
+          brighter = std::max(brighter, diff);
+        }
         const bool in = g.rect.Contains(x, y) && g.object[g.Index(x, y)] >= 0;
         // 15 levels: the one-sample stream re-rendered is identical, and the
         // composite's round trip (8-bit -> linear / gain -> 8-bit) moves bare
@@ -157,6 +160,7 @@ TEST(Demo, QuickDemoEndToEndPutsTheTorusOnTheSurfaceUnderTheImageCentre) {
         }
         if (changed) {
           ++(in ? changed_inside : changed_outside);
+          if (!in && brighter > 15) ++brighter_outside;
           if (in) {
             cx += x;
             cy += y;
@@ -164,14 +168,17 @@ TEST(Demo, QuickDemoEndToEndPutsTheTorusOnTheSurfaceUnderTheImageCentre) {
         }
       }
     ASSERT_GT(silhouette, 0);
-    std::printf("torus silhouette %d px, changed inside %d, changed outside %d\n", silhouette, changed_inside,
-                changed_outside);
+    std::printf("torus silhouette %d px, changed inside %d, changed outside %d (brighter %d)\n", silhouette,
+                changed_inside, changed_outside, brighter_outside);
     // Most of the silhouette is drawn (parts of the torus lit like the table
-    // can stay within 40 levels of it), and little is drawn elsewhere (the
-    // edge pixels the tracked pose shifts by ~1 px, and shadow where it is
-    // darker than 40 levels).
+    // can stay within 40 levels of it), and little is drawn elsewhere: the
+    // pixels outside it that got brighter are the edge pixels the tracked
+    // pose shifts by ~1 px (a misplaced orange torus on the beige table
+    // raises red by far more than 15 levels over hundreds of pixels). The
+    // ones that got darker are its shadow, as large as the light makes it
+    // (session 8: 912 of the 959 changed outside, 47 brighter).
     EXPECT_GT(changed_inside, silhouette * 6 / 10);
-    EXPECT_LT(changed_outside, silhouette / 2);
+    EXPECT_LT(brighter_outside, silhouette / 10);
     if (changed_inside > 0) {
       // Centroids within 2 px: the tracked pose against the true one (~1 px).
       EXPECT_NEAR(cx / changed_inside, sx / silhouette, 2.0);
