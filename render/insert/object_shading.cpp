@@ -130,13 +130,12 @@ void GatherRun(const ShadeInputs& in, int32_t o, const uint32_t* pixels, size_t 
     const std::vector<Vec3f>& vn = in.vertex_normals[o];
     // Per vertex unless the rasteriser flipped the normal (a back face
     // seen): the vertices' γ belong to the other side.
-    if (m == 0) {
-    } else if (vg && !vg->gamma.empty() && Dot(vn[tri[0]] * b0 + vn[tri[1]] * b1 + vn[tri[2]] * b2, n) > 0.0f) {
+    if (m > 0 && vg && !vg->gamma.empty() && Dot(vn[tri[0]] * b0 + vn[tri[1]] * b1 + vn[tri[2]] * b2, n) > 0.0f) {
       const float* g0 = &vg->gamma[size_t(tri[0]) * m];
       const float* g1 = &vg->gamma[size_t(tri[1]) * m];
       const float* g2 = &vg->gamma[size_t(tri[2]) * m];
       for (size_t l = 0; l < m; ++l) gp[l] = b0 * g0[l] + b1 * g1[l] + b2 * g2[l];
-    } else if (in.options.self_shadow) {
+    } else if (m > 0 && in.options.self_shadow) {
       const Vec3f point =
           g.position[i] + n * static_cast<float>(in.options.self_shadow_offset_radii * in.spheres[o].radius);
       s.ssd_min.assign(m, std::numeric_limits<float>::infinity());
@@ -356,69 +355,70 @@ void ShadeObjects(const std::vector<InsertObject>& objects, const std::vector<Wo
   }
   // 2. Every pixel: from the grid where it may stand in, else exactly.
   const float min_cos = static_cast<float>(std::cos(options.shade_refine_angle_deg * kPi / 180.0));
-  ParallelFor((covered.size() + kChunk - 1) / kChunk,
-              [&](size_t c) {
-                const size_t begin = c * kChunk, end = std::min(covered.size(), begin + kChunk);
-                RunScratch& s = ThreadScratch();
-                std::vector<uint32_t>& sg_pixels = s.sg_pixels;
-                std::vector<uint32_t>& map_pixels = s.map_pixels;
-                std::vector<uint32_t>& exact_pixels = s.exact_pixels;
-                std::vector<DiffuseAndVisibility>& values = s.values;
-                std::vector<DiffuseAndVisibility>& exact_values = s.exact_values;
-                std::vector<size_t>& exact_slot = s.exact_slot;
-                std::vector<Vec3f>& sg_rgb = s.sg_rgb;
-                sg_pixels.clear(), map_pixels.clear(), exact_pixels.clear();
-                values.clear(), exact_slot.clear();
-                for (size_t k = begin; k < end; ++k) {
-                  const uint32_t i = covered[k];
-                  const int32_t o = g.object[i];
-                  if (in.Map(o) == nullptr) {
-                    sg_pixels.push_back(i);
-                    continue;
-                  }
-                  map_pixels.push_back(i);
-                  values.emplace_back();
-                  if (on_grid[o]) {
-                    const int x = g.rect.x0 + int(i % size_t(g.rect.width())),
-                              y = g.rect.y0 + int(i / size_t(g.rect.width()));
-                    const int rx = x - g.rect.x0, ry = y - g.rect.y0;
-                    if (rx % step == 0 && ry % step == 0) {
-                      values.back() = grid.values[grid.Node(rx / step, ry / step)];
-                      continue;
-                    }
-                    if (InterpolateFromGrid(grid, g, o, x, y, g.normal[i], min_cos, &values.back())) continue;
-                  }
-                  exact_pixels.push_back(i);
-                  exact_slot.push_back(values.size() - 1);
-                }
-                // SG-only objects.
-                ForEachRun(g, sg_pixels, [&](int32_t o, size_t first, size_t count) {
-                  sg_rgb.resize(count);
-                  ShadeRunSg(in, o, &sg_pixels[first], count, s, sg_rgb.data());
-                  for (size_t k = 0; k < count; ++k) Store(sg_rgb[k], sg_pixels[first + k], object);
-                });
-                // D and V where the grid could not stand in.
-                exact_values.resize(exact_pixels.size());
-                ForEachRun(g, exact_pixels, [&](int32_t o, size_t first, size_t count) {
-                  ShadeRunDiffuseAndVisibility(in, o, &exact_pixels[first], count, s, &exact_values[first]);
-                });
-                for (size_t k = 0; k < exact_pixels.size(); ++k) values[exact_slot[k]] = exact_values[k];
-                // The map's specular per pixel: radiance = base ⊙ D + specular · V.
-                ForEachRun(g, map_pixels, [&](int32_t o, size_t first, size_t count) {
-                  const uint32_t* pixels = &map_pixels[first];
-                  GatherRun(in, o, pixels, count, s, /*gamma=*/false);
-                  s.specular_rgb.resize(count);
-                  in.Map(o)->ShadeSpecular(s.materials.data(), s.normals.data(), s.views.data(), s.points.data(), count,
-                                           s.specular_rgb.data());
-                  for (size_t k = 0; k < count; ++k) {
-                    const DiffuseAndVisibility& v = values[first + k];
-                    const Vec3& base = s.materials[k].base_color;
-                    const Vec3f rgb(float(base.x) * v.d[0], float(base.y) * v.d[1], float(base.z) * v.d[2]);
-                    Store(rgb + s.specular_rgb[k] * v.visibility, pixels[k], object);
-                  }
-                });
-              },
-              1);
+  ParallelFor(
+      (covered.size() + kChunk - 1) / kChunk,
+      [&](size_t c) {
+        const size_t begin = c * kChunk, end = std::min(covered.size(), begin + kChunk);
+        RunScratch& s = ThreadScratch();
+        std::vector<uint32_t>& sg_pixels = s.sg_pixels;
+        std::vector<uint32_t>& map_pixels = s.map_pixels;
+        std::vector<uint32_t>& exact_pixels = s.exact_pixels;
+        std::vector<DiffuseAndVisibility>& values = s.values;
+        std::vector<DiffuseAndVisibility>& exact_values = s.exact_values;
+        std::vector<size_t>& exact_slot = s.exact_slot;
+        std::vector<Vec3f>& sg_rgb = s.sg_rgb;
+        sg_pixels.clear(), map_pixels.clear(), exact_pixels.clear();
+        values.clear(), exact_slot.clear();
+        for (size_t k = begin; k < end; ++k) {
+          const uint32_t i = covered[k];
+          const int32_t o = g.object[i];
+          if (in.Map(o) == nullptr) {
+            sg_pixels.push_back(i);
+            continue;
+          }
+          map_pixels.push_back(i);
+          values.emplace_back();
+          if (on_grid[o]) {
+            // G-buffer indices run over its rectangle.
+            const int rx = int(i % size_t(g.rect.width())), ry = int(i / size_t(g.rect.width()));
+            if (rx % step == 0 && ry % step == 0) {
+              values.back() = grid.values[grid.Node(rx / step, ry / step)];
+              continue;
+            }
+            if (InterpolateFromGrid(grid, g, o, g.rect.x0 + rx, g.rect.y0 + ry, g.normal[i], min_cos, &values.back()))
+              continue;
+          }
+          exact_pixels.push_back(i);
+          exact_slot.push_back(values.size() - 1);
+        }
+        // SG-only objects.
+        ForEachRun(g, sg_pixels, [&](int32_t o, size_t first, size_t count) {
+          sg_rgb.resize(count);
+          ShadeRunSg(in, o, &sg_pixels[first], count, s, sg_rgb.data());
+          for (size_t k = 0; k < count; ++k) Store(sg_rgb[k], sg_pixels[first + k], object);
+        });
+        // D and V where the grid could not stand in.
+        exact_values.resize(exact_pixels.size());
+        ForEachRun(g, exact_pixels, [&](int32_t o, size_t first, size_t count) {
+          ShadeRunDiffuseAndVisibility(in, o, &exact_pixels[first], count, s, &exact_values[first]);
+        });
+        for (size_t k = 0; k < exact_pixels.size(); ++k) values[exact_slot[k]] = exact_values[k];
+        // The map's specular per pixel: radiance = base ⊙ D + specular · V.
+        ForEachRun(g, map_pixels, [&](int32_t o, size_t first, size_t count) {
+          const uint32_t* pixels = &map_pixels[first];
+          GatherRun(in, o, pixels, count, s, /*gamma=*/false);
+          s.specular_rgb.resize(count);
+          in.Map(o)->ShadeSpecular(s.materials.data(), s.normals.data(), s.views.data(), s.points.data(), count,
+                                   s.specular_rgb.data());
+          for (size_t k = 0; k < count; ++k) {
+            const DiffuseAndVisibility& v = values[first + k];
+            const Vec3& base = s.materials[k].base_color;
+            const Vec3f rgb(float(base.x) * v.d[0], float(base.y) * v.d[1], float(base.z) * v.d[2]);
+            Store(rgb + s.specular_rgb[k] * v.visibility, pixels[k], object);
+          }
+        });
+      },
+      1);
 }
 
 }  // namespace nerfar
