@@ -127,8 +127,7 @@ int RunInsert(const CommandArgs& args) {
   int light_refine_rays = -1;
   bool gamma_per_pixel = false;
   double shadow_reach = -1, self_shadow_offset = -1, receiver_min_opacity = -1;
-  bool no_self_shadow = false, no_shadows = false, paper_gamma = false, truth_geometry = false,
-       occluder_from_nerf = false;
+  bool no_self_shadow = false, no_shadows = false, paper_gamma = false, truth_geometry = false;
   bool light_from_centre = false, no_seen_radiance = false, expected_depth = false;
   bool no_see_through = false;
   int seen_views = -1;
@@ -225,9 +224,6 @@ int RunInsert(const CommandArgs& args) {
   parser.Flag("--no-specular-parallax", &no_specular_parallax,
               "prefiltered reflections looked up along the reflected direction, as if all they reflect were distant "
               "(the default in fast and balanced)");
-  parser.Flag("--occluder-from-nerf", &occluder_from_nerf,
-              "scene parts in front of an object take the NeRF's colour (paper eq. 7; always with --background nerf) "
-              "instead of the camera frame's pixel weighted by the NeRF's opacity");
   parser.Flag("--paper-gamma", &paper_gamma,
               "self-shadow γ = f_h(S)/f_h(π/2) as in the paper (default: horizon-relative)");
   parser.Option("--light-probe", &light_probe, "FILE", "light every object with this panorama fitted with SGs instead");
@@ -304,7 +300,6 @@ int RunInsert(const CommandArgs& args) {
   if (no_self_shadow) options.self_shadow = false;
   if (no_shadows) options.shadows = false;
   if (paper_gamma) options.self_shadow_horizon = false;
-  if (occluder_from_nerf || background == "nerf") options.occluder_from_background = false;
   if (sg_specular) options.prefiltered_specular = false;
   if (specular_parallax) options.specular_parallax = true;
   if (no_specular_parallax) options.specular_parallax = false;

@@ -130,7 +130,6 @@ std::string InsertOptions::ToJson() const {
   j["kappa_sample_min_radius"] = kappa_sample_min_radius;
   j["occlusion_step"] = occlusion_step;
   j["occlusion_clear_opacity"] = occlusion_clear_opacity;
-  j["occluder_from_background"] = occluder_from_background;
   j["kappa_cache_spacing_radii"] = kappa_cache_spacing_radii;
   j["kappa_plane_upsampling"] = kappa_plane_upsampling;
   j["kappa_receiver_reuse"] = kappa_receiver_reuse;

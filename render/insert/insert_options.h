@@ -72,14 +72,6 @@ struct InsertOptions {
   // the object unoccluded, the others march every pixel (1: every pixel).
   int occlusion_step = 2;
   double occlusion_clear_opacity = 1e-3;
-  // What the scene in front of an object pixel looks like: true, the
-  // background's own pixel weighted by the NeRF's opacity in front of the
-  // object, I_α·I_v + (1 − I_α)·I_o (a matte for a camera frame: an opaque
-  // occluder keeps exactly what the camera saw, and a NeRF halo or floater
-  // does not paint its colour over the frame); false: the NeRF's colour
-  // over that range, I_α·I_c + (1 − I_α)·I_o (paper eq. 7; exact when the
-  // background is the NeRF's own rendering).
-  bool occluder_from_background = true;
 
   bool shadows = true;               // κ on the scene (paper eq. 8)
   double shadow_reach_radii = 12.0;  // κ only within this distance (× bounding radius) of an object's centre
@@ -102,9 +94,9 @@ struct InsertOptions {
   // 1.00 (docs/BENCHMARKS.md, session 7), and it costs 2-2.5× the κ time
   // under a sky of many distant sources.
   bool kappa_from_samples = false;
-  int kappa_sample_bins = 128;            // Fibonacci bins the samples are gathered into (per kind: near, distant)
-  double kappa_sample_min_radius = 0.03;  // radians: no source narrower (the SSDF's own resolution)
-  int kappa_step = 2;                     // κ at every kappa_step-th pixel, bilinear in between (1: every pixel)
+  int kappa_sample_bins = 128;             // Fibonacci bins the samples are gathered into (per kind: near, distant)
+  double kappa_sample_min_radius = 0.03;   // radians: no source narrower (the SSDF's own resolution)
+  int kappa_step = 2;  // κ at every kappa_step-th pixel, bilinear in between (1: every pixel)
   // κ grid nodes whose surrounding grid cells hold only object pixels (no
   // background pixel is multiplied by them) are neither found nor
   // evaluated, and hold κ = 1 in the κ layer (only cells wholly under the

@@ -111,13 +111,11 @@ void OccludeAndComposite(const SceneField& scene, const InsertOptions& options, 
           }
           const float w = 1.0f - opacity;
           layers.alpha.pixels[i] = w;
-          // The NeRF's Ĉ is I_α·I_c (opacity-weighted); the background's
-          // pixel weighted alike stands in for it (insert_options.h).
+          // Ĉ = I_α·I_c (opacity-weighted), so this is I_α·I_c + (1 − I_α)·I_v.
           // Edge pixels: the object over the part of the pixel it covers.
           const float cover = g.coverage.empty() ? 1.0f : g.coverage[i];
           for (int ch = 0; ch < 3; ++ch) {
-            const float in_front = options.occluder_from_background ? opacity * frame.at(x, y, ch) : front[ch];
-            const float composite = in_front + w * layers.object.pixels[static_cast<size_t>(i) * 3 + ch];
+            const float composite = front[ch] + w * layers.object.pixels[static_cast<size_t>(i) * 3 + ch];
             frame.at(x, y, ch) = cover * composite + (1.0f - cover) * frame.at(x, y, ch);
           }
         }

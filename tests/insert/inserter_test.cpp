@@ -49,8 +49,7 @@ TEST(Composite, ClippedRangeAndTranslucentOccluder) {
   const SgMixture light = OneLobe({0, 0, 1}, 2.0, 1.0);
   InsertOptions options;
   options.shadows = false;
-  options.antialias_edges = false;           // exact per-pixel composite (edges blend by coverage otherwise)
-  options.occluder_from_background = false;  // paper eq. 7: the medium's own colour in front
+  options.antialias_edges = false;  // exact per-pixel composite (edges blend by coverage otherwise)
   Inserter inserter(scene, {}, options);
   ImageF frame(camera.width, camera.height, 3, 0.25f);
   InsertLayers layers;
@@ -103,7 +102,6 @@ TEST(Composite, OpaqueSceneInFrontHidesTheObject) {
   const SgMixture light = OneLobe({0, 0, 1}, 2.0, 1.0);
   InsertOptions options;
   options.shadows = false;
-  options.occluder_from_background = false;  // paper eq. 7: the sphere's own colour in front
   Inserter inserter(scene, {}, options);
   ImageF frame(camera.width, camera.height, 3, 0.0f);
   InsertLayers layers;
@@ -114,58 +112,6 @@ TEST(Composite, OpaqueSceneInFrontHidesTheObject) {
   ASSERT_GE(layers.gbuffer.object[i], 0);
   EXPECT_NEAR(layers.alpha.pixels[i], 0.0, 1e-6);
   EXPECT_NEAR(frame.at(x, y, 2), params.sphere_radiance.z, 1e-5);
-}
-
-TEST(Composite, OccluderFromTheCameraFrameIsAMatteOverIt) {
-  // The default for camera frames: the scene in front of the object keeps
-  // the frame's own pixel, weighted by the NeRF's opacity there, whatever
-  // colour the NeRF gives it (a camera that saw the occluder darker than the
-  // NeRF holds it, as a black lamp shade under a NeRF halo).
-  AnalyticSceneParams params;
-  params.has_sphere = false;
-  const AnalyticScene scene(params);
-  const SphereObject object({0.0, -0.1, 0.1}, 0.04);  // behind the translucent medium seen from +x
-  const Vec3 eye{0.6, -0.1, 0.1};
-  const Pose cam = LookAt(eye, object.center);
-  const CameraIntrinsics camera = testing::TestCamera(128, 96);
-  const SgMixture light = OneLobe({0, 0, 1}, 2.0, 1.0);
-  InsertOptions options;
-  options.shadows = false;
-  options.antialias_edges = false;
-  ASSERT_TRUE(options.occluder_from_background);  // the default
-  ImageF frame(camera.width, camera.height, 3, 0.0f);
-  for (int y = 0; y < camera.height; ++y)  // a frame unlike the NeRF: a gradient, never the medium's colour
-    for (int x = 0; x < camera.width; ++x)
-      for (int ch = 0; ch < 3; ++ch) frame.at(x, y, ch) = 1e-3f + 0.01f * float(x + ch) / float(camera.width);
-  const ImageF camera_frame = frame;
-  InsertLayers layers;
-  Inserter(scene, {}, options).Render(camera, cam, {object.Object(&light)}, frame, &layers);
-  const ObjectGBuffer& g = layers.gbuffer;
-  size_t through_medium = 0;
-  for (int y = g.rect.y0; y < g.rect.y1; ++y)
-    for (int x = g.rect.x0; x < g.rect.x1; ++x) {
-      const size_t i = g.Index(x, y);
-      if (g.object[i] < 0) continue;
-      // The opacity in front from the ray-sphere chord (as above), not from
-      // the inserter's layers.
-      const Vec3 d(CameraRayDirection(camera, cam, x, y));
-      const Vec3 oc = eye - params.medium_center;
-      const double b = Dot(oc, d), c = Dot(oc, oc) - params.medium_radius * params.medium_radius;
-      double chord = 0;
-      if (b * b - c > 0) {
-        const double s = std::sqrt(b * b - c);
-        chord = std::max(0.0, std::min<double>(g.t[i], -b + s) - std::max(0.0, -b - s));
-      }
-      const double opacity = 1.0 - std::exp(-params.medium_density * chord);
-      through_medium += opacity > 0.1;
-      for (int ch = 0; ch < 3; ++ch) {
-        const double expected =
-            opacity * camera_frame.at(x, y, ch) + (1 - opacity) * layers.object.at(x - g.rect.x0, y - g.rect.y0, ch);
-        // float opacity (1e-4 relative, as above) times a frame value <= 0.011.
-        EXPECT_NEAR(frame.at(x, y, ch), expected, 1e-4 * (1 + expected)) << x << "," << y;
-      }
-    }
-  EXPECT_GT(through_medium, 50u);  // the medium really covers part of the object
 }
 
 // ------------------------------------------------------------------ κ
@@ -460,9 +406,6 @@ TEST(Background, NerfRenderingMatchesTheFieldAndBothBackgroundsAgreeOnTheObject)
   const SgMixture light = OneLobe({0, 0, 1}, 2.0, 1.0);
   InsertOptions options;
   options.antialias_edges = false;  // edge pixels would mix in the two different backgrounds
-  // The NeRF's colour in front (paper eq. 7, what --background nerf uses):
-  // the object's pixels then do not depend on the background.
-  options.occluder_from_background = false;
   Inserter inserter(scene, {}, options);
   ImageF nerf_bg = inserter.RenderBackground(camera, cam);
   // Pixel by pixel against the exact single-ray renderer.
