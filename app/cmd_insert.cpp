@@ -133,6 +133,7 @@ int RunInsert(const CommandArgs& args) {
   int seen_views = -1;
   double seen_group_cm = -1;
   bool seen_whole_band = false;
+  bool no_views_cache = false;
   double normal_probe_voxels = -1;
   ArgParser parser("insert", "Insert virtual objects into a captured scene: light, shade, occlude, shadow, composite.");
   parser.Option(
@@ -203,6 +204,9 @@ int RunInsert(const CommandArgs& args) {
   parser.Option("--normal-probe-voxels", &normal_probe_voxels, "V",
                 "NeRF receiver normals from the surface found V voxels to each side (default 3; 0: density "
                 "gradient only)");
+  parser.Flag("--no-views-cache", &no_views_cache,
+              "every light takes its own seen-radiance views (default in fast and balanced: the answers of cells "
+              "met before are kept, also from the centre rays for the refined sub-rays)");
   parser.Flag("--seen-whole-band", &seen_whole_band,
               "seen radiance from views over the whole capture band (default: the views that see the face the "
               "light ray meets, the band only where none does)");
@@ -288,6 +292,7 @@ int RunInsert(const CommandArgs& args) {
   if (no_seen_radiance) nerf_options.light_seen_radiance = false;
   if (no_see_through) nerf_options.seen.see_through = false;
   if (seen_whole_band) nerf_options.seen.face_views = false;
+  if (no_views_cache) nerf_options.cache_views = false;
   if (expected_depth) nerf_options.surface_depth = false;
   if (normal_probe_voxels != -1) nerf_options.normal_probe_voxels = normal_probe_voxels;
   if (parallax_min_sharpness != -1) options.light.parallax_min_sharpness = parallax_min_sharpness;

@@ -13,7 +13,9 @@ NerfSceneOptions NerfSceneOptions::Preset(const std::string& name) {
     o.seen.group_m = 0.02;
   } else if (name == "balanced") {
     o.seen.group_m = 0.01;
-  } else if (name != "accurate") {
+  } else if (name == "accurate") {
+    o.cache_views = false;
+  } else {
     ThrowInputError("preset", "unknown preset '" + name + "' (expected fast, balanced or accurate)");
   }
   return o;
@@ -76,8 +78,14 @@ void NerfScene::Render(const SceneRays& rays, SceneSamples& out, bool light) con
     uint64_t samples = 0;
     for (const NerfRayResult& r : results) samples += r.samples;
     uint64_t view_samples = 0;
-    if (options_.light_seen_radiance && n > 0)
-      ApplySeenRadiance(field_, nerf_rays, results, options_.seen, options_.light_render, &view_samples);
+    if (options_.light_seen_radiance && n > 0) {
+      if (options_.cache_views) {
+        const std::lock_guard<std::mutex> lock(cache_mutex_);
+        ApplySeenRadiance(field_, nerf_rays, results, options_.seen, options_.light_render, &view_samples, &cache_);
+      } else {
+        ApplySeenRadiance(field_, nerf_rays, results, options_.seen, options_.light_render, &view_samples);
+      }
+    }
     light_samples_ += samples + view_samples;
     light_view_samples_ += view_samples;
   } else {
@@ -91,6 +99,21 @@ void NerfScene::Render(const SceneRays& rays, SceneSamples& out, bool light) con
     // surface_depth is the mean already where the ray stays under 1/2.
     out.depth[i] = options_.surface_depth && r.opacity >= 0.5f ? r.surface_depth : r.depth;
   }
+}
+
+uint64_t NerfScene::LightCacheHits() const {
+  const std::lock_guard<std::mutex> lock(cache_mutex_);
+  return cache_.hits;
+}
+
+uint64_t NerfScene::LightCacheMisses() const {
+  const std::lock_guard<std::mutex> lock(cache_mutex_);
+  return cache_.misses;
+}
+
+void NerfScene::ClearLightCache() {
+  const std::lock_guard<std::mutex> lock(cache_mutex_);
+  cache_.Clear();
 }
 
 void NerfScene::Normals(const std::vector<Vec3f>& points, std::vector<Vec3f>& normals) const {

@@ -6,6 +6,7 @@
 
 #include <atomic>
 #include <cstdint>
+#include <mutex>
 #include <string>
 #include <vector>
 
@@ -54,9 +55,18 @@ struct NerfSceneOptions {
   // half-voxel step resolves (measured: docs/BENCHMARKS.md "incident light on
   // a real NeRF"). NerfRenderOptions::Preset("full") gives `render`'s march.
   NerfRenderOptions light_render = NerfRenderOptions::Preset("live");
+  // Keep the seen-radiance views' answer per cell across frames
+  // (SeenRadianceCache): a dragged object's light rays meet the same cells
+  // of the scene frame after frame and only the cells met for the first time
+  // take views. The cache belongs to the NerfScene (one field, these
+  // options); within one light the refined sub-rays also take the answers
+  // of the cells the centre rays met. Off in "accurate" (each light's own
+  // views, the reference); a field edited in place needs
+  // NerfScene::ClearLightCache().
+  bool cache_views = true;
   // The insertion presets (render/insert/insert_options.h), as they set the
-  // incident light's views: "accurate" is the default above (the views of
-  // each voxel's points their own); "balanced" shares the views of the light
+  // incident light's views: "accurate" is the default above without the
+  // cache (the views of each voxel's points their own, every light); "balanced" shares the views of the light
   // rays whose points fall in one 1 cm cell (seen.group_m: a refined
   // direction's 16 sub-rays meet one lamp within a few centimetres), "fast"
   // in one 2 cm cell. End to end within 0.1 dB / 0.01 of the unshared views
@@ -83,6 +93,12 @@ class NerfScene final : public SceneField {
   uint64_t LightSamples() const { return light_samples_.load(); }
   // Of those, the ones the seen-radiance views took.
   uint64_t LightViewSamples() const { return light_view_samples_.load(); }
+  // Cells of seen-radiance views answered from the cache / by new views
+  // since construction (NerfSceneOptions::cache_views).
+  uint64_t LightCacheHits() const;
+  uint64_t LightCacheMisses() const;
+  // Forget the cached views' answers (after editing the field in place).
+  void ClearLightCache();
   void Normals(const std::vector<Vec3f>& points, std::vector<Vec3f>& normals) const override;
   const NerfSceneOptions& options() const { return options_; }
 
@@ -91,6 +107,8 @@ class NerfScene final : public SceneField {
   const NerfField& field_;
   NerfSceneOptions options_;
   mutable std::atomic<uint64_t> light_samples_{0}, light_view_samples_{0};
+  mutable std::mutex cache_mutex_;  // the light's batches may come from several objects' threads
+  mutable SeenRadianceCache cache_;
 };
 
 }  // namespace nerfar

@@ -47,8 +47,53 @@ Vec3f AveragedGradientNormal(const NerfField& field, const Vec3f& p) {
 }
 
 size_t ApplySeenRadiance(const NerfField& field, const std::vector<NerfRay>& rays, std::vector<NerfRayResult>& results,
-                         const SeenRadianceOptions& options, const NerfRenderOptions& render, uint64_t* samples) {
+                         const SeenRadianceOptions& options, const NerfRenderOptions& render, uint64_t* samples,
+                         SeenRadianceCache* cache) {
   NERFAR_CHECK_EQ(rays.size(), results.size());
+  if (cache) {
+    // What the cells' answers depend on: the field (its arrays and layout)
+    // and every option the views use.
+    const auto address = [](const void* p) { return static_cast<double>(reinterpret_cast<uintptr_t>(p)); };
+    const std::vector<double> key = {address(&field),
+                                     address(field.density.data()),
+                                     double(field.density.size()),
+                                     address(field.color.data()),
+                                     double(field.color.size()),
+                                     address(field.occupancy.data()),
+                                     double(field.occupancy.size()),
+                                     double(field.RenderCopyCurrent()),
+                                     address(field.render_copy.bytes.data()),
+                                     field.voxel_m,
+                                     field.origin.x,
+                                     field.origin.y,
+                                     field.origin.z,
+                                     field.aabb.min.x,
+                                     field.aabb.min.y,
+                                     field.aabb.min.z,
+                                     field.aabb.max.x,
+                                     field.aabb.max.y,
+                                     field.aabb.max.z,
+                                     options.min_elevation_deg,
+                                     options.max_elevation_deg,
+                                     double(options.views),
+                                     options.reach_m,
+                                     options.min_opacity,
+                                     double(options.see_through),
+                                     options.see_through_min_opacity,
+                                     options.see_through_reach_m,
+                                     options.group_m,
+                                     double(options.face_views),
+                                     options.face_min_cosine,
+                                     options.face_reach_m,
+                                     render.step_voxels,
+                                     render.min_transmittance,
+                                     render.min_alpha,
+                                     double(render.use_render_copy)};
+    if (cache->key != key) {
+      cache->Clear();
+      cache->key = key;
+    }
+  }
   const double z_min = std::sin(options.min_elevation_deg * kPi / 180);
   // The view directions (from the point towards the camera): a spiral over
   // the capture band, the same for every point.
@@ -72,6 +117,7 @@ size_t ApplySeenRadiance(const NerfField& field, const std::vector<NerfRay>& ray
   std::vector<Vec3f> points;                 // one per cell: the first ray's surface point
   std::vector<Vec3f> point_dirs;             // the first ray's direction (turns the face normal towards it)
   std::vector<unsigned char> point_surface;  // some ray there is opaque enough for the seen radiance
+  std::vector<int64_t> point_keys;           // the cell and kind of each point (the cache's key)
   std::vector<size_t> ray_slot(rays.size(), SIZE_MAX);
   const float voxel = options.group_m > 0.0 ? static_cast<float>(options.group_m) : field.voxel_m;
   for (size_t r = 0; r < rays.size(); ++r) {
@@ -88,6 +134,7 @@ size_t ApplySeenRadiance(const NerfField& field, const std::vector<NerfRay>& ray
     const auto it = slot_of.emplace(key, points.size()).first;
     if (it->second == points.size()) {
       points.push_back(x);
+      point_keys.push_back(key.v);
       point_dirs.push_back(rays[r].dir);
       point_surface.push_back(0);
     }
@@ -100,9 +147,30 @@ size_t ApplySeenRadiance(const NerfField& field, const std::vector<NerfRay>& ray
   std::vector<uint64_t> point_samples(points.size(), 0);
   // Views that meet a surface at the point, and views that pass it (see-through).
   std::vector<int> meet(points.size(), 0), pass(points.size(), 0);
+  // Cells answered by an earlier call (cache): their answers, no views.
+  std::vector<unsigned char> cached(points.size(), 0);
+  if (cache) {
+    size_t fresh = 0;
+    for (size_t p = 0; p < points.size(); ++p) {
+      const auto it = cache->cells.find(point_keys[p]);
+      if (it == cache->cells.end()) {
+        ++fresh;
+        continue;
+      }
+      cached[p] = 1;
+      seen[p] = it->second.seen;
+      reached[p] = it->second.reached ? 1 : 0;
+      meet[p] = it->second.meet;
+      pass[p] = it->second.pass;
+    }
+    cache->hits += points.size() - fresh;
+    cache->misses += fresh;
+    if (fresh > 0 && cache->cells.size() + fresh > cache->max_cells) cache->cells.clear();  // answers copied above
+  }
   ParallelFor(
       points.size(),
       [&](size_t p) {
+        if (cached[p]) return;
         double best = -1;
         // One view from outside the volume towards the point, along -u
         // (false where it misses the volume).
@@ -165,6 +233,9 @@ size_t ApplySeenRadiance(const NerfField& field, const std::vector<NerfRay>& ray
       8);
   if (samples)
     for (uint64_t s : point_samples) *samples += s;
+  if (cache)
+    for (size_t p = 0; p < points.size(); ++p)
+      if (!cached[p]) cache->cells[point_keys[p]] = {seen[p], reached[p] != 0, meet[p], pass[p]};
   size_t changed = 0;
   for (size_t r = 0; r < rays.size(); ++r) {
     const size_t p = ray_slot[r];

@@ -48,6 +48,7 @@
 #pragma once
 
 #include <cstdint>
+#include <unordered_map>
 #include <vector>
 
 #include "render/nerf/nerf_field.h"
@@ -102,6 +103,37 @@ struct SeenRadianceOptions {
 // averaged at p and ±1 voxel along each axis, negated (zero where undefined).
 Vec3f AveragedGradientNormal(const NerfField& field, const Vec3f& p);
 
+// The views' answer for one cell of points (ApplySeenRadiance): the
+// brightest radiance seen there (when reached), and the see-through votes.
+struct SeenCellAnswer {
+  Vec3f seen;
+  bool reached = false;
+  int meet = 0, pass = 0;
+};
+
+// The cells' answers kept across calls (frames). A dragged object's light
+// rays meet the same cells of the scene frame after frame (the lamp, the
+// wall): a cell answered before is not looked at again, only the cells the
+// rays reach for the first time take views. A cell's answer is that of the
+// first point the views were aimed at in it (as within one call), so a call
+// with the same rays as an earlier one gives the same results bit for bit.
+// The answers hold for one field and one set of options: ApplySeenRadiance
+// empties the cache when called with another (the field's arrays or size,
+// the options; `key` below). Code that edits a field's values in place calls
+// Clear(), as for NerfField::UpdateRenderCopy.
+struct SeenRadianceCache {
+  std::vector<double> key;  // what the answers depend on (ApplySeenRadiance sets it)
+  std::unordered_map<int64_t, SeenCellAnswer> cells;
+  // Emptied before a call's new cells would grow it past this many (a long
+  // drag through a big scene; ~40 bytes a cell); that call's cells are kept.
+  size_t max_cells = size_t(1) << 20;
+  uint64_t hits = 0, misses = 0;  // cells answered from the cache / by new views, since construction
+  void Clear() {
+    key.clear();
+    cells.clear();
+  }
+};
+
 // For every ray (origin, dir) with its rendered result whose surface point
 // x = o + surface_depth·d is seen from below the capture hemisphere (the
 // direction back to the ray's origin, −d, has elevation below
@@ -119,8 +151,10 @@ Vec3f AveragedGradientNormal(const NerfField& field, const Vec3f& p);
 // own face when any of them sees it (the header's note). Returns how many
 // rays were changed.
 // `samples` (optional) is increased by the density samples the views took.
+// `cache` (optional): cells answered by an earlier call with the same field
+// and options take that answer instead of new views (SeenRadianceCache).
 size_t ApplySeenRadiance(const NerfField& field, const std::vector<NerfRay>& rays, std::vector<NerfRayResult>& results,
                          const SeenRadianceOptions& options, const NerfRenderOptions& render = {},
-                         uint64_t* samples = nullptr);
+                         uint64_t* samples = nullptr, SeenRadianceCache* cache = nullptr);
 
 }  // namespace nerfar
