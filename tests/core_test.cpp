@@ -195,6 +195,30 @@ TEST(Metrics, PsnrTmOfAKnownOffset) {
   EXPECT_TRUE(std::isinf(PsnrTm(estimate, truth, &mask)));
 }
 
+TEST(Metrics, PooledPsnrIsThePsnrOfAllPixelsTogether) {
+  // Two masked "views" of one truth (k = 1): 4 pixels off by tm 0.25 (MSE
+  // 0.0625) and 12 pixels exact but one channel of one pixel off by 0.25.
+  // Together: squared errors 4·3·0.0625 + 0.0625 over 16·3 values.
+  ImageF truth(8, 8, 3, 1.0f), estimate = truth;
+  ImageF first(8, 8, 1, 0.0f), second(8, 8, 1, 0.0f), both(8, 8, 1, 0.0f);
+  for (int i = 0; i < 4; ++i) {
+    first.at(i, 0) = both.at(i, 0) = 1.0f;
+    for (int c = 0; c < 3; ++c) estimate.at(i, 0, c) = 3.0f;  // tm 0.75 against 0.5
+  }
+  for (int i = 0; i < 12; ++i) second.at(i % 8, 1 + i / 8) = both.at(i % 8, 1 + i / 8) = 1.0f;
+  estimate.at(0, 1, 0) = 3.0f;
+  const double expected = -10.0 * std::log10((4 * 3 * 0.0625 + 0.0625) / 48.0);
+  const double pooled = PooledPsnr({PsnrTm(estimate, truth, &first), PsnrTm(estimate, truth, &second)}, {4, 12});
+  EXPECT_NEAR(pooled, expected, 1e-9);
+  EXPECT_NEAR(pooled, PsnrTm(estimate, truth, &both), 1e-9);  // the same as one mask over both
+  // An exact view (infinite psnr) adds pixels without error; a view without
+  // pixels or with a NaN psnr is left out; none left: NaN.
+  EXPECT_NEAR(PooledPsnr({PsnrTm(estimate, truth, &first), INFINITY, 5.0, NAN}, {4, 12, 0, 7}),
+              -10.0 * std::log10(4 * 0.0625 / 16.0), 1e-9);
+  EXPECT_TRUE(std::isinf(PooledPsnr({INFINITY}, {3})));
+  EXPECT_TRUE(std::isnan(PooledPsnr({NAN, 3.0}, {3, 0})));
+}
+
 TEST(Json, SyntaxErrorsNameLineAndColumn) {
   const std::string message = InputErrorOf([] { ParseJson("{\n  \"a\": 1,\n  \"b\": ]\n}", "x.json"); });
   EXPECT_NE(message.find("x.json: line 3, column"), std::string::npos) << message;

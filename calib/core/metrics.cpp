@@ -40,4 +40,16 @@ double PsnrTm(const ImageF& estimate, const ImageF& truth, const ImageF* mask) {
   return -10.0 * std::log10(mse);
 }
 
+double PooledPsnr(const std::vector<double>& psnr_db, const std::vector<size_t>& pixels) {
+  NERFAR_CHECK_EQ(psnr_db.size(), pixels.size());
+  double squared_error = 0.0, count = 0.0;
+  for (size_t i = 0; i < psnr_db.size(); ++i) {
+    if (std::isnan(psnr_db[i]) || pixels[i] == 0) continue;
+    squared_error += std::pow(10.0, -psnr_db[i] / 10.0) * static_cast<double>(pixels[i]);
+    count += static_cast<double>(pixels[i]);
+  }
+  if (count == 0.0) return std::numeric_limits<double>::quiet_NaN();
+  return -10.0 * std::log10(squared_error / count);
+}
+
 }  // namespace nerfar
