@@ -9,6 +9,7 @@
 // OpenCV camera axes, linear HDR RGB.
 #pragma once
 
+#include <cstdint>
 #include <memory>
 #include <optional>
 #include <string>
@@ -102,6 +103,15 @@ struct InsertLayers {
   ImageF kappa;                // κ over kappa_rect (1 channel; 1 elsewhere)
   size_t kappa_queries = 0;    // receivers that needed the SSDF (the rest were bounded to 1)
   size_t nonfinite_fixed = 0;  // non-finite output pixels replaced by the background (should stay 0)
+  // Edge pixels whose centre an object covers but only part of whose area
+  // it covers (coverage < 1): G-buffer index and the background's share
+  // (1 − coverage) × frame in the composite, which the shadow darkens later
+  // (CompositeEdges); empty without edge coverage.
+  struct EdgeShare {
+    uint32_t index = 0;
+    float rgb[3] = {0, 0, 0};
+  };
+  std::vector<EdgeShare> edge_background;
 };
 
 // A layer over `rect` as a full width × height image, `fill` outside it.

@@ -73,6 +73,7 @@ void OccludeAndComposite(const SceneField& scene, const InsertOptions& options, 
     }
   }
   std::vector<size_t> fixed_per_chunk(chunks, 0);
+  std::vector<std::vector<InsertLayers::EdgeShare>> shares(chunks);
   ParallelFor(
       chunks,
       [&](size_t c) {
@@ -114,6 +115,12 @@ void OccludeAndComposite(const SceneField& scene, const InsertOptions& options, 
           // Ĉ = I_α·I_c (opacity-weighted), so this is I_α·I_c + (1 − I_α)·I_v.
           // Edge pixels: the object over the part of the pixel it covers.
           const float cover = g.coverage.empty() ? 1.0f : g.coverage[i];
+          if (cover < 1.0f) {
+            InsertLayers::EdgeShare share;
+            share.index = i;
+            for (int ch = 0; ch < 3; ++ch) share.rgb[ch] = (1.0f - cover) * frame.at(x, y, ch);
+            shares[c].push_back(share);
+          }
           for (int ch = 0; ch < 3; ++ch) {
             const float composite = front[ch] + w * layers.object.pixels[static_cast<size_t>(i) * 3 + ch];
             frame.at(x, y, ch) = cover * composite + (1.0f - cover) * frame.at(x, y, ch);
@@ -122,6 +129,9 @@ void OccludeAndComposite(const SceneField& scene, const InsertOptions& options, 
       },
       1);
   for (size_t f : fixed_per_chunk) layers.nonfinite_fixed += f;
+  layers.edge_background.clear();
+  for (const auto& chunk : shares)
+    layers.edge_background.insert(layers.edge_background.end(), chunk.begin(), chunk.end());
 }
 
 void CompositeEdges(const ReceiverOverride& receivers, ImageF& frame, const InsertLayers& layers) {
@@ -161,6 +171,30 @@ void CompositeEdges(const ReceiverOverride& receivers, ImageF& frame, const Inse
       }
     for (size_t k = 0; k < partial.size(); ++k)
       for (int ch = 0; ch < 3; ++ch) frame.at(where[k].first, where[k].second, ch) = partial[k][ch];
+  }
+  // Edge pixels whose centre is covered: the background's share of the
+  // composite was taken before κ, which the shadow pass leaves alone on
+  // object pixels; it takes the mean κ of the pixel's uncovered neighbours
+  // (the contact shadow next to the silhouette, the darkest part of it).
+  const PixelRect& kr = layers.kappa_rect;
+  if (!layers.edge_background.empty() && layers.kappa.width == kr.width() && layers.kappa.height == kr.height()) {
+    for (const InsertLayers::EdgeShare& share : layers.edge_background) {
+      const int x = g.rect.x0 + static_cast<int>(share.index % g.rect.width());
+      const int y = g.rect.y0 + static_cast<int>(share.index / g.rect.width());
+      float sum = 0.0f;
+      int n = 0;
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          const int xx = x + dx, yy = y + dy;
+          if (xx < 0 || yy < 0 || xx >= frame.width || yy >= frame.height) continue;
+          if (g.rect.Contains(xx, yy) && g.object[g.Index(xx, yy)] >= 0) continue;
+          sum += kr.Contains(xx, yy) ? layers.kappa.at(xx - kr.x0, yy - kr.y0) : 1.0f;  // 1 outside the rect
+          ++n;
+        }
+      if (n == 0) continue;
+      const float k = std::clamp(sum / float(n), 0.0f, 1.0f);
+      for (int ch = 0; ch < 3; ++ch) frame.at(x, y, ch) += (k - 1.0f) * share.rgb[ch];
+    }
   }
 }
 
