@@ -142,7 +142,8 @@ void BenchInsertRealNerfLight(const BenchOptions& options, std::vector<BenchFigu
     figures.push_back({p + "light_ms", median(sample_ms), "ms", cold_note});
     figures.push_back(
         {p + "fit_cold_ms", median(fit_ms), "ms", cold_note + "; M=" + std::to_string(insert_options.light.fit.lobes)});
-    figures.push_back({p + "light_samples", median(samples), "samples", cold_note + "; density samples, views included"});
+    figures.push_back(
+        {p + "light_samples", median(samples), "samples", cold_note + "; density samples, views included"});
     figures.push_back({p + "light_view_samples", median(view_samples), "samples",
                        cold_note + "; of light_samples, the seen-radiance views"});
     figures.push_back({p + "light_refined", median(refined), "directions", cold_note});
@@ -156,13 +157,16 @@ void BenchInsertRealNerfLight(const BenchOptions& options, std::vector<BenchFigu
     const double step_m = (step_env ? std::atof(step_env) : 5.0) / 1000.0;
     const NerfScene scene(nerf, scene_options);
     IncidentLight light;
-    std::vector<double> drag_ms, drag_fit_ms, drag_samples, drag_view_samples;
+    std::vector<double> drag_ms, drag_fit_ms, drag_refresh_ms, drag_samples, drag_view_samples;
     double first_ms = 0, first_samples = 0;
     uint64_t last_samples = 0, last_views = 0;
     for (int f = 0; f < frames; ++f) {
       const Vec3 offset{step_m * f, 0.0, 0.0};
       const LightObjectVolume moved{&mesh, Pose{T_world_object.rotation, T_world_object.translation + offset}, scale};
+      const auto t0 = std::chrono::steady_clock::now();
       const IncidentLight::Update u = light.Refresh(scene, environment, center + offset, insert_options.light, &moved);
+      const double refresh_ms =
+          std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
       const double frame_samples = static_cast<double>(scene.LightSamples() - last_samples);
       const double frame_views = static_cast<double>(scene.LightViewSamples() - last_views);
       last_samples = scene.LightSamples();
@@ -173,6 +177,7 @@ void BenchInsertRealNerfLight(const BenchOptions& options, std::vector<BenchFigu
         continue;
       }
       drag_ms.push_back(u.sample_ms);
+      drag_refresh_ms.push_back(refresh_ms);
       drag_fit_ms.push_back(u.fit_ms);
       drag_samples.push_back(frame_samples);
       drag_view_samples.push_back(frame_views);
@@ -182,6 +187,9 @@ void BenchInsertRealNerfLight(const BenchOptions& options, std::vector<BenchFigu
                                   (scene_options.cache_views ? "on" : "off");
     const double cells = static_cast<double>(scene.LightCacheHits() + scene.LightCacheMisses());
     figures.push_back({p + "drag_light_ms", median(drag_ms), "ms", drag_note + "; median over frames 2.."});
+    figures.push_back({p + "drag_refresh_ms", median(drag_refresh_ms), "ms",
+                       drag_note + "; the whole Refresh: the rays' starts on the moved mesh, light, warm fit, lobe "
+                                   "distances"});
     figures.push_back({p + "drag_first_light_ms", first_ms, "ms", drag_note + "; the drag's first frame (cold)"});
     figures.push_back({p + "drag_fit_warm_ms", median(drag_fit_ms), "ms", drag_note});
     figures.push_back({p + "drag_light_samples", median(drag_samples), "samples",

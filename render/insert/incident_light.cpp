@@ -249,30 +249,49 @@ std::vector<float> ObjectExitDistances(const LightObjectVolume& volume, const Ve
   }
   std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return local[a].z < local[b].z; });
   for (size_t k = 0; k < order.size(); ++k) sorted_z[k] = local[order[k]].z;
-  std::vector<double> farthest(directions.size(), 0.0);
   constexpr double kSlack = 1e-6;  // rad and z: rounding of the cone and the band, far below a facet
-  for (const auto& tri : mesh.triangles) {
-    const Vec3 a(mesh.positions[tri[0]]), b(mesh.positions[tri[1]]), c(mesh.positions[tri[2]]);
-    double z_low = -2.0, z_high = 2.0;  // every direction, unless the cone is narrow
-    const Vec3 axis = Normalized((a + b + c) / 3.0 - o);
-    double cos_half = 1.0;
-    for (const Vec3& v : {a, b, c}) {
-      const double len = Length(v - o);
-      cos_half = len > 0.0 ? std::min(cos_half, Dot(axis, (v - o) / len)) : -1.0;
-    }
-    if (Length(axis) > 0.5 && cos_half > 0.0) {  // a convex cone under 90°: it holds the whole triangle
-      const double polar = std::acos(std::clamp(axis.z, -1.0, 1.0));
-      const double half = std::acos(std::min(cos_half, 1.0)) + kSlack;
-      z_low = std::cos(std::min(kPi, polar + half)) - kSlack;
-      z_high = std::cos(std::max(0.0, polar - half)) + kSlack;
-    }
-    const size_t first = std::lower_bound(sorted_z.begin(), sorted_z.end(), z_low) - sorted_z.begin();
-    const size_t last = std::upper_bound(sorted_z.begin(), sorted_z.end(), z_high) - sorted_z.begin();
-    for (size_t k = first; k < last; ++k) {
-      const uint32_t i = order[k];
-      farthest[i] = std::max(farthest[i], CrossingDistance(o, local[i], a, b, c));
-    }
-  }
+  // Triangles in chunks over the threads, each chunk its own farthest
+  // crossing per direction, merged by the maximum (the same in any order).
+  const size_t triangles = mesh.triangles.size();
+  const size_t chunks = std::min<size_t>(triangles, 8);
+  std::vector<std::vector<double>> chunk_farthest(chunks, std::vector<double>(directions.size(), 0.0));
+  ParallelFor(
+      chunks,
+      [&](size_t chunk) {
+        std::vector<double>& farthest = chunk_farthest[chunk];
+        for (size_t t = chunk * triangles / chunks; t < (chunk + 1) * triangles / chunks; ++t) {
+          const auto& tri = mesh.triangles[t];
+          const Vec3 a(mesh.positions[tri[0]]), b(mesh.positions[tri[1]]), c(mesh.positions[tri[2]]);
+          double z_low = -2.0, z_high = 2.0;  // every direction, unless the cone is narrow
+          double cos_cone = -2.0;             // the cone itself: directions farther from its axis miss
+          const Vec3 axis = Normalized((a + b + c) / 3.0 - o);
+          double cos_half = 1.0;
+          for (const Vec3& v : {a, b, c}) {
+            const double len = Length(v - o);
+            cos_half = len > 0.0 ? std::min(cos_half, Dot(axis, (v - o) / len)) : -1.0;
+          }
+          if (Length(axis) > 0.5 && cos_half > 0.0) {  // a convex cone under 90°: it holds the whole triangle
+            const double polar = std::acos(std::clamp(axis.z, -1.0, 1.0));
+            const double half = std::acos(std::min(cos_half, 1.0)) + kSlack;
+            z_low = std::cos(std::min(kPi, polar + half)) - kSlack;
+            z_high = std::cos(std::max(0.0, polar - half)) + kSlack;
+            cos_cone = std::cos(half) - kSlack;
+          }
+          const size_t first = std::lower_bound(sorted_z.begin(), sorted_z.end(), z_low) - sorted_z.begin();
+          const size_t last = std::upper_bound(sorted_z.begin(), sorted_z.end(), z_high) - sorted_z.begin();
+          for (size_t k = first; k < last; ++k) {
+            const uint32_t i = order[k];
+            // The z band is a ring around the pole; the triangle covers a small
+            // part of it: a direction outside the cone cannot cross it.
+            if (Dot(local[i], axis) < cos_cone) continue;
+            farthest[i] = std::max(farthest[i], CrossingDistance(o, local[i], a, b, c));
+          }
+        }
+      },
+      1);
+  std::vector<double> farthest(directions.size(), 0.0);
+  for (const std::vector<double>& f : chunk_farthest)
+    for (size_t i = 0; i < f.size(); ++i) farthest[i] = std::max(farthest[i], f[i]);
   for (size_t i = 0; i < directions.size(); ++i) exit[i] = static_cast<float>(farthest[i] * s);
   return exit;
 }
