@@ -468,10 +468,11 @@ std::vector<BenchFigure> BenchInsert(const BenchOptions& options) {
     if (off.find("snap") != std::string::npos) insert_options.shadow_epsilon_snap = false;
     if (off.find("skip_covered") != std::string::npos) insert_options.kappa_skip_covered = false;
     // NERFAR_BENCH_INSERT_KNOBS="kappa_step=4,shadow_reach_radii=8,...": κ
-    // knobs set over the preset (to attribute one preset's cost against
-    // another's): kappa_step, kappa_coarse_factor, shadow_reach_radii,
+    // and shading knobs set over the preset (to attribute one preset's cost
+    // against another's): kappa_step, kappa_coarse_factor, shadow_reach_radii,
     // shadow_epsilon, kappa_cache_spacing_radii, occlusion_step, parallax,
-    // kappa_refine_delta.
+    // kappa_refine_delta, shade_step, shade_refine_delta,
+    // shade_refine_angle_deg, shade_specular_on_grid.
     if (const char* knobs = std::getenv("NERFAR_BENCH_INSERT_KNOBS")) {
       std::string list = knobs;
       for (size_t begin = 0; begin < list.size();) {
@@ -493,6 +494,7 @@ std::vector<BenchFigure> BenchInsert(const BenchOptions& options) {
         if (name == "shade_step") insert_options.shade_step = int(v);
         if (name == "shade_refine_delta") insert_options.shade_refine_delta = v;
         if (name == "shade_refine_angle_deg") insert_options.shade_refine_angle_deg = v;
+        if (name == "shade_specular_on_grid") insert_options.shade_specular_on_grid = v != 0;
       }
     }
     const StageMedians m = TimePreset(scene, environment, object, camera, T_world_camera, insert_options, repeats);

@@ -124,6 +124,7 @@ std::string InsertOptions::ToJson() const {
   j["shade_step"] = shade_step;
   j["shade_refine_delta"] = shade_refine_delta;
   j["shade_refine_angle_deg"] = shade_refine_angle_deg;
+  j["shade_specular_on_grid"] = shade_specular_on_grid;
   j["antialias_edges"] = antialias_edges;
   j["kappa_from_samples"] = kappa_from_samples;
   j["kappa_sample_bins"] = kappa_sample_bins;

@@ -51,7 +51,7 @@ struct InsertOptions {
   // With a prefiltered map: the smooth part of the shading (the diffuse
   // radiance and the specular's self-shadow ratio, both from the SG light
   // with γ) at every shade_step-th pixel of the objects' box, bilinear in
-  // between; the map's specular stays per pixel. A pixel is shaded exactly
+  // between; the map's specular per pixel (but shade_specular_on_grid). A pixel is shaded exactly
   // where its cell's four nodes are not all on its object, a node's normal
   // is more than shade_refine_angle_deg from the pixel's, or the nodes'
   // values differ by more than shade_refine_delta (diffuse: relative to its
@@ -60,6 +60,12 @@ struct InsertOptions {
   int shade_step = 2;
   double shade_refine_delta = 0.1;
   double shade_refine_angle_deg = 20.0;
+  // On the grid path, the map's specular too (split by F0, so an albedo
+  // map still applies per pixel) in the cells where it also agrees to
+  // shade_refine_delta and the nodes' mirror directions differ by at most
+  // α/3 (GGX α = roughness²: a rough object nearly everywhere, a glossy
+  // one only when large on screen); elsewhere looked up per pixel.
+  bool shade_specular_on_grid = true;
 
   // Object edges blended with the background by the fraction of each pixel
   // the objects cover (4×4 sub-samples of the rasteriser), as a camera's
@@ -94,9 +100,9 @@ struct InsertOptions {
   // 1.00 (docs/BENCHMARKS.md, session 7), and it costs 2-2.5× the κ time
   // under a sky of many distant sources.
   bool kappa_from_samples = false;
-  int kappa_sample_bins = 128;             // Fibonacci bins the samples are gathered into (per kind: near, distant)
-  double kappa_sample_min_radius = 0.03;   // radians: no source narrower (the SSDF's own resolution)
-  int kappa_step = 2;  // κ at every kappa_step-th pixel, bilinear in between (1: every pixel)
+  int kappa_sample_bins = 128;            // Fibonacci bins the samples are gathered into (per kind: near, distant)
+  double kappa_sample_min_radius = 0.03;  // radians: no source narrower (the SSDF's own resolution)
+  int kappa_step = 2;                     // κ at every kappa_step-th pixel, bilinear in between (1: every pixel)
   // κ grid nodes whose surrounding grid cells hold only object pixels (no
   // background pixel is multiplied by them) are neither found nor
   // evaluated, and hold κ = 1 in the κ layer (only cells wholly under the
@@ -122,8 +128,11 @@ struct InsertOptions {
   // spacing (× the smallest caster's bounding radius), one value per node and
   // receiver-normal cell (32×32 octahedral cells), computed when a receiver
   // first needs it and reused, trilinearly, until an object or a light
-  // changes. 0: κ evaluated exactly at every receiver, every frame.
-  double kappa_cache_spacing_radii = 0.1;
+  // changes. 0: κ evaluated exactly at every receiver, every frame. 0.15
+  // (was 0.1 in balanced): a hand-held frame's new nodes 1 804 -> 468 and
+  // look-ups 51 K -> 31 K (bench insert), ground-truth-input shadow error
+  // within 0.001 on all four pairs (docs/BENCHMARKS.md, session 9).
+  double kappa_cache_spacing_radii = 0.15;
   // With the lattice (spacing > 0) and NeRF receivers: a grid node's receiver
   // is first sought among the last frame's receivers instead of marching its
   // ray. The last grid's cell at the node's pixel gives a plane (through its

@@ -84,20 +84,24 @@ struct ShadeInputs {
 // radiance for a white base colour (times the pixel's base colour gives the
 // diffuse term) and the specular's self-shadow ratio V (times the map's
 // specular gives the specular term).
+// On the grid path also the map's specular split by F0 (ShadeSpecularParts:
+// specular = V · (F0 ⊙ s + b)) where `has_specular`.
 struct DiffuseAndVisibility {
   float d[3] = {0, 0, 0};
   float visibility = 1;
+  float s[3] = {0, 0, 0}, b[3] = {0, 0, 0};
+  bool has_specular = false;
 };
 
 // Per-chunk buffers (reused across the runs of a chunk).
 struct RunScratch {
   std::vector<float> ssd, ssd_min, gamma;
   std::vector<SgMaterial> materials;
-  std::vector<Vec3f> normals, views, points, rgb, shadowed, specular_rgb;
+  std::vector<Vec3f> normals, views, points, rgb, shadowed, specular_rgb, scaled, biased;
   std::vector<uint32_t> pixels;
   // One chunk's pixels by path (ShadeObjects, step 2).
-  std::vector<uint32_t> sg_pixels, map_pixels, exact_pixels;
-  std::vector<DiffuseAndVisibility> values, exact_values;
+  std::vector<uint32_t> sg_pixels, map_pixels, exact_pixels, composed_pixels;
+  std::vector<DiffuseAndVisibility> values, exact_values, composed_values;
   std::vector<size_t> exact_slot;
   std::vector<Vec3f> sg_rgb;
 };
@@ -168,10 +172,21 @@ void ShadeRunSg(const ShadeInputs& in, int32_t o, const uint32_t* pixels, size_t
 // V is the SG specular's luminance with γ over that without, summed in the
 // diffuse pass (the same lobe loop) when any γ of the run is below 1: the
 // SG light knows where the lobes are shadowed, the map what they reflect.
+// With `specular_parts` also the map's specular parts (the grid's nodes).
 void ShadeRunDiffuseAndVisibility(const ShadeInputs& in, int32_t o, const uint32_t* pixels, size_t count, RunScratch& s,
-                                  DiffuseAndVisibility* out) {
+                                  DiffuseAndVisibility* out, bool specular_parts = false) {
   GatherRun(in, o, pixels, count, s);
   for (size_t k = 0; k < count; ++k) out[k] = DiffuseAndVisibility{};
+  if (specular_parts) {
+    s.scaled.resize(count), s.biased.resize(count);
+    in.Map(o)->ShadeSpecularParts(s.materials.data(), s.normals.data(), s.views.data(), s.points.data(), count,
+                                  s.scaled.data(), s.biased.data());
+    for (size_t k = 0; k < count; ++k) {
+      out[k].has_specular = true;
+      out[k].s[0] = s.scaled[k].x, out[k].s[1] = s.scaled[k].y, out[k].s[2] = s.scaled[k].z;
+      out[k].b[0] = s.biased[k].x, out[k].b[1] = s.biased[k].y, out[k].b[2] = s.biased[k].z;
+    }
+  }
   const LightPrep& p = in.preps[o];
   if (p.axes.empty()) return;
   for (SgMaterial& material : s.materials) material.base_color = Vec3(1, 1, 1);
@@ -212,6 +227,19 @@ void Store(const Vec3f& rgb, size_t px, ImageF& object) {
   object.pixels[px * 3 + 2] = std::max(value.z, 0.0f);
 }
 
+// ShadeGrid::cell_agrees values (CellAgrees).
+constexpr uint8_t kCellDiffuse = 1, kCellSpecular = 2;
+
+// The mirror directions of a cell's four nodes may differ by at most this
+// fraction of the GGX α (radians) for the map's specular to be interpolated
+// there. The map at roughness r is the radiance blurred by the GGX lobe, whose
+// profile in the mirror direction is no narrower than f(θ) ∝ (1 + θ²/α²)^−2
+// (|f''| ≤ 4 f_max / α²); bilinear interpolation over a span Δ errs by at
+// most Δ²/8 · |f''| = (Δ/α)²/2 · f_max: at 1/3, 5.6 % of the lobe's peak
+// (α ≥ 0.49 at the bench's roughness 0.7: nearly every cell; α 0.0625 at
+// roughness 0.25: only objects over ~200 px across).
+constexpr float kSpecularCellLobes = 1.0f / 3.0f;
+
 // The coarse grid of D and V (InsertOptions::shade_step): nodes every
 // `step` pixels of the G-buffer's rectangle, from its corner.
 struct ShadeGrid {
@@ -219,8 +247,11 @@ struct ShadeGrid {
   std::vector<int32_t> object;  // per node: the object shaded there, −1: none (uncovered or not on the grid path)
   std::vector<DiffuseAndVisibility> values;
   std::vector<float> mean_brightest;  // per object: mean over its nodes of D's brightest channel
-  std::vector<Vec3f> normal;          // per node: the G-buffer's normal there
-  std::vector<uint8_t> cell_agrees;   // per cell (columns − 1 per row): CellAgrees
+  std::vector<float> mean_specular;   // per object: mean over its nodes of the brightest channel of s + b
+  std::vector<float> min_cos_reflect;  // per object: kSpecularCellLobes · α as a cosine (−2: no specular on the grid)
+  std::vector<Vec3f> normal;           // per node: the G-buffer's normal there
+  std::vector<Vec3f> reflect;          // per node: the view's mirror direction there
+  std::vector<uint8_t> cell_agrees;    // per cell (columns − 1 per row): CellAgrees
   size_t Node(int column, int row) const { return size_t(row) * size_t(columns) + size_t(column); }
 };
 
@@ -251,12 +282,23 @@ bool InterpolateFromGrid(const ShadeGrid& grid, const ObjectGBuffer& g, int32_t 
     for (int c = 0; c < 3; ++c) out->d[c] += w[k] * v.d[c];
     out->visibility += w[k] * v.visibility;
   }
+  if (grid.cell_agrees[size_t(cy) * size_t(grid.columns - 1) + size_t(cx)] == kCellSpecular) {
+    out->has_specular = true;
+    for (int k = 0; k < 4; ++k) {
+      const DiffuseAndVisibility& v = grid.values[nodes[k]];
+      for (int c = 0; c < 3; ++c) out->s[c] += w[k] * v.s[c], out->b[c] += w[k] * v.b[c];
+    }
+  }
   return true;
 }
 
 // Whether the cell whose top-left node is (cx, cy) has four nodes of one
-// object whose D and V agree to delta (InterpolateFromGrid's value test).
-bool CellAgrees(const ShadeGrid& grid, int cx, int cy, float delta) {
+// object whose D and V agree to delta (InterpolateFromGrid's value test):
+// 0 no; kCellDiffuse: D and V; kCellSpecular: the specular parts too, and
+// the nodes' mirror directions lie within the object's min_cos_reflect of
+// one another (the prefiltered map varies over a lobe's width, so values
+// that agree at the corners say little about a sharp lobe between them).
+uint8_t CellAgrees(const ShadeGrid& grid, int cx, int cy, float delta) {
   const size_t node = grid.Node(cx, cy);
   const size_t nodes[4] = {node, node + 1, node + size_t(grid.columns), node + size_t(grid.columns) + 1};
   const int32_t o = grid.object[node];
@@ -273,8 +315,30 @@ bool CellAgrees(const ShadeGrid& grid, int cx, int cy, float delta) {
   // cell (the terminator, a shadowed fold) is held to the object's scale.
   const float brightest = std::max({hi[0], hi[1], hi[2], grid.mean_brightest[o]});
   for (int c = 0; c < 3; ++c)
-    if (!(hi[c] - lo[c] <= delta * brightest)) return false;
-  return hi[3] - lo[3] <= delta;
+    if (!(hi[c] - lo[c] <= delta * brightest)) return 0;
+  if (!(hi[3] - lo[3] <= delta)) return 0;
+  // The specular: F0 ≤ 1 and V ≤ 1, so a channel's specular spans at most
+  // the span of s plus that of b; held to the brighter of the cell's
+  // diffuse, its specular and the object's means.
+  const float min_cos = grid.min_cos_reflect[o];
+  if (min_cos < -1.0f) return kCellDiffuse;
+  for (int a = 0; a < 4; ++a)
+    for (int b = a + 1; b < 4; ++b)
+      if (!(Dot(grid.reflect[nodes[a]], grid.reflect[nodes[b]]) >= min_cos)) return kCellDiffuse;
+  float span[3], top = std::max(brightest, grid.mean_specular[o]);
+  for (int c = 0; c < 3; ++c) {
+    float slo = std::numeric_limits<float>::infinity(), shi = -slo, blo = slo, bhi = -slo;
+    for (int k = 0; k < 4; ++k) {
+      const DiffuseAndVisibility& v = grid.values[nodes[k]];
+      slo = std::min(slo, v.s[c]), shi = std::max(shi, v.s[c]);
+      blo = std::min(blo, v.b[c]), bhi = std::max(bhi, v.b[c]);
+      top = std::max(top, v.s[c] + v.b[c]);
+    }
+    span[c] = (shi - slo) + (bhi - blo);
+  }
+  for (int c = 0; c < 3; ++c)
+    if (!(span[c] <= delta * top)) return kCellDiffuse;
+  return kCellSpecular;
 }
 
 }  // namespace
@@ -317,11 +381,11 @@ void ShadeObjects(const std::vector<InsertObject>& objects, const std::vector<Wo
                   s.pixels.assign(node_pixels.begin() + begin, node_pixels.begin() + end);
                   ForEachRun(g, s.pixels, [&](int32_t o, size_t first, size_t count) {
                     ShadeRunDiffuseAndVisibility(in, o, &node_pixels[begin + first], count, s,
-                                                 &node_values[begin + first]);
+                                                 &node_values[begin + first], /*specular_parts=*/true);
                   });
                 },
                 1);
-    std::vector<double> sum(objects.size(), 0.0), count(objects.size(), 0.0);
+    std::vector<double> sum(objects.size(), 0.0), count(objects.size(), 0.0), specular_sum(objects.size(), 0.0);
     for (size_t k = 0; k < node_pixels.size(); ++k) {
       const int x = int(node_pixels[k] % size_t(g.rect.width())), y = int(node_pixels[k] / size_t(g.rect.width()));
       const size_t node = grid.Node(x / step, y / step);
@@ -330,19 +394,35 @@ void ShadeObjects(const std::vector<InsertObject>& objects, const std::vector<Wo
       grid.object[node] = o;
       grid.values[node] = v;
       const float brightest = std::max({v.d[0], v.d[1], v.d[2]});
-      if (std::isfinite(brightest)) sum[o] += brightest, count[o] += 1;
+      const float specular = std::max({v.s[0] + v.b[0], v.s[1] + v.b[1], v.s[2] + v.b[2]});
+      if (std::isfinite(brightest) && std::isfinite(specular))
+        sum[o] += brightest, specular_sum[o] += specular, count[o] += 1;
     }
     grid.mean_brightest.assign(objects.size(), 0.0f);
-    for (size_t o = 0; o < objects.size(); ++o)
-      if (count[o] > 0) grid.mean_brightest[o] = static_cast<float>(sum[o] / count[o]);
+    grid.mean_specular.assign(objects.size(), 0.0f);
+    grid.min_cos_reflect.assign(objects.size(), -2.0f);
+    for (size_t o = 0; o < objects.size(); ++o) {
+      if (count[o] > 0) {
+        grid.mean_brightest[o] = static_cast<float>(sum[o] / count[o]);
+        grid.mean_specular[o] = static_cast<float>(specular_sum[o] / count[o]);
+      }
+      const double r = std::clamp(objects[o].material.roughness, 0.0, 1.0);
+      if (options.shade_specular_on_grid && std::isfinite(objects[o].material.roughness))
+        grid.min_cos_reflect[o] = static_cast<float>(std::cos(kSpecularCellLobes * r * r));
+    }
     grid.normal.assign(grid.object.size(), Vec3f{});
+    grid.reflect.assign(grid.object.size(), Vec3f{});
     grid.cell_agrees.assign(size_t(std::max(0, grid.columns - 1)) * size_t(std::max(0, grid.rows - 1)), 0);
     const float delta = static_cast<float>(options.shade_refine_delta);
     ParallelFor(
         size_t(grid.rows),
         [&](size_t r) {
-          for (int c = 0; c < grid.columns; ++c)
-            grid.normal[grid.Node(c, int(r))] = g.normal[g.Index(g.rect.x0 + c * step, g.rect.y0 + int(r) * step)];
+          for (int c = 0; c < grid.columns; ++c) {
+            const size_t i = g.Index(g.rect.x0 + c * step, g.rect.y0 + int(r) * step), node = grid.Node(c, int(r));
+            const Vec3f n = g.normal[i], v = Normalized(eye - g.position[i]);
+            grid.normal[node] = n;
+            grid.reflect[node] = n * (2.0f * Dot(n, v)) - v;
+          }
         },
         8);
     ParallelFor(
@@ -355,70 +435,92 @@ void ShadeObjects(const std::vector<InsertObject>& objects, const std::vector<Wo
   }
   // 2. Every pixel: from the grid where it may stand in, else exactly.
   const float min_cos = static_cast<float>(std::cos(options.shade_refine_angle_deg * kPi / 180.0));
-  ParallelFor(
-      (covered.size() + kChunk - 1) / kChunk,
-      [&](size_t c) {
-        const size_t begin = c * kChunk, end = std::min(covered.size(), begin + kChunk);
-        RunScratch& s = ThreadScratch();
-        std::vector<uint32_t>& sg_pixels = s.sg_pixels;
-        std::vector<uint32_t>& map_pixels = s.map_pixels;
-        std::vector<uint32_t>& exact_pixels = s.exact_pixels;
-        std::vector<DiffuseAndVisibility>& values = s.values;
-        std::vector<DiffuseAndVisibility>& exact_values = s.exact_values;
-        std::vector<size_t>& exact_slot = s.exact_slot;
-        std::vector<Vec3f>& sg_rgb = s.sg_rgb;
-        sg_pixels.clear(), map_pixels.clear(), exact_pixels.clear();
-        values.clear(), exact_slot.clear();
-        for (size_t k = begin; k < end; ++k) {
-          const uint32_t i = covered[k];
-          const int32_t o = g.object[i];
-          if (in.Map(o) == nullptr) {
-            sg_pixels.push_back(i);
-            continue;
-          }
-          map_pixels.push_back(i);
-          values.emplace_back();
-          if (on_grid[o]) {
-            // G-buffer indices run over its rectangle.
-            const int rx = int(i % size_t(g.rect.width())), ry = int(i / size_t(g.rect.width()));
-            if (rx % step == 0 && ry % step == 0) {
-              values.back() = grid.values[grid.Node(rx / step, ry / step)];
-              continue;
-            }
-            if (InterpolateFromGrid(grid, g, o, g.rect.x0 + rx, g.rect.y0 + ry, g.normal[i], min_cos, &values.back()))
-              continue;
-          }
-          exact_pixels.push_back(i);
-          exact_slot.push_back(values.size() - 1);
-        }
-        // SG-only objects.
-        ForEachRun(g, sg_pixels, [&](int32_t o, size_t first, size_t count) {
-          sg_rgb.resize(count);
-          ShadeRunSg(in, o, &sg_pixels[first], count, s, sg_rgb.data());
-          for (size_t k = 0; k < count; ++k) Store(sg_rgb[k], sg_pixels[first + k], object);
-        });
-        // D and V where the grid could not stand in.
-        exact_values.resize(exact_pixels.size());
-        ForEachRun(g, exact_pixels, [&](int32_t o, size_t first, size_t count) {
-          ShadeRunDiffuseAndVisibility(in, o, &exact_pixels[first], count, s, &exact_values[first]);
-        });
-        for (size_t k = 0; k < exact_pixels.size(); ++k) values[exact_slot[k]] = exact_values[k];
-        // The map's specular per pixel: radiance = base ⊙ D + specular · V.
-        ForEachRun(g, map_pixels, [&](int32_t o, size_t first, size_t count) {
-          const uint32_t* pixels = &map_pixels[first];
-          GatherRun(in, o, pixels, count, s, /*gamma=*/false);
-          s.specular_rgb.resize(count);
-          in.Map(o)->ShadeSpecular(s.materials.data(), s.normals.data(), s.views.data(), s.points.data(), count,
-                                   s.specular_rgb.data());
-          for (size_t k = 0; k < count; ++k) {
-            const DiffuseAndVisibility& v = values[first + k];
-            const Vec3& base = s.materials[k].base_color;
-            const Vec3f rgb(float(base.x) * v.d[0], float(base.y) * v.d[1], float(base.z) * v.d[2]);
-            Store(rgb + s.specular_rgb[k] * v.visibility, pixels[k], object);
-          }
-        });
-      },
-      1);
+  ParallelFor((covered.size() + kChunk - 1) / kChunk,
+              [&](size_t c) {
+                const size_t begin = c * kChunk, end = std::min(covered.size(), begin + kChunk);
+                RunScratch& s = ThreadScratch();
+                std::vector<uint32_t>& sg_pixels = s.sg_pixels;
+                std::vector<uint32_t>& map_pixels = s.map_pixels;
+                std::vector<uint32_t>& exact_pixels = s.exact_pixels;
+                std::vector<uint32_t>& composed_pixels = s.composed_pixels;
+                std::vector<DiffuseAndVisibility>& composed_values = s.composed_values;
+                std::vector<DiffuseAndVisibility>& values = s.values;
+                std::vector<DiffuseAndVisibility>& exact_values = s.exact_values;
+                std::vector<size_t>& exact_slot = s.exact_slot;
+                std::vector<Vec3f>& sg_rgb = s.sg_rgb;
+                sg_pixels.clear(), map_pixels.clear(), exact_pixels.clear(), composed_pixels.clear();
+                values.clear(), exact_slot.clear(), composed_values.clear();
+                for (size_t k = begin; k < end; ++k) {
+                  const uint32_t i = covered[k];
+                  const int32_t o = g.object[i];
+                  if (in.Map(o) == nullptr) {
+                    sg_pixels.push_back(i);
+                    continue;
+                  }
+                  if (on_grid[o]) {
+                    // G-buffer indices run over its rectangle.
+                    const int rx = int(i % size_t(g.rect.width())), ry = int(i / size_t(g.rect.width()));
+                    DiffuseAndVisibility v;
+                    const bool from_grid =
+                        (rx % step == 0 && ry % step == 0)
+                            ? (v = grid.values[grid.Node(rx / step, ry / step)], true)
+                            : InterpolateFromGrid(grid, g, o, g.rect.x0 + rx, g.rect.y0 + ry, g.normal[i], min_cos, &v);
+                    if (from_grid && v.has_specular) {
+                      composed_pixels.push_back(i);
+                      composed_values.push_back(v);
+                      continue;
+                    }
+                    if (from_grid) {
+                      map_pixels.push_back(i);
+                      values.push_back(v);
+                      continue;
+                    }
+                  }
+                  map_pixels.push_back(i);
+                  values.emplace_back();
+                  exact_pixels.push_back(i);
+                  exact_slot.push_back(values.size() - 1);
+                }
+                // SG-only objects.
+                ForEachRun(g, sg_pixels, [&](int32_t o, size_t first, size_t count) {
+                  sg_rgb.resize(count);
+                  ShadeRunSg(in, o, &sg_pixels[first], count, s, sg_rgb.data());
+                  for (size_t k = 0; k < count; ++k) Store(sg_rgb[k], sg_pixels[first + k], object);
+                });
+                // D and V where the grid could not stand in.
+                exact_values.resize(exact_pixels.size());
+                ForEachRun(g, exact_pixels, [&](int32_t o, size_t first, size_t count) {
+                  ShadeRunDiffuseAndVisibility(in, o, &exact_pixels[first], count, s, &exact_values[first]);
+                });
+                for (size_t k = 0; k < exact_pixels.size(); ++k) values[exact_slot[k]] = exact_values[k];
+                // Everything from the grid: radiance = base ⊙ D + V · (F0 ⊙ s + b).
+                for (size_t k = 0; k < composed_pixels.size(); ++k) {
+                  const uint32_t i = composed_pixels[k];
+                  const InsertObject& ob = objects[g.object[i]];
+                  const SgMaterial m = ob.albedo_map ? PixelMaterial(ob, g.uv[i]) : ob.material;
+                  const Vec3f f0 = PrefilteredRadiance::SpecularF0(m);
+                  const DiffuseAndVisibility& v = composed_values[k];
+                  const Vec3f rgb(float(m.base_color.x) * v.d[0] + v.visibility * (f0.x * v.s[0] + v.b[0]),
+                                  float(m.base_color.y) * v.d[1] + v.visibility * (f0.y * v.s[1] + v.b[1]),
+                                  float(m.base_color.z) * v.d[2] + v.visibility * (f0.z * v.s[2] + v.b[2]));
+                  Store(rgb, i, object);
+                }
+                // The map's specular per pixel: radiance = base ⊙ D + specular · V.
+                ForEachRun(g, map_pixels, [&](int32_t o, size_t first, size_t count) {
+                  const uint32_t* pixels = &map_pixels[first];
+                  GatherRun(in, o, pixels, count, s, /*gamma=*/false);
+                  s.specular_rgb.resize(count);
+                  in.Map(o)->ShadeSpecular(s.materials.data(), s.normals.data(), s.views.data(), s.points.data(), count,
+                                           s.specular_rgb.data());
+                  for (size_t k = 0; k < count; ++k) {
+                    const DiffuseAndVisibility& v = values[first + k];
+                    const Vec3& base = s.materials[k].base_color;
+                    const Vec3f rgb(float(base.x) * v.d[0], float(base.y) * v.d[1], float(base.z) * v.d[2]);
+                    Store(rgb + s.specular_rgb[k] * v.visibility, pixels[k], object);
+                  }
+                });
+              },
+              1);
 }
 
 }  // namespace nerfar

@@ -413,10 +413,13 @@ Vec3f PrefilteredRadiance::ParallaxDirection(const Vec3f& point, const Vec3f& r)
   return d;
 }
 
-Vec3f PrefilteredRadiance::Shade(const Prepared& p, const SgMaterial& m, const Vec3f& n, const Vec3f& v,
-                                 const Vec3f* point) const {
+void PrefilteredRadiance::ShadeParts(const Prepared& p, const Vec3f& n, const Vec3f& v, const Vec3f* point,
+                                     Vec3f* scaled, Vec3f* biased) const {
   const float nv = Dot(n, v);
-  if (!(nv > 0.0f)) return {};
+  if (!(nv > 0.0f)) {
+    *scaled = *biased = Vec3f{};
+    return;
+  }
   const Vec3f r = n * (2.0f * nv) - v;
   Vec3f dominant = n * (1.0f - p.s) + r * p.s;  // any length: octahedral
   if (point != nullptr && !distances_.empty()) dominant = ParallaxDirection(*point, dominant);
@@ -425,11 +428,23 @@ Vec3f PrefilteredRadiance::Shade(const Prepared& p, const SgMaterial& m, const V
   const int i = std::min(kTableNv - 2, static_cast<int>(x));
   const float fx = x - i;
   const float scale = (1 - fx) * p.scale[i] + fx * p.scale[i + 1], bias = (1 - fx) * p.bias[i] + fx * p.bias[i + 1];
+  *scaled = L * scale;
+  *biased = L * bias;
+}
+
+Vec3f PrefilteredRadiance::SpecularF0(const SgMaterial& m) {
   const float metal = static_cast<float>(m.metallic), d0 = static_cast<float>(kDielectricF0);
-  const float f0r = d0 + (static_cast<float>(m.base_color.x) - d0) * metal;
-  const float f0g = d0 + (static_cast<float>(m.base_color.y) - d0) * metal;
-  const float f0b = d0 + (static_cast<float>(m.base_color.z) - d0) * metal;
-  return {L.x * (f0r * scale + bias), L.y * (f0g * scale + bias), L.z * (f0b * scale + bias)};
+  return {d0 + (static_cast<float>(m.base_color.x) - d0) * metal,
+          d0 + (static_cast<float>(m.base_color.y) - d0) * metal,
+          d0 + (static_cast<float>(m.base_color.z) - d0) * metal};
+}
+
+Vec3f PrefilteredRadiance::Shade(const Prepared& p, const SgMaterial& m, const Vec3f& n, const Vec3f& v,
+                                 const Vec3f* point) const {
+  Vec3f scaled, biased;
+  ShadeParts(p, n, v, point, &scaled, &biased);
+  const Vec3f f0 = SpecularF0(m);
+  return {f0.x * scaled.x + biased.x, f0.y * scaled.y + biased.y, f0.z * scaled.z + biased.z};
 }
 
 Vec3f PrefilteredRadiance::ShadeSpecular(const SgMaterial& m, const Vec3f& n, const Vec3f& v) const {
@@ -454,6 +469,22 @@ void PrefilteredRadiance::ShadeSpecular(const SgMaterial* materials, const Vec3f
     const float rough = static_cast<float>(materials[i].roughness);
     if (!prepared || !(rough == p.roughness)) p = Prepare(rough), prepared = true;
     out[i] = Shade(p, materials[i], n[i], v[i], points ? &points[i] : nullptr);
+  }
+}
+
+void PrefilteredRadiance::ShadeSpecularParts(const SgMaterial* materials, const Vec3f* n, const Vec3f* v,
+                                             const Vec3f* points, size_t count, Vec3f* scaled, Vec3f* biased) const {
+  if (levels_.empty()) {
+    std::fill(scaled, scaled + count, Vec3f{});
+    std::fill(biased, biased + count, Vec3f{});
+    return;
+  }
+  Prepared p;
+  bool prepared = false;
+  for (size_t i = 0; i < count; ++i) {
+    const float rough = static_cast<float>(materials[i].roughness);
+    if (!prepared || !(rough == p.roughness)) p = Prepare(rough), prepared = true;
+    ShadeParts(p, n[i], v[i], points ? &points[i] : nullptr, &scaled[i], &biased[i]);
   }
 }
 

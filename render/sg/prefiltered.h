@@ -85,6 +85,17 @@ class PrefilteredRadiance {
   // with one roughness (an object's whole material without a roughness map).
   void ShadeSpecular(const SgMaterial* materials, const Vec3f* n, const Vec3f* v, size_t count, Vec3f* out) const;
 
+  // ShadeSpecular split by the material's F0 = mix(0.02, a, m): specular =
+  // F0 ⊙ scaled[i] + biased[i], with scaled = L·A and biased = L·B (L the
+  // look-up, A and B the environment BRDF at the pixel's n·v). Nothing of
+  // the material but its roughness enters: the parts may be interpolated
+  // between pixels whose base colour differs (an albedo map) and F0 applied
+  // per pixel. `points` as below (nullptr: uncorrected).
+  void ShadeSpecularParts(const SgMaterial* materials, const Vec3f* n, const Vec3f* v, const Vec3f* points,
+                          size_t count, Vec3f* scaled, Vec3f* biased) const;
+  // F0 of a material: mix(0.02, base colour, metallic) per channel.
+  static Vec3f SpecularF0(const SgMaterial& material);
+
   // Parallax-corrected reflections: the samples were taken at `center` and
   // `distances` says how far each direction's light comes from. A pixel at
   // world point p then looks its reflection up not along its reflected
@@ -119,6 +130,9 @@ class PrefilteredRadiance {
   Vec3f Lookup(const Vec3f& d, const Prepared& p) const;
   Vec3f Shade(const Prepared& p, const SgMaterial& material, const Vec3f& n, const Vec3f& v,
               const Vec3f* point = nullptr) const;
+  // The look-up and the environment BRDF's A and B at n·v (0 from behind).
+  void ShadeParts(const Prepared& p, const Vec3f& n, const Vec3f& v, const Vec3f* point, Vec3f* scaled,
+                  Vec3f* biased) const;
   std::vector<Level> levels_;
   Vec3f center_;
   DistanceMap distances_;

@@ -212,7 +212,7 @@ TEST(FastPath, HandHeldFramesReuseReceivers) {
   const CameraIntrinsics camera = testing::TestCamera(240, 180);
   SgMixture light = OneLobe({0.8, -0.1, 1.0}, 40.0, 5.0);
   light.push_back(OneLobe({0, 0, 1}, 1.0, 0.3)[0]);
-  InsertOptions reuse;  // balanced: κ step 2, coarse factor 4, plane upsampling, lattice 0.1 radii
+  InsertOptions reuse;  // balanced: κ step 2, coarse factor 4, plane upsampling, lattice 0.15 radii
   InsertOptions marched = reuse;
   marched.kappa_receiver_reuse = false;
   marched.receiver_normal_per_cell = false;  // the exact receivers: a march and a normal query each
@@ -250,10 +250,10 @@ TEST(FastPath, HandHeldFramesReuseReceivers) {
   EXPECT_LT(marched_reuse, marched_all / 2);
   // A reused receiver lies within 0.02 radii (0.8 mm) of the tangent planes
   // of four marched receivers with normals within 10° and takes one of their
-  // normals: κ, trilinear over 4 mm lattice nodes in ~4° normal cells, moves
+  // normals: κ, trilinear over 6 mm lattice nodes in ~4° normal cells, moves
   // by a fraction of a node at most; a cell's normal is the exact one at a
   // point of the cell (the table's exactly, the 8 cm sphere's within ~4°
-  // over a 4 mm cell): under 2% of the shadow per frame and 0.05 at any
+  // over a 6 mm cell): under 2% of the shadow per frame and 0.05 at any
   // pixel (an edge pixel's full κ step is ~0.3 here). Measured 1e-4 and
   // 0.008.
   EXPECT_LT(worst_mean, 0.02);
