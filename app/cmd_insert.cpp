@@ -133,6 +133,7 @@ int RunInsert(const CommandArgs& args) {
   bool no_see_through = false;
   int seen_views = -1;
   double seen_group_cm = -1;
+  double seen_agree = -1;
   bool seen_whole_band = false;
   bool no_views_cache = false;
   double normal_probe_voxels = -1;
@@ -196,6 +197,9 @@ int RunInsert(const CommandArgs& args) {
               "from the capture band find matter; the rest lets the environment behind it through)");
   parser.Option("--seen-views", &seen_views, "V",
                 "views aimed from the capture band at each point a light ray meets from below (default 12)");
+  parser.Option("--seen-agree", &seen_agree, "F",
+                "a point's seen radiance: the mean of its views at least F x as bright as the brightest (default "
+                "0.5; 1: the brightest alone)");
   parser.Option("--seen-group-cm", &seen_group_cm, "C",
                 "light rays whose points lie in one C cm cell share their views (fast: 2, balanced: 1, accurate: "
                 "0 = one NeRF voxel)");
@@ -290,6 +294,7 @@ int RunInsert(const CommandArgs& args) {
   NerfSceneOptions nerf_options = NerfSceneOptions::Preset(preset);
   if (seen_views != -1) nerf_options.seen.views = seen_views;  // validated
   if (seen_group_cm != -1) nerf_options.seen.group_m = seen_group_cm / 100.0;
+  if (seen_agree != -1) nerf_options.seen.agree_fraction = seen_agree;  // validated
   if (no_seen_radiance) nerf_options.light_seen_radiance = false;
   if (no_see_through) nerf_options.seen.see_through = false;
   if (seen_whole_band) nerf_options.seen.face_views = false;

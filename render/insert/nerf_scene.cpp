@@ -48,6 +48,8 @@ std::vector<std::string> NerfSceneOptions::Validate() const {
     check(seen.see_through_reach_m > 0.0 && std::isfinite(seen.see_through_reach_m),
           "seen.see_through_reach_m: must be a finite number > 0");
     check(seen.group_m >= 0.0 && seen.group_m <= 1.0, "seen.group_m: out of range (expected 0 to 1 metre)");
+    check(seen.agree_fraction >= 0.0 && seen.agree_fraction <= 1.0,
+          "seen.agree_fraction: out of range (expected 0 to 1)");
     check(seen.face_min_cosine >= -1.0 && seen.face_min_cosine <= 1.0, "seen.face_min_cosine: must be in [-1, 1]");
     check(seen.face_reach_m > 0.0 && std::isfinite(seen.face_reach_m),
           "seen.face_reach_m: must be a finite number > 0");

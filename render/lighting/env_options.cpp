@@ -44,6 +44,7 @@ std::vector<OptionField> Fields(EnvEstimateOptions& o) {
           {"near_field_seen_radiance", F::kBool, &o.near_field_seen_radiance},
           {"seen_radiance_views", F::kInt, &o.seen_radiance_views},
           {"seen_radiance_face_views", F::kBool, &o.seen_radiance_face_views},
+          {"seen_radiance_agree_fraction", F::kDouble, &o.seen_radiance_agree_fraction},
           {"step_voxels", F::kFloat, &o.render.step_voxels},
           {"min_transmittance", F::kFloat, &o.render.min_transmittance},
           {"ignore_near_field", F::kBool, &o.ignore_near_field},
@@ -72,6 +73,7 @@ SeenRadianceOptions SeenOptions(const EnvEstimateOptions& o) {
   seen.min_elevation_deg = std::max(0.0, o.min_view_elevation_deg);
   seen.views = o.seen_radiance_views;
   seen.face_views = o.seen_radiance_face_views;
+  seen.agree_fraction = o.seen_radiance_agree_fraction;
   return seen;
 }
 
@@ -125,6 +127,7 @@ std::vector<std::string> EnvEstimateOptions::Validate() const {
   range("ray_offset_voxels", ray_offset_voxels, 0, 100);
   range("near_field_pool_m", near_field_pool_m, 0, 10);
   range("seen_radiance_views", seen_radiance_views, 1, 1024);
+  range("seen_radiance_agree_fraction", seen_radiance_agree_fraction, 0, 1);
   range("step_voxels", render.step_voxels, 0.01, 10);
   range("min_transmittance", render.min_transmittance, 0, 1);
   range("lobes", lobes, 1, kMaxSgLobes);

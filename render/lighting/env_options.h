@@ -78,6 +78,8 @@ struct EnvEstimateOptions {
   int seen_radiance_views = 12;  // views from the capture hemisphere per surface point
   // The views aimed at the face each ray meets (SeenRadianceOptions::face_views); false: the whole band.
   bool seen_radiance_face_views = true;
+  // The views' agreement (SeenRadianceOptions::agree_fraction); 1: the brightest view alone.
+  double seen_radiance_agree_fraction = 0.5;
   NerfRenderOptions render;        // sample spacing etc. of every NeRF ray
   bool ignore_near_field = false;  // baseline: E_nerf = 0 and Ô = 0 (environment explains everything, PhySG-like)
   // --- fit

@@ -28,7 +28,28 @@ std::vector<Vec3f> BandSpiral(double lo, double hi, int count) {
   }
   return dirs;
 }
+
 }  // namespace
+
+bool AgreeingRadiance(const std::vector<Vec3f>& radiances, double agree_fraction, Vec3f& out) {
+  double brightest = -1;
+  for (const Vec3f& c : radiances) brightest = std::max(brightest, LuminanceOf(Vec3(c)));
+  if (radiances.empty()) return false;
+  Vec3 sum{};
+  int count = 0;
+  for (const Vec3f& c : radiances)
+    if (LuminanceOf(Vec3(c)) >= agree_fraction * std::max(brightest, 0.0)) {
+      sum += Vec3(c);
+      ++count;
+    }
+  if (count == 0)  // all darker than black (a field's negative colour): their plain mean
+    for (const Vec3f& c : radiances) {
+      sum += Vec3(c);
+      ++count;
+    }
+  out = Vec3f(sum * (1.0 / count));
+  return true;
+}
 
 Vec3f AveragedGradientNormal(const NerfField& field, const Vec3f& p) {
   // Normalising each gradient first keeps σ's range (1e-13 to 1e6 per
@@ -85,6 +106,7 @@ size_t ApplySeenRadiance(const NerfField& field, const std::vector<NerfRay>& ray
                                      double(options.face_views),
                                      options.face_min_cosine,
                                      options.face_reach_m,
+                                     options.agree_fraction,
                                      render.step_voxels,
                                      render.min_transmittance,
                                      render.min_alpha,
@@ -171,7 +193,6 @@ size_t ApplySeenRadiance(const NerfField& field, const std::vector<NerfRay>& ray
       points.size(),
       [&](size_t p) {
         if (cached[p]) return;
-        double best = -1;
         // One view from outside the volume towards the point, along -u
         // (false where it misses the volume).
         const auto look = [&](const Vec3f& u, NerfRayResult& res) {
@@ -181,15 +202,13 @@ size_t ApplySeenRadiance(const NerfField& field, const std::vector<NerfRay>& ray
           point_samples[p] += res.samples;
           return true;
         };
-        // The seen radiance: the brightest surface the views found at the point.
-        const auto keep_brightest = [&](const NerfRayResult& res) {
-          const Vec3f radiance = res.color * (1.0f / res.opacity);
-          const double y = LuminanceOf(Vec3(radiance));
-          if (y > best) {
-            best = y;
-            seen[p] = radiance;
-            reached[p] = 1;
-          }
+        // The radiance (per unit opacity) of each view that sees the point,
+        // and the seen radiance they agree on (AgreeingRadiance).
+        std::vector<Vec3f> found;
+        const auto keep = [&](const NerfRayResult& res) { found.push_back(res.color * (1.0f / res.opacity)); };
+        const auto settle = [&] {
+          if (AgreeingRadiance(found, options.agree_fraction, seen[p])) reached[p] = 1;
+          found.clear();
         };
         // Face views first: the band's directions in front of the point's face.
         if (options.face_views && point_surface[p]) {
@@ -205,8 +224,9 @@ size_t ApplySeenRadiance(const NerfField& field, const std::vector<NerfRay>& ray
             NerfRayResult res;
             if (!look(*facing[(2 * i + 1) * facing.size() / (2 * count)], res)) continue;
             if (res.opacity > options.min_opacity && std::fabs(res.surface_depth - kFar) <= options.face_reach_m)
-              keep_brightest(res);
+              keep(res);
           }
+          settle();
         }
         // The whole band: the see-through votes, and the seen radiance of a
         // point no face view saw.
@@ -227,8 +247,9 @@ size_t ApplySeenRadiance(const NerfField& field, const std::vector<NerfRay>& ray
           else if (offset >= -options.see_through_reach_m)
             ++meet[p];
           // The seen radiance: a surface within reach_m of the point.
-          if (!face_seen && opaque && !(std::fabs(offset) > options.reach_m)) keep_brightest(res);
+          if (!face_seen && opaque && !(std::fabs(offset) > options.reach_m)) keep(res);
         }
+        if (!face_seen) settle();
       },
       8);
   if (samples)

@@ -97,14 +97,33 @@ struct SeenRadianceOptions {
   // each way). Tighter than reach_m: a view that meets another surface
   // (a bulb 3 cm above the pole point it was aimed at) says nothing here.
   double face_reach_m = 0.02;
+  // The seen radiance of a point is the mean of the views that see it
+  // (face views, or the whole band's when no face view does) whose
+  // luminance is at least this fraction of the brightest's. 1: the
+  // brightest alone (the rule before session 9). Why not the brightest: a
+  // trained emitter's radiance varies from view to view around its true
+  // value (the field blurs the emitter's edge and the training compensates
+  // with a brighter core along some directions), and the maximum of 12 such
+  // views is biased high (lamps bulb: 122-343 against a true 120); a point's
+  // views that are far darker than the brightest meet another surface at
+  // it (a lamp's dark frame or backing, a pole), and would drag the mean of
+  // an emitter down. 0: the plain mean of every view that sees the point.
+  double agree_fraction = 0.5;
 };
+
+// The seen radiance of a point from the radiances (per unit opacity) of
+// the views that see it: the mean of those whose luminance is at least
+// agree_fraction × the brightest's (all of them when every one is darker
+// than black, a field's negative colour). False, `out` untouched, when
+// there are none.
+bool AgreeingRadiance(const std::vector<Vec3f>& radiances, double agree_fraction, Vec3f& out);
 
 // The unit normal at p of the field's surface: unit density gradients
 // averaged at p and ±1 voxel along each axis, negated (zero where undefined).
 Vec3f AveragedGradientNormal(const NerfField& field, const Vec3f& p);
 
 // The views' answer for one cell of points (ApplySeenRadiance): the
-// brightest radiance seen there (when reached), and the see-through votes.
+// radiance its views agree on (when reached), and the see-through votes.
 struct SeenCellAnswer {
   Vec3f seen;
   bool reached = false;
@@ -137,8 +156,9 @@ struct SeenRadianceCache {
 // For every ray (origin, dir) with its rendered result whose surface point
 // x = o + surface_depth·d is seen from below the capture hemisphere (the
 // direction back to the ray's origin, −d, has elevation below
-// min_elevation_deg), replaces result.color by the brightest (luminance per
-// unit opacity) of the views from the capture hemisphere that reach x, times
+// min_elevation_deg), replaces result.color by the radiance (per unit
+// opacity) the views from the capture hemisphere that reach x agree on
+// (SeenRadianceOptions::agree_fraction), times
 // the ray's opacity, when that is brighter than the ray's own colour; rays
 // whose point no view reaches keep their colour. Points are grouped by
 // voxel, or by cells of options.group_m, and by whether their opacity

@@ -13,6 +13,7 @@
 #include "calib/core/error.h"
 #include "calib/core/log.h"
 #include "calib/core/parallel.h"
+#include "render/lighting/seen_radiance.h"
 #include "render/lighting/view_quality.h"
 #include "render/sg/sphere.h"
 #include "render/sg/visibility.h"
@@ -776,6 +777,29 @@ TEST(SeenRadiance, FaceViewsKeepABulbsRadianceOffItsPole) {
   // times the ray's opacity, within 10 % (interpolated colour near the
   // surface, as the lamp test above).
   EXPECT_NEAR(face[1].color.y, le * raw[1].opacity, 0.1 * le);
+}
+
+// A point's seen radiance from its views (grey radiances: luminance = the
+// value). Two views of an emitter (120, 200) and one that meets the lamp's
+// dark frame at the point (10): at 0.5 the frame's view is left out and the
+// emitter's two averaged; 1 keeps the brightest alone, 0 averages all.
+TEST(SeenRadiance, AgreeingRadianceAveragesTheViewsNearTheBrightest) {
+  const auto grey = [](float v) { return Vec3f{v, v, v}; };
+  const std::vector<Vec3f> views = {grey(120), grey(200), grey(10)};
+  Vec3f out;
+  ASSERT_TRUE(AgreeingRadiance(views, 0.5, out));
+  EXPECT_NEAR(out.y, 160.0f, 1e-3f);
+  ASSERT_TRUE(AgreeingRadiance(views, 1.0, out));
+  EXPECT_NEAR(out.y, 200.0f, 1e-3f);
+  ASSERT_TRUE(AgreeingRadiance(views, 0.0, out));
+  EXPECT_NEAR(out.y, 110.0f, 1e-3f);
+  // Every view darker than black (a field's negative colour): their mean.
+  ASSERT_TRUE(AgreeingRadiance({grey(-1), grey(-3)}, 0.5, out));
+  EXPECT_NEAR(out.y, -2.0f, 1e-5f);
+  // No view: nothing, `out` untouched.
+  out = grey(7);
+  EXPECT_FALSE(AgreeingRadiance({}, 0.5, out));
+  EXPECT_EQ(out.y, 7.0f);
 }
 
 TEST(EnvEstimate, OptionsValidateAndSet) {
