@@ -12,6 +12,7 @@
 #include <filesystem>
 #include <memory>
 #include <nlohmann/json.hpp>
+#include <sstream>
 
 #include "app/bench.h"
 #include "app/cli.h"
@@ -154,28 +155,44 @@ int RunInsert(const CommandArgs& args) {
                 "camera frames named like the dataset's images (default: those images)");
   parser.Option("--background", &background, "B", "images (AR over the camera frames, default) or nerf");
   parser.Option("--preset", &preset, "P", "fast, balanced (default) or accurate; the knobs below override it");
-  parser.Option("--light-directions", &light_directions, "N", "rays from the object centre (balanced: 1024)");
-  parser.Option("--sg-lobes", &sg_lobes, "M", "SG lobes of the incident light (balanced: 32)");
-  parser.Option("--kappa-step", &kappa_step, "S", "κ every S pixels, interpolated between (balanced: 2)");
+  // The presets' values in the help come from the presets themselves.
+  const InsertOptions balanced = InsertOptions::Preset("balanced"), fast = InsertOptions::Preset("fast");
+  const auto shown = [](double value) {
+    std::ostringstream text;
+    text << value;
+    return text.str();
+  };
+  parser.Option("--light-directions", &light_directions, "N",
+                "rays from the object centre (balanced: " + shown(balanced.light.directions) + ")");
+  parser.Option("--sg-lobes", &sg_lobes, "M",
+                "SG lobes of the incident light (balanced: " + shown(balanced.light.fit.lobes) + ")");
+  parser.Option("--kappa-step", &kappa_step, "S",
+                "κ every S pixels, interpolated between (balanced: " + shown(balanced.kappa_step) + ")");
   int shade_step = -1;
   parser.Option("--shade-step", &shade_step, "S",
-                "diffuse and self-shadow every S pixels of the object, interpolated where smooth (balanced: 2)");
+                "diffuse and self-shadow every S pixels of the object, interpolated where smooth (balanced: " +
+                    shown(balanced.shade_step) + ")");
   parser.Option("--kappa-refine-delta", &kappa_refine_delta, "D",
-                "coarse κ cells whose corners differ by more than D get every node (balanced: 0.02, fast: 0.04)");
-  parser.Option("--shadow-reach", &shadow_reach, "R", "κ within R bounding radii of an object (balanced: 12)");
+                "coarse κ cells whose corners differ by more than D get every node (balanced: " +
+                    shown(balanced.kappa_refine_delta) + ", fast: " + shown(fast.kappa_refine_delta) + ")");
+  parser.Option("--shadow-reach", &shadow_reach, "R",
+                "κ within R bounding radii of an object (balanced: " + shown(balanced.shadow_reach_radii) + ")");
   parser.Option("--self-shadow-offset", &self_shadow_offset, "R",
-                "self-shadow SSDF queried R bounding radii off the surface (balanced: 0.01)");
-  parser.Option("--receiver-min-opacity", &receiver_min_opacity, "A",
-                "κ only on receivers whose NeRF opacity reaches A (balanced: 0.5)");
+                "self-shadow SSDF queried R bounding radii off the surface (balanced: " +
+                    shown(balanced.self_shadow_offset_radii) + ")");
+  parser.Option(
+      "--receiver-min-opacity", &receiver_min_opacity, "A",
+      "κ only on receivers whose NeRF opacity reaches A (balanced: " + shown(balanced.receiver_min_opacity) + ")");
   parser.Option("--light-source", &light_source, "L", "full (default), near (NeRF only) or env (environment only)");
   parser.Option("--occlusion-step", &occlusion_step, "S",
-                "occlusion first every S pixels, per pixel only where the scene is seen (balanced: 2; 1: every pixel)");
-  parser.Option(
-      "--kappa-cache", &kappa_cache, "H",
-      "κ kept on a world lattice of H bounding radii while nothing moves (balanced: 0.1; 0: exact per pixel)");
+                "occlusion first every S pixels, per pixel only where the scene is seen (balanced: " +
+                    shown(balanced.occlusion_step) + "; 1: every pixel)");
+  parser.Option("--kappa-cache", &kappa_cache, "H",
+                "κ kept on a world lattice of H bounding radii while nothing moves (balanced: " +
+                    shown(balanced.kappa_cache_spacing_radii) + "; 0: exact per pixel)");
   parser.Option("--receiver-reuse", &receiver_reuse, "T",
-                "κ receivers taken from the last frame's within T bounding radii of their planes (fast/balanced: "
-                "0.02; 0: every receiver marched)");
+                "κ receivers taken from the last frame's within T bounding radii of their planes (balanced: " +
+                    shown(balanced.kappa_reuse_tolerance_radii) + "; 0: every receiver marched)");
   parser.Flag("--kappa-samples", &kappa_samples,
               "shadow ratio κ from the light's samples gathered into sources instead of the SG lobes");
   parser.Option("--kappa-sample-bins", &kappa_sample_bins, "N",
@@ -183,15 +200,15 @@ int RunInsert(const CommandArgs& args) {
   parser.Flag("--no-parallax", &no_parallax,
               "the light is the same at every shadow receiver, as taken at the object centre (no lobe distances)");
   parser.Option("--light-refine-rays", &light_refine_rays, "K",
-                "rays averaged over each incident-light direction where the light changes fast (balanced, accurate: "
-                "16; fast: 0 = off)");
+                "rays averaged over each incident-light direction where the light changes fast (balanced: " +
+                    shown(balanced.light.refine_rays) + "; fast: " + shown(fast.light.refine_rays) + " = off)");
   parser.Option("--parallax-min-sharpness", &parallax_min_sharpness, "L",
                 "lobes at least this sharp are re-aimed from each receiver as compact sources (default 10)");
   parser.Flag("--light-from-centre", &light_from_centre,
               "incident-light rays start at the object centre (the paper), not where they leave the object's mesh");
   parser.Flag("--no-seen-radiance", &no_seen_radiance,
               "incident light takes the NeRF's own colour of surfaces seen from below the capture band (default: "
-              "the brightest radiance seen from the band nearby)");
+              "the radiance the views from the band agree on nearby)");
   parser.Flag("--no-see-through", &no_see_through,
               "incident light keeps the NeRF's semi-transparent content whole (default: only the share that views "
               "from the capture band find matter; the rest lets the environment behind it through)");
