@@ -439,6 +439,17 @@ Vec3f PrefilteredRadiance::SpecularF0(const SgMaterial& m) {
           d0 + (static_cast<float>(m.base_color.z) - d0) * metal};
 }
 
+template <class PerPixel>
+void PrefilteredRadiance::EachPrepared(const SgMaterial* materials, size_t count, PerPixel&& per_pixel) const {
+  Prepared p;
+  bool prepared = false;
+  for (size_t i = 0; i < count; ++i) {
+    const float rough = static_cast<float>(materials[i].roughness);
+    if (!prepared || !(rough == p.roughness)) p = Prepare(rough), prepared = true;
+    per_pixel(p, i);
+  }
+}
+
 Vec3f PrefilteredRadiance::Shade(const Prepared& p, const SgMaterial& m, const Vec3f& n, const Vec3f& v,
                                  const Vec3f* point) const {
   Vec3f scaled, biased;
@@ -463,13 +474,9 @@ void PrefilteredRadiance::ShadeSpecular(const SgMaterial* materials, const Vec3f
     std::fill(out, out + count, Vec3f{});
     return;
   }
-  Prepared p;
-  bool prepared = false;
-  for (size_t i = 0; i < count; ++i) {
-    const float rough = static_cast<float>(materials[i].roughness);
-    if (!prepared || !(rough == p.roughness)) p = Prepare(rough), prepared = true;
+  EachPrepared(materials, count, [&](const Prepared& p, size_t i) {
     out[i] = Shade(p, materials[i], n[i], v[i], points ? &points[i] : nullptr);
-  }
+  });
 }
 
 void PrefilteredRadiance::ShadeSpecularParts(const SgMaterial* materials, const Vec3f* n, const Vec3f* v,
@@ -479,13 +486,9 @@ void PrefilteredRadiance::ShadeSpecularParts(const SgMaterial* materials, const 
     std::fill(biased, biased + count, Vec3f{});
     return;
   }
-  Prepared p;
-  bool prepared = false;
-  for (size_t i = 0; i < count; ++i) {
-    const float rough = static_cast<float>(materials[i].roughness);
-    if (!prepared || !(rough == p.roughness)) p = Prepare(rough), prepared = true;
+  EachPrepared(materials, count, [&](const Prepared& p, size_t i) {
     ShadeParts(p, n[i], v[i], points ? &points[i] : nullptr, &scaled[i], &biased[i]);
-  }
+  });
 }
 
 }  // namespace nerfar

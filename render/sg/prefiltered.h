@@ -133,6 +133,10 @@ class PrefilteredRadiance {
   // The look-up and the environment BRDF's A and B at n·v (0 from behind).
   void ShadeParts(const Prepared& p, const Vec3f& n, const Vec3f& v, const Vec3f* point, Vec3f* scaled,
                   Vec3f* biased) const;
+  // per_pixel(p, i) for i in [0, count), p prepared for materials[i]'s
+  // roughness (again only where it changes; prefiltered.cpp).
+  template <class PerPixel>
+  void EachPrepared(const SgMaterial* materials, size_t count, PerPixel&& per_pixel) const;
   std::vector<Level> levels_;
   Vec3f center_;
   DistanceMap distances_;
