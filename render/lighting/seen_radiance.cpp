@@ -32,9 +32,9 @@ std::vector<Vec3f> BandSpiral(double lo, double hi, int count) {
 }  // namespace
 
 bool AgreeingRadiance(const std::vector<Vec3f>& radiances, double agree_fraction, Vec3f& out) {
+  if (radiances.empty()) return false;
   double brightest = -1;
   for (const Vec3f& c : radiances) brightest = std::max(brightest, LuminanceOf(Vec3(c)));
-  if (radiances.empty()) return false;
   Vec3 sum{};
   int count = 0;
   for (const Vec3f& c : radiances)

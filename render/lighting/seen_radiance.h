@@ -100,7 +100,7 @@ struct SeenRadianceOptions {
   // The seen radiance of a point is the mean of the views that see it
   // (face views, or the whole band's when no face view does) whose
   // luminance is at least this fraction of the brightest's. 1: the
-  // brightest alone (the rule before session 9). Why not the brightest: a
+  // brightest alone (the rule before session 10). Why not the brightest: a
   // trained emitter's radiance varies from view to view around its true
   // value (the field blurs the emitter's edge and the training compensates
   // with a brighter core along some directions), and the maximum of 12 such
