@@ -317,14 +317,14 @@ uint8_t CellAgrees(const ShadeGrid& grid, int cx, int cy, float delta) {
   for (int c = 0; c < 3; ++c)
     if (!(hi[c] - lo[c] <= delta * brightest)) return 0;
   if (!(hi[3] - lo[3] <= delta)) return 0;
-  // The specular: F0 ≤ 1 and V ≤ 1, so a channel's specular spans at most
-  // the span of s plus that of b; held to the brighter of the cell's
-  // diffuse, its specular and the object's means.
   const float min_cos = grid.min_cos_reflect[o];
   if (min_cos < -1.0f) return kCellDiffuse;
   for (int a = 0; a < 4; ++a)
     for (int b = a + 1; b < 4; ++b)
       if (!(Dot(grid.reflect[nodes[a]], grid.reflect[nodes[b]]) >= min_cos)) return kCellDiffuse;
+  // The specular: F0 ≤ 1 and V ≤ 1, so a channel's specular spans at most
+  // the span of s plus that of b; held to the brighter of the cell's
+  // diffuse, its specular and the object's means.
   float span[3], top = std::max(brightest, grid.mean_specular[o]);
   for (int c = 0; c < 3; ++c) {
     float slo = std::numeric_limits<float>::infinity(), shi = -slo, blo = slo, bhi = -slo;
@@ -496,14 +496,13 @@ void ShadeObjects(const std::vector<InsertObject>& objects, const std::vector<Wo
                 // Everything from the grid: radiance = base ⊙ D + V · (F0 ⊙ s + b).
                 for (size_t k = 0; k < composed_pixels.size(); ++k) {
                   const uint32_t i = composed_pixels[k];
-                  const InsertObject& ob = objects[g.object[i]];
-                  const SgMaterial m = ob.albedo_map ? PixelMaterial(ob, g.uv[i]) : ob.material;
-                  const Vec3f f0 = PrefilteredRadiance::SpecularF0(m);
+                  const SgMaterial m = PixelMaterial(objects[g.object[i]], g.uv[i]);
                   const DiffuseAndVisibility& v = composed_values[k];
-                  const Vec3f rgb(float(m.base_color.x) * v.d[0] + v.visibility * (f0.x * v.s[0] + v.b[0]),
-                                  float(m.base_color.y) * v.d[1] + v.visibility * (f0.y * v.s[1] + v.b[1]),
-                                  float(m.base_color.z) * v.d[2] + v.visibility * (f0.z * v.s[2] + v.b[2]));
-                  Store(rgb, i, object);
+                  const Vec3f specular =
+                      PrefilteredRadiance::SpecularFromParts(m, {v.s[0], v.s[1], v.s[2]}, {v.b[0], v.b[1], v.b[2]});
+                  const Vec3f diffuse(float(m.base_color.x) * v.d[0], float(m.base_color.y) * v.d[1],
+                                      float(m.base_color.z) * v.d[2]);
+                  Store(diffuse + specular * v.visibility, i, object);
                 }
                 // The map's specular per pixel: radiance = base ⊙ D + specular · V.
                 ForEachRun(g, map_pixels, [&](int32_t o, size_t first, size_t count) {

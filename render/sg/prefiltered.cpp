@@ -432,11 +432,12 @@ void PrefilteredRadiance::ShadeParts(const Prepared& p, const Vec3f& n, const Ve
   *biased = L * bias;
 }
 
-Vec3f PrefilteredRadiance::SpecularF0(const SgMaterial& m) {
+Vec3f PrefilteredRadiance::SpecularFromParts(const SgMaterial& m, const Vec3f& scaled, const Vec3f& biased) {
   const float metal = static_cast<float>(m.metallic), d0 = static_cast<float>(kDielectricF0);
-  return {d0 + (static_cast<float>(m.base_color.x) - d0) * metal,
-          d0 + (static_cast<float>(m.base_color.y) - d0) * metal,
-          d0 + (static_cast<float>(m.base_color.z) - d0) * metal};
+  const Vec3f f0(d0 + (static_cast<float>(m.base_color.x) - d0) * metal,
+                 d0 + (static_cast<float>(m.base_color.y) - d0) * metal,
+                 d0 + (static_cast<float>(m.base_color.z) - d0) * metal);
+  return {f0.x * scaled.x + biased.x, f0.y * scaled.y + biased.y, f0.z * scaled.z + biased.z};
 }
 
 template <class PerPixel>
@@ -454,8 +455,7 @@ Vec3f PrefilteredRadiance::Shade(const Prepared& p, const SgMaterial& m, const V
                                  const Vec3f* point) const {
   Vec3f scaled, biased;
   ShadeParts(p, n, v, point, &scaled, &biased);
-  const Vec3f f0 = SpecularF0(m);
-  return {f0.x * scaled.x + biased.x, f0.y * scaled.y + biased.y, f0.z * scaled.z + biased.z};
+  return SpecularFromParts(m, scaled, biased);
 }
 
 Vec3f PrefilteredRadiance::ShadeSpecular(const SgMaterial& m, const Vec3f& n, const Vec3f& v) const {

@@ -93,8 +93,9 @@ class PrefilteredRadiance {
   // per pixel. `points` as below (nullptr: uncorrected).
   void ShadeSpecularParts(const SgMaterial* materials, const Vec3f* n, const Vec3f* v, const Vec3f* points,
                           size_t count, Vec3f* scaled, Vec3f* biased) const;
-  // F0 of a material: mix(0.02, base colour, metallic) per channel.
-  static Vec3f SpecularF0(const SgMaterial& material);
+  // The specular of a material from its parts: F0 ⊙ scaled + biased, with
+  // F0 = mix(0.02, base colour, metallic) per channel.
+  static Vec3f SpecularFromParts(const SgMaterial& material, const Vec3f& scaled, const Vec3f& biased);
 
   // Parallax-corrected reflections: the samples were taken at `center` and
   // `distances` says how far each direction's light comes from. A pixel at
