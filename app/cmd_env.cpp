@@ -11,6 +11,7 @@
 #include "calib/core/atomic_file.h"
 #include "calib/core/error.h"
 #include "calib/core/log.h"
+#include "calib/core/output_guard.h"
 #include "render/lighting/env_estimate.h"
 #include "render/lighting/env_light.h"
 #include "render/nerf/nerf_file.h"
@@ -43,9 +44,7 @@ int RunEnv(const CommandArgs& args) {
       list.ThrowIfAny();
     }
   }
-  CheckNotSameFile(output, {nerf_path});
-  if (!preview.empty()) CheckNotSameFile(preview, {nerf_path, output});
-  if (!dump.empty()) CheckNotSameFile(dump, {nerf_path, output, preview});
+  CheckOutputsSpareInputs({output, preview, dump}, {nerf_path});
   const NerfField field = LoadNerf(nerf_path);
   LogInfo("env: " + nerf_path + "; preset " + preset + "; options " + options.ToJson());
 
