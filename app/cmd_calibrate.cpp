@@ -87,7 +87,7 @@ int RunCalibrate(const CommandArgs& args) {
   usage.ThrowIfAny();
   if (!job.images_dir.empty() && !std::filesystem::is_directory(job.images_dir))
     ThrowInputError(job.images_dir, "no such folder (expected a folder of board images)");
-  CheckOutputsSpareInputs({job.output}, Join({{job.board_path, job.images_dir}, SourceInputs(job.source)}));
+  CheckOutputsSpareInputs({job.output}, Paths(job.board_path, job.images_dir, SourceInputs(job.source)));
 
   const Board board = ReadBoard(job.board_path);
   TagDetector detector(TagDetectorOptions::Preset(job.detector_preset));

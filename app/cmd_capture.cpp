@@ -308,7 +308,7 @@ int RunCapture(const CommandArgs& args) {
   usage.ThrowIfAny();
 
   CheckOutputsSpareInputs(CaptureOutputs(options.output, options.views),
-                          Join({{options.board_path, options.camera_path}, SourceInputs(options.source)}));
+                          Paths(options.board_path, options.camera_path, SourceInputs(options.source)));
   const Board board = ReadBoard(options.board_path);
   const CameraFile camera = ReadCameraFile(options.camera_path);
   MakeDirectories(options.output);

@@ -342,13 +342,8 @@ int RunInsert(const CommandArgs& args) {
   // Inputs.
   const Dataset dataset = ReadDataset(DatasetSplitPath(dataset_dir, split));
   CheckOutputsSpareInputs(InsertOutputs(output, dataset, object_paths.size()),
-                          Join({{nerf_path, env_path, light_probe, probe_distances, frames_dir},
-                                DatasetInputs(dataset),
-                                object_paths,
-                                pose_paths,
-                                mesh_paths,
-                                material_paths,
-                                InsertTruthInputs(truth_dir)}));
+                          Paths(nerf_path, env_path, light_probe, probe_distances, frames_dir, DatasetInputs(dataset),
+                                object_paths, pose_paths, mesh_paths, material_paths, InsertTruthInputs(truth_dir)));
   // Without a NeRF (ground-truth inputs) the scene is empty: nothing occludes.
   NerfField nerf = without_nerf ? NerfField{} : LoadNerf(nerf_path);
   // The field does not change from here on: rays read its compact copy (same samples, quantised values).

@@ -157,10 +157,9 @@ int RunLive(const CommandArgs& args) {
   const std::string video_file = !video_path.empty() ? video_path : (fs::path(session_dir) / "live.mp4").string();
   const std::string sheet_file =
       !sheet_path.empty() ? sheet_path : (fs::path(session_dir) / "contact_sheet.png").string();
-  CheckOutputsSpareInputs(Join({LiveSessionOutputs(session_dir), {video_file, sheet_file}}),
-                          Join({{paths.nerf, paths.env, paths.board, paths.camera, camera_path, board_path},
-                                object_paths,
-                                SourceInputs(source_name)}));
+  CheckOutputsSpareInputs(Paths(LiveSessionOutputs(session_dir), video_file, sheet_file),
+                          Paths(paths.nerf, paths.env, paths.board, paths.camera, camera_path, board_path, object_paths,
+                                SourceInputs(source_name)));
   LiveSceneData scene = LoadLiveScene(paths);
   if (object_paths.empty())
     throw InputError("nerfar live: no object: give --object OBJ (.ssdf or mesh), or bake one into " + scene_dir);

@@ -88,8 +88,8 @@ int RunRender(const CommandArgs& args) {
   if (const std::vector<std::string> problems = file_options.Validate(); !problems.empty())
     throw InputError("nerfar render: " + problems.front());
   const Dataset split = ReadDataset(DatasetSplitPath(dataset, options.split));
-  CheckOutputsSpareInputs(Join({RenderOutputs(output, split), {save_model}}),
-                          Join({{model}, DatasetInputs(split), RenderReferenceInputs(dataset)}));
+  CheckOutputsSpareInputs(Paths(RenderOutputs(output, split), save_model),
+                          Paths(model, DatasetInputs(split), RenderReferenceInputs(dataset)));
   NerfField field = LoadNerf(model);
   if (occupancy_sigma > 0) field.UpdateOccupancy(float(occupancy_sigma));
   // What the model takes as a file (as written by --save-model, or with the default file options).

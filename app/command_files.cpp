@@ -6,12 +6,6 @@
 namespace nerfar {
 namespace fs = std::filesystem;
 
-PathList Join(std::initializer_list<PathList> lists) {
-  PathList all;
-  for (const PathList& list : lists) all.insert(all.end(), list.begin(), list.end());
-  return all;
-}
-
 PathList SourceInputs(const std::string& source) {
   for (const char* scheme : {"video:", "images:"})
     if (source.rfind(scheme, 0) == 0) return {source.substr(std::string(scheme).size())};

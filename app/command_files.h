@@ -1,13 +1,13 @@
 // The files each command reads and writes, listed before any work so that
 // CheckOutputsSpareInputs (calib/core/output_guard.h) can refuse to write
 // over an input. A command calls it once, e.g.
-//   CheckOutputsSpareInputs(RenderOutputs(output, dataset), Join({{model}, DatasetInputs(dataset)}));
+//   CheckOutputsSpareInputs(RenderOutputs(output, dataset), Paths(model, DatasetInputs(dataset)));
 // The output lists name every file the command may write (those it writes
 // only with some options too): keep them in step with the commands.
 #pragma once
 
-#include <initializer_list>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include "calib/core/output_guard.h"
@@ -17,8 +17,19 @@ namespace nerfar {
 
 using PathList = std::vector<std::string>;
 
-// The lists one after the other.
-PathList Join(std::initializer_list<PathList> lists);
+// Paths and lists of paths, one after the other, in one list.
+template <typename... Parts>
+PathList Paths(const Parts&... parts) {
+  PathList all;
+  const auto add = [&all](const auto& part) {
+    if constexpr (std::is_convertible_v<decltype(part), const std::string&>)
+      all.push_back(part);
+    else
+      all.insert(all.end(), part.begin(), part.end());
+  };
+  (add(parts), ...);
+  return all;
+}
 
 // What a frame-source string reads: the video file or the image folder
 // ("video:FILE", "images:DIR" or a bare path); nothing for devices, streams

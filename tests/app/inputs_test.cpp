@@ -46,7 +46,7 @@ void ExpectRefusedLine(const std::string& command_line, const std::string& outpu
   EXPECT_NE(r.output.find(output + ": "), std::string::npos) << "output " << output << " not named:\n" << r.output;
   if (!input.empty()) {
     EXPECT_NE(r.output.find("input " + input + " "), std::string::npos) << "input " << input << " not named:\n"
-                                                                       << r.output;
+                                                                        << r.output;
   }
   EXPECT_EQ(testing::ReadText(input_file), before) << input_file << " was written";
 }
@@ -89,8 +89,7 @@ TEST(InputsAreNeverWritten, InsertIntoItsOwnFramesFolder) {
   testing::TempDir dir;
   WriteTinyDataset(dir.File("ds"));
   MakeDirectories(dir.File("frames"));
-  for (const char* name : {"r_000.exr", "r_001.exr"})
-    WriteExrRgb(dir.File("frames/") + name, ImageF(16, 12, 3, 0.5f));
+  for (const char* name : {"r_000.exr", "r_001.exr"}) WriteExrRgb(dir.File("frames/") + name, ImageF(16, 12, 3, 0.5f));
   testing::WriteText(dir.File("scene.nerf"), "not a model");
   testing::WriteText(dir.File("o.ssdf"), "not a field");
   testing::WriteText(dir.File("pose.json"), "{}");
@@ -158,8 +157,8 @@ TEST(InputsAreNeverWritten, CalibrateTrackCapture) {
   ExpectRefused("calibrate --board " + dir.File("board.json") + " --images " + dir.File("frames") + " -o " +
                     dir.File("frames/view.png"),
                 dir.File("frames/view.png"), dir.File("frames") + "/view.png", dir.File("frames/view.png"));
-  ExpectRefused("track --source images:" + dir.File("frames") + " --board " + dir.File("board.json") +
-                    " --camera " + dir.File("camera.json") + " -o " + dir.File("camera.json"),
+  ExpectRefused("track --source images:" + dir.File("frames") + " --board " + dir.File("board.json") + " --camera " +
+                    dir.File("camera.json") + " -o " + dir.File("camera.json"),
                 dir.File("camera.json"), dir.File("camera.json"));
   // capture into the dataset whose views it reads as its source.
   ExpectRefused("capture --source images:" + dir.File("ds/train") + " --board " + dir.File("board.json") +

@@ -7,8 +7,8 @@
 // nothing to keep, leaves an earlier env.json as it was.
 #include <gtest/gtest.h>
 
-#include <csignal>
 #include <cmath>
+#include <csignal>
 #include <filesystem>
 #include <nlohmann/json.hpp>
 #include <regex>
@@ -72,11 +72,27 @@ void WriteSmallDataset(const std::string& dir) {
 
 std::vector<std::string> TrainArguments(const std::string& dir) {
   // Endless (a million steps), a checkpoint every 0.2 s of training, a coarse grid.
-  return {NERFAR_BINARY,   "train",         dir + "/ds",          "-o",    dir + "/m.nerf",
-          "--preset",      "fast",          "--set",              "steps=1000000",
-          "--set",         "levels=1",      "--set",              "coarse_voxel_m=0.05",
-          "--set",         "rays_per_step=256", "--set",          "eval_views=0",
-          "--checkpoint-seconds", "0.2",    "--threads",          "1"};
+  return {NERFAR_BINARY,
+          "train",
+          dir + "/ds",
+          "-o",
+          dir + "/m.nerf",
+          "--preset",
+          "fast",
+          "--set",
+          "steps=1000000",
+          "--set",
+          "levels=1",
+          "--set",
+          "coarse_voxel_m=0.05",
+          "--set",
+          "rays_per_step=256",
+          "--set",
+          "eval_views=0",
+          "--checkpoint-seconds",
+          "0.2",
+          "--threads",
+          "1"};
 }
 
 TEST(Signals, TrainWritesTheCheckpointOfTheStepItStoppedAtAndResumesFromIt) {
@@ -102,8 +118,7 @@ TEST(Signals, TrainWritesTheCheckpointOfTheStepItStoppedAtAndResumesFromIt) {
     again.push_back(std::to_string(step + 1));
     testing::ChildProcess resumed(again);
     EXPECT_EQ(resumed.Wait(120), 0) << resumed.output();
-    EXPECT_NE(resumed.output().find("at step " + std::to_string(step) + " ("), std::string::npos)
-        << resumed.output();
+    EXPECT_NE(resumed.output().find("at step " + std::to_string(step) + " ("), std::string::npos) << resumed.output();
     EXPECT_TRUE(fs::exists(dir.File("m.nerf")));
   }
 }
