@@ -10,8 +10,10 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <limits>
 #include <sstream>
+#include <vector>
 
 #include "calib/core/atomic_file.h"
 
@@ -177,32 +179,71 @@ std::optional<Material> ConvertMaterial(const aiMaterial& in, const std::string&
   return m;
 }
 
-// A PLY header announces its element counts before any data; reject absurd
-// ones before the importer allocates for them (a 4e9-vertex header in a
-// 100-byte file must not take gigabytes).
+bool PlyType(const std::string& type) {
+  static const char* const kTypes[] = {"char", "uchar", "short", "ushort", "int",   "uint",   "float",   "double",
+                                       "int8", "uint8", "int16", "uint16", "int32", "uint32", "float32", "float64"};
+  return std::find(std::begin(kTypes), std::end(kTypes), type) != std::end(kTypes);
+}
+
+// One line of a PLY header checked against the header's grammar (an importer
+// that meets anything else may misread or never finish: a fuzzed header sent
+// assimp into an endless loop). Returns false for end_header.
+bool CheckPlyHeaderLine(const std::string& path, int number, const std::string& line, bool& ascii, bool& in_element,
+                        uintmax_t file_bytes) {
+  std::istringstream words(line);
+  std::string keyword;
+  words >> keyword;
+  std::vector<std::string> rest;
+  for (std::string word; words >> word;) rest.push_back(word);
+  const auto bad = [&](const std::string& expected) {
+    ThrowInputError(
+        path, "line " + std::to_string(number + 1) + " of the PLY header, '" + line + "' (expected " + expected + ")");
+  };
+  if (number == 0) {
+    if (line != "ply") bad("'ply'");
+  } else if (keyword == "format") {
+    const bool known =
+        rest.size() == 2 && (rest[0] == "ascii" || rest[0] == "binary_little_endian" || rest[0] == "binary_big_endian");
+    if (!known || number != 1) bad("'format ascii|binary_little_endian|binary_big_endian 1.0' as the second line");
+    ascii = rest[0] == "ascii";
+  } else if (keyword == "comment" || keyword == "obj_info") {
+  } else if (keyword == "element") {
+    long double count = -1;
+    if (rest.size() != 2 || !(std::istringstream(rest[1]) >> count) || count < 0) bad("'element NAME COUNT'");
+    const size_t limit = rest[0] == "face" ? kMaxMeshTriangles : kMaxMeshVertices;
+    // Each element takes at least 1 byte in binary and 2 ('0\n') in ASCII:
+    // absurd counts are refused before the importer allocates for them.
+    if (count > static_cast<long double>(limit) || count * (ascii ? 2 : 1) > static_cast<long double>(file_bytes))
+      ThrowInputError(path, "PLY header announces " + std::to_string(static_cast<unsigned long long>(count)) + " " +
+                                rest[0] + " elements in a " + std::to_string(file_bytes) +
+                                "-byte file (expected at most " + std::to_string(limit) +
+                                " and a file large enough to hold them)");
+    in_element = true;
+  } else if (keyword == "property") {
+    const bool scalar = rest.size() == 2 && PlyType(rest[0]);
+    const bool list = rest.size() == 4 && rest[0] == "list" && PlyType(rest[1]) && PlyType(rest[2]);
+    if (!in_element || !(scalar || list))
+      bad("'property TYPE NAME' or 'property list TYPE TYPE NAME' after an element");
+  } else if (keyword == "end_header" && rest.empty()) {
+    return false;
+  } else {
+    bad("format, comment, element, property or end_header");
+  }
+  return true;
+}
+
+// The header of a PLY file, line by line, up to end_header.
 void CheckPlyHeader(const std::string& path, uintmax_t file_bytes) {
   std::ifstream in(path, std::ios::binary);
   std::string line;
-  bool ascii = false;
-  for (int lines = 0; lines < 1000 && std::getline(in, line); ++lines) {
+  bool ascii = false, in_element = false;
+  constexpr int kMaxHeaderLines = 1000;
+  for (int number = 0; number < kMaxHeaderLines && std::getline(in, line); ++number) {
     if (!line.empty() && line.back() == '\r') line.pop_back();
-    if (line.rfind("format ascii", 0) == 0) ascii = true;
-    if (line == "end_header") return;
-    std::istringstream words(line);
-    std::string keyword, name;
-    long double count = -1;
-    if (!(words >> keyword) || keyword != "element") continue;
-    if (!(words >> name >> count) || count < 0)
-      ThrowInputError(path, "bad PLY element line '" + line + "' (expected 'element NAME COUNT')");
-    const size_t limit = name == "face" ? kMaxMeshTriangles : kMaxMeshVertices;
-    // Each element takes at least 1 byte in binary and 2 ('0\n') in ASCII.
-    const long double min_bytes = count * (ascii ? 2 : 1);
-    if (count > static_cast<long double>(limit) || min_bytes > static_cast<long double>(file_bytes))
-      ThrowInputError(path, "PLY header announces " + std::to_string(static_cast<unsigned long long>(count)) + " " +
-                                name + " elements in a " + std::to_string(file_bytes) +
-                                "-byte file (expected at most " + std::to_string(limit) +
-                                " and a file large enough to hold them)");
+    if (!CheckPlyHeaderLine(path, number, line, ascii, in_element, file_bytes)) return;
   }
+  ThrowInputError(path, "PLY header without end_header in its first " + std::to_string(kMaxHeaderLines) +
+                            " lines (expected a header ending with the line 'end_header')");
 }
 
 }  // namespace

@@ -923,7 +923,7 @@ class CheckpointReader {
           path_, "checkpoint array has " + std::to_string(n) + " values (expected " + std::to_string(expected) + ")");
     Need(n * sizeof(T));
     std::vector<T> v(n);
-    std::memcpy(v.data(), b_.data() + pos_, n * sizeof(T));
+    if (n > 0) std::memcpy(v.data(), b_.data() + pos_, n * sizeof(T));  // an empty vector's data() may be null
     pos_ += n * sizeof(T);
     return v;
   }

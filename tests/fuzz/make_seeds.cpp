@@ -44,8 +44,37 @@ NerfField SmallField() {
   return field;
 }
 
+template <typename T>
+void Put(std::string& out, const T& value) {
+  out.append(reinterpret_cast<const char*>(&value), sizeof value);
+}
+
+// Version 1 (read only) by its stated layout (nerf_file.h): every vertex of
+// every brick stored, as half floats (all 0 here: the layout is what counts).
+std::string Version1(const NerfField& f) {
+  std::string v1 = "NERFARF1";
+  Put(v1, uint32_t{1});
+  Put(v1, uint32_t{1});
+  for (int a = 0; a < 3; ++a) Put(v1, float(f.aabb.min[a]));
+  for (int a = 0; a < 3; ++a) Put(v1, float(f.aabb.max[a]));
+  for (int a = 0; a < 3; ++a) Put(v1, f.origin[a]);
+  Put(v1, f.voxel_m);
+  Put(v1, f.occupancy_sigma);
+  for (int a = 0; a < 3; ++a) Put(v1, int32_t(f.res[a]));
+  Put(v1, uint32_t(f.BrickCount()));
+  Put(v1, uint64_t(f.SlotCount()));
+  for (size_t b = 0; b < f.BrickCount(); ++b) {
+    for (int a = 0; a < 3; ++a) Put(v1, int32_t(f.brick_coords[3 * b + a]));
+    Put(v1, ~uint64_t{0});
+    Put(v1, f.occupancy[b]);
+  }
+  v1.append(f.SlotCount() * (1 + kNerfColorCoeffs) * 2, '\0');
+  return v1;
+}
+
 void NerfSeeds() {
   const NerfField field = SmallField();
+  Write("nerf/small_v1.bin", Version1(field));
   NerfFileOptions raw;
   raw.compress = false;
   Write("nerf/small_raw.bin", WithoutChecksum(SerializeNerf(field, raw)));
