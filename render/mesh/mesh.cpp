@@ -246,6 +246,60 @@ void CheckPlyHeader(const std::string& path, uintmax_t file_bytes) {
                             " lines (expected a header ending with the line 'end_header')");
 }
 
+// What assimp's importers made, checked before its post-processing steps run
+// on it: they take the scene as valid, and abort the process on face indices
+// past the vertices or nodes naming meshes that are not there (a fuzzed
+// binary PLY did).
+void CheckImportedScene(const aiScene& scene, const std::string& path) {
+  const auto bad = [&](const std::string& what) {
+    ThrowInputError(path, "cannot read the mesh: " + what + " (expected a valid OBJ, PLY or glTF 2.0 file)");
+  };
+  for (unsigned m = 0; m < scene.mNumMeshes; ++m) {
+    const aiMesh* mesh = scene.mMeshes[m];
+    if (mesh == nullptr || (mesh->mNumVertices > 0 && mesh->mVertices == nullptr)) bad("a mesh without vertices");
+    if (mesh->mNumFaces > 0 && mesh->mFaces == nullptr) bad("a mesh without its faces");
+    if (scene.mNumMaterials > 0 && mesh->mMaterialIndex >= scene.mNumMaterials) bad("a material index out of range");
+    for (unsigned f = 0; f < mesh->mNumFaces; ++f) {
+      const aiFace& face = mesh->mFaces[f];
+      if (face.mNumIndices == 0 || face.mIndices == nullptr) bad("face " + std::to_string(f) + " has no vertices");
+      for (unsigned k = 0; k < face.mNumIndices; ++k)
+        if (face.mIndices[k] >= mesh->mNumVertices)
+          bad("face " + std::to_string(f) + " names vertex " + std::to_string(face.mIndices[k]) + " of " +
+              std::to_string(mesh->mNumVertices));
+    }
+  }
+  // The node tree (PreTransformVertices walks it), without recursion: depth is the file's to choose.
+  std::vector<const aiNode*> nodes = {scene.mRootNode};
+  for (size_t visited = 0; !nodes.empty(); ++visited) {
+    const aiNode* node = nodes.back();
+    nodes.pop_back();
+    if (node == nullptr || visited > kMaxMeshTriangles) bad("a broken node tree");
+    for (unsigned i = 0; i < node->mNumMeshes; ++i)
+      if (node->mMeshes[i] >= scene.mNumMeshes) bad("a node names mesh " + std::to_string(node->mMeshes[i]));
+    for (unsigned i = 0; i < node->mNumChildren; ++i) nodes.push_back(node->mChildren[i]);
+  }
+}
+
+// The file through assimp: imported as it is, checked, then post-processed
+// into triangles with shared vertices and the node transforms applied.
+const aiScene* ImportScene(Assimp::Importer& importer, const std::string& path) {
+  const auto failed = [&] {
+    std::string why = importer.GetErrorString();
+    if (why.empty()) why = "unknown reason";
+    ThrowInputError(path, "cannot read the mesh: " + why + " (expected a valid OBJ, PLY or glTF 2.0 file)");
+  };
+  const aiScene* imported = importer.ReadFile(path, 0);
+  if (imported == nullptr) failed();
+  CheckImportedScene(*imported, path);
+  // Drop lines and points so that Triangulate leaves triangles only.
+  importer.SetPropertyInteger(AI_CONFIG_PP_SBP_REMOVE, aiPrimitiveType_LINE | aiPrimitiveType_POINT);
+  const aiScene* scene = importer.ApplyPostProcessing(aiProcess_ValidateDataStructure | aiProcess_Triangulate |
+                                                      aiProcess_JoinIdenticalVertices | aiProcess_PreTransformVertices |
+                                                      aiProcess_SortByPType);
+  if (scene == nullptr) failed();
+  return scene;
+}
+
 }  // namespace
 
 TriangleMesh ReadMesh(const std::string& path) {
@@ -266,16 +320,7 @@ TriangleMesh ReadMesh(const std::string& path) {
   if (extension == ".ply") CheckPlyHeader(path, bytes);
 
   Assimp::Importer importer;
-  // Drop lines and points so that Triangulate leaves triangles only.
-  importer.SetPropertyInteger(AI_CONFIG_PP_SBP_REMOVE, aiPrimitiveType_LINE | aiPrimitiveType_POINT);
-  const unsigned flags = aiProcess_Triangulate | aiProcess_JoinIdenticalVertices | aiProcess_PreTransformVertices |
-                         aiProcess_SortByPType | aiProcess_ValidateDataStructure;
-  const aiScene* scene = importer.ReadFile(path, flags);
-  if (scene == nullptr) {
-    std::string why = importer.GetErrorString();
-    if (why.empty()) why = "unknown reason";
-    ThrowInputError(path, "cannot read the mesh: " + why + " (expected a valid OBJ, PLY or glTF 2.0 file)");
-  }
+  const aiScene* scene = ImportScene(importer, path);
   if (scene->mNumMeshes == 0) ThrowInputError(path, "the file holds no mesh (expected at least one triangle)");
 
   size_t total_vertices = 0, total_faces = 0;

@@ -220,7 +220,7 @@ TEST(ReadMesh, BadFilesAreInputErrorsNamingTheFile) {
 // PLY headers outside the grammar are refused by our check, before assimp:
 // the fuzzer's input (a header that never ends, with a property line of four
 // words) kept assimp 5.2 busy for minutes.
-TEST(ReadMesh, PlyHeadersOutsideTheGrammarAreRefusedNamingTheLine) {
+TEST(ReadMesh, PlyHeadersOutsideTheGrammarAndBadFaceIndicesAreRefused) {
   ExpectInputErrorNaming(testing::TestDataPath("../fuzz/regressions/mesh/ply_without_end_header.ply"), "line 7");
   TempDir dir;
   const std::string good = testing::ReadText(TestDataPath("mesh/tetra.ply"));
@@ -234,6 +234,9 @@ TEST(ReadMesh, PlyHeadersOutsideTheGrammarAreRefusedNamingTheLine) {
   ExpectInputErrorNaming(dir.File("orphan.ply"), "after an element");
   testing::WriteText(dir.File("format.ply"), "ply\nformat utf8 1.0\nend_header\n");
   ExpectInputErrorNaming(dir.File("format.ply"), "line 2");
+  // A binary PLY whose first face lists no vertex (and others past the four
+  // it has): refused before assimp's post-processing, which aborted on it.
+  ExpectInputErrorNaming(testing::TestDataPath("../fuzz/regressions/mesh/binary_ply_bad_faces.ply"), "face 0");
   // A valid header with comments passes on to the importer.
   const std::string commented =
       "ply\nformat ascii 1.0\ncomment made by hand\nobj_info x" + good.substr(good.find("\nelement"));
