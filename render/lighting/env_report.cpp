@@ -13,6 +13,7 @@
 #include "calib/core/exr.h"
 #include "calib/core/image_io.h"
 #include "calib/core/media.h"
+#include "calib/core/metrics.h"
 #include "render/lighting/env_report_draw.h"
 #include "render/sg/sphere.h"
 
@@ -23,7 +24,9 @@ using env_report_internal::DrawLobes;
 using env_report_internal::DrawPanoramaGuides;
 using env_report_internal::GreyBackdrop;
 using env_report_internal::HemisphereDots;
+using env_report_internal::LobeEnergy;
 using env_report_internal::LobeHalfMaxAngle;
+using env_report_internal::LobesByEnergy;
 using env_report_internal::Paste;
 using env_report_internal::ResidualLegend;
 using env_report_internal::Resized;
@@ -106,31 +109,57 @@ std::string Format(const char* format, double a, double b = 0, double c = 0, dou
   return buffer;
 }
 
+// The q-quantile (nearest rank) of the values; NaN for none.
+double Quantile(std::vector<double> values, double q) {
+  if (values.empty()) return std::nan("");
+  const size_t k = std::min(values.size() - 1, static_cast<size_t>(q * values.size()));
+  std::nth_element(values.begin(), values.begin() + static_cast<std::ptrdiff_t>(k), values.end());
+  return values[k];
+}
+
+// Where a panorama's key light is: the mean direction of its pixels at least
+// half as bright as the brightest, weighted by luminance times solid angle
+// (zero for a black panorama).
+Vec3 KeyLightDirection(const ImageF& panorama) {
+  float brightest = 0;
+  for (size_t p = 0; p < panorama.PixelCount(); ++p)
+    brightest = std::max(brightest, Luminance(&panorama.pixels[p * 3], 3));
+  Vec3 sum;
+  for (int j = 0; j < panorama.height; ++j)
+    for (int i = 0; i < panorama.width; ++i) {
+      const float y = Luminance(panorama.Pixel(i, j), 3);
+      if (brightest > 0 && y >= 0.5f * brightest)
+        sum += EquirectDirection((i + 0.5) / panorama.width, (j + 0.5) / panorama.height) *
+               (y * EquirectPixelSolidAngle(panorama.width, panorama.height, j));
+    }
+  return Length(sum) > 0 ? Normalized(sum) : Vec3{};
+}
+
 double AzimuthDeg(const Vec3& d) { return std::atan2(d.y, d.x) * 180 / kPi; }
 double ElevationDeg(const Vec3& d) { return std::asin(std::clamp(d.z / Length(d), -1.0, 1.0)) * 180 / kPi; }
 
-// `count` kept views spread over the directions they look from: the first
-// kept view, then each time the one farthest (in angle) from those chosen.
+// `count` kept views spread around the volume: for each of `count` azimuths
+// (from world +x, evenly spaced, half a step off the axes) at the kept views'
+// median elevation, the kept view looking from nearest to it, each view once.
+// Extremes (grazing views that show mostly sky) are left out unless nothing else is kept.
 std::vector<size_t> SpreadViews(const EnvViewReport& views, int count) {
   std::vector<size_t> kept, chosen;
   for (size_t v = 0; v < views.poses.size() && v < views.kept.size(); ++v)
     if (views.kept[v]) kept.push_back(v);
-  const auto axis = [&](size_t v) { return views.poses[v].rotation * Vec3{0, 0, 1}; };
-  while (!kept.empty() && static_cast<int>(chosen.size()) < count) {
+  const auto from = [&](size_t v) { return -(views.poses[v].rotation * Vec3{0, 0, 1}); };
+  std::vector<double> elevations;
+  for (size_t v : kept) elevations.push_back(ElevationDeg(from(v)));
+  const double elevation = Quantile(elevations, 0.5) * kPi / 180;
+  for (int k = 0; k < count && !kept.empty(); ++k) {
+    const double azimuth = 2 * kPi * (k + 0.5) / count - kPi;
+    const Vec3 target{std::cos(elevation) * std::cos(azimuth), std::cos(elevation) * std::sin(azimuth),
+                      std::sin(elevation)};
     size_t best = 0;
-    double best_cos = 2;
-    for (size_t k = 0; k < kept.size(); ++k) {
-      double nearest = -2;
-      for (size_t c : chosen) nearest = std::max(nearest, Dot(axis(kept[k]), axis(c)));
-      if (chosen.empty() || nearest < best_cos) best_cos = nearest, best = k;
-      if (chosen.empty()) break;
-    }
+    for (size_t i = 1; i < kept.size(); ++i)
+      if (Dot(from(kept[i]), target) > Dot(from(kept[best]), target)) best = i;
     chosen.push_back(kept[best]);
     kept.erase(kept.begin() + static_cast<std::ptrdiff_t>(best));
   }
-  // Shown in the order of the azimuth they look from.
-  std::sort(chosen.begin(), chosen.end(),
-            [&](size_t a, size_t b) { return AzimuthDeg(-axis(a)) < AzimuthDeg(-axis(b)); });
   return chosen;
 }
 
@@ -157,74 +186,145 @@ Image8 ResidualView(const NerfField& field, const EnvEstimateReport& estimate, c
   std::stable_sort(order.begin(), order.end(),
                    [&](size_t a, size_t b) { return std::fabs(residual[a]) < std::fabs(residual[b]); });
   const double scale = static_cast<double>(tile_camera.width) / render_camera.width;
-  const double radius = std::max(1.5, tile_camera.width / 200.0);
+  // Dots of half the radius of the disk each sample would own if those seen
+  // covered half the tile (they do not overlap much), from 1.5 px (still a
+  // colour) to 3 px (few samples).
+  const double radius =
+      std::clamp(std::sqrt(0.5 * tile.width * tile.height / (kPi * std::max<size_t>(seen.size(), 1))) / 2, 1.5, 3.0);
   for (size_t k : order)
     DrawDot(tile, {seen[k].pixel.x * scale, seen[k].pixel.y * scale}, radius,
             DivergingColour(residual[k] / kResidualScaleLog2));
   const Vec3 from = -(pose.rotation * Vec3{0, 0, 1});
-  *caption = "from azimuth " + Format("%.0f", AzimuthDeg(from)) + ", elevation " + Format("%.0f", ElevationDeg(from)) +
-             " deg: " + std::to_string(seen.size()) + " samples seen";
+  *caption = Format("residual, view from azimuth %.0f elevation %.0f: ", AzimuthDeg(from), ElevationDeg(from)) +
+             std::to_string(seen.size()) + " samples";
+  if (!residual.empty()) *caption += Format(", median x%.2f", std::exp2(Quantile(residual, 0.5)));
   return tile;
 }
 
-// The text block: the fit's residual, model selection, energy, lobes, and the truth's error.
-std::vector<std::string> ReportLines(const EnvLight& env, const EnvEstimateReport& estimate,
-                                     const EnvReportLayout& layout, bool with_truth) {
-  const EnvFitReport& fit = estimate.fit;
+// The share (in %) of the values for which `test` holds; 0 for none.
+template <typename Test>
+double PercentWhere(const std::vector<double>& values, Test test) {
+  return values.empty() ? 0.0 : 100.0 * std::count_if(values.begin(), values.end(), test) / values.size();
+}
+
+// The fit's residual (relative RMS, robust loss, with and without
+// environment; model / observed over the samples), its model selection, and
+// how much of the samples' light the environment gives.
+std::vector<std::string> FitLines(const EnvLight& env, const EnvEstimateReport& estimate) {
+  const EnvFitResidual& fit = env.fit;
   std::vector<std::string> lines;
-  std::string residual = "fit over " + std::to_string(estimate.surface.size()) + " surface samples: relative RMS " +
-                         Format("%.3f", fit.relative_rms) + ", robust loss " + Format("%.4f", fit.final_loss);
-  if (fit.near_only_loss > 0)
+  std::string residual = "fit over " + std::to_string(fit.samples) + " surface samples: relative RMS " +
+                         Format("%.3f", fit.relative_rms) + ", robust loss " + Format("%.4f", fit.loss);
+  if (fit.near_only_fitted)
     residual += Format("; near field only: relative RMS %.3f, robust loss %.4f", fit.near_only_relative_rms,
                        fit.near_only_loss);
   lines.push_back(residual);
+  const EnvSurfaceSamples& s = estimate.surface;
+  std::vector<double> log2_ratio;
+  for (size_t i = 0; i < s.size(); ++i) {
+    const double r = ResidualLog2(estimate.fit.modelled[i], s.radiance[i]);
+    if (std::isfinite(r)) log2_ratio.push_back(r);
+  }
+  lines.push_back(Format("model / observed over the samples: median x%.2f, quartiles x%.2f .. x%.2f; ",
+                         std::exp2(Quantile(log2_ratio, 0.5)), std::exp2(Quantile(log2_ratio, 0.25)),
+                         std::exp2(Quantile(log2_ratio, 0.75))) +
+                  Format("%.0f %% within a factor of 1.41",
+                         PercentWhere(log2_ratio, [](double r) { return std::fabs(r) <= 0.5; })));
   if (env.evidence_needed > 0)
     lines.push_back(Format("model selection: the environment's log-likelihood gain %.1f against the BIC penalty %.1f",
                            env.evidence, env.evidence_needed) +
-                    (fit.environment_supported ? ": supported" : ": not supported"));
+                    (env.evidence > env.evidence_needed ? ": supported" : ": not supported"));
   lines.push_back(Format("environment / near-field irradiance: %.3f over the samples, %.3f at the volume centre",
                          env.env_to_near_surface, env.env_to_near_center) +
                   (env.negligible ? "; NEGLIGIBLE: insertion drops the environment" : "; kept"));
-  double total = 0;
-  for (const Sg& g : env.lobes) total += LuminanceOf(g.amplitude) * SgUnitIntegral(g.sharpness);
-  std::vector<const Sg*> lobes;
-  for (const Sg& g : env.lobes) lobes.push_back(&g);
-  std::stable_sort(lobes.begin(), lobes.end(), [](const Sg* a, const Sg* b) {
-    return LuminanceOf(a->amplitude) * SgUnitIntegral(a->sharpness) >
-           LuminanceOf(b->amplitude) * SgUnitIntegral(b->sharpness);
-  });
-  lines.push_back(std::to_string(env.lobes.size()) + " lobes; the brightest (numbered on the panorama):");
-  for (size_t k = 0; k < lobes.size() && static_cast<int>(k) < kLabelledLobes; ++k) {
-    const Sg& g = *lobes[k];
-    const double share = total > 0 ? LuminanceOf(g.amplitude) * SgUnitIntegral(g.sharpness) / total : 0;
+  if (estimate.e_env.size() == s.size() && s.e_nerf.size() == s.size()) {
+    std::vector<double> share;  // of the environment in each sample's modelled irradiance g·E_nerf + E_env
+    for (size_t i = 0; i < s.size(); ++i) {
+      const double e_env = LuminanceOf(estimate.e_env[i]),
+                   e_all = e_env + estimate.fit.near_field_gain * LuminanceOf(Vec3(s.e_nerf[i]));
+      if (e_all > 0) share.push_back(e_env / e_all);
+    }
     lines.push_back(
-        "  " + std::to_string(k + 1) +
-        Format(": azimuth %4.0f, elevation %3.0f deg; sharpness %.3g (half maximum at %.1f deg); ", AzimuthDeg(g.axis),
-               ElevationDeg(g.axis), g.sharpness, LobeHalfMaxAngle(g.sharpness) * 180 / kPi) +
-        Format("%.0f %% of the energy; RGB %.3g %.3g %.3g", 100 * share, g.amplitude.x, g.amplitude.y, g.amplitude.z));
+        Format("the environment's share of each sample's irradiance: median %.0f %%, quartiles %.0f .. %.0f %%",
+               100 * Quantile(share, 0.5), 100 * Quantile(share, 0.25), 100 * Quantile(share, 0.75)) +
+        Format("; lit mostly by it: %.0f %% of the samples", PercentWhere(share, [](double f) { return f > 0.5; })));
   }
+  return lines;
+}
+
+// The lobes carrying the most energy, as numbered on the panoramas.
+std::vector<std::string> LobeLines(const SgMixture& lobes) {
+  double total = 0;
+  for (const Sg& g : lobes) total += LobeEnergy(g);
+  std::vector<std::string> lines = {std::to_string(lobes.size()) +
+                                    " lobes; the brightest (numbered on the panoramas):"};
+  const std::vector<size_t> order = LobesByEnergy(lobes);
+  for (size_t k = 0; k < order.size() && static_cast<int>(k) < kLabelledLobes; ++k) {
+    const Sg& g = lobes[order[k]];
+    lines.push_back("  " + std::to_string(k + 1) +
+                    Format(": azimuth %4.0f, elevation %3.0f deg; sharpness %.3g (half maximum at %.1f deg); ",
+                           AzimuthDeg(g.axis), ElevationDeg(g.axis), g.sharpness,
+                           LobeHalfMaxAngle(g.sharpness) * 180 / kPi) +
+                    Format("%.0f %% of the energy; RGB %.3g %.3g %.3g", total > 0 ? 100 * LobeEnergy(g) / total : 0.0,
+                           g.amplitude.x, g.amplitude.y, g.amplitude.z));
+  }
+  return lines;
+}
+
+// The comparison with the truth: the evaluation's irradiance error and the key lights' directions.
+std::vector<std::string> TruthLines(const EnvReportLayout& layout) {
+  std::vector<std::string> lines;
+  lines.push_back(std::isfinite(layout.irradiance_error_upper)
+                      ? Format("irradiance error against the truth (luminance, relative RMS; eval/metrics.py "
+                               "irradiance): %.4f over the 32 upper normals, %.4f over all 64",
+                               layout.irradiance_error_upper, layout.irradiance_error_sphere)
+                      : std::string("irradiance error: the truth is black (no light from outside the volume); "
+                                    "the estimate should be negligible"));
+  if (Length(layout.key_truth) > 0 && Length(layout.key_estimate) > 0)
+    lines.push_back(
+        Format("key light (pixels at least half the brightest): truth at azimuth %.0f, elevation %.0f deg; ",
+               AzimuthDeg(layout.key_truth), ElevationDeg(layout.key_truth)) +
+        Format("estimate at azimuth %.0f, elevation %.0f deg: %.1f deg apart", AzimuthDeg(layout.key_estimate),
+               ElevationDeg(layout.key_estimate),
+               std::acos(std::clamp(Dot(layout.key_truth, layout.key_estimate), -1.0, 1.0)) * 180 / kPi));
+  return lines;
+}
+
+std::vector<std::string> ReportLines(const EnvLight& env, const EnvEstimateReport& estimate,
+                                     const EnvReportLayout& layout, bool with_truth) {
+  std::vector<std::string> lines = FitLines(env, estimate);
+  for (const std::string& line : LobeLines(env.lobes)) lines.push_back(line);
   if (with_truth)
-    lines.push_back(std::isfinite(layout.irradiance_error_upper)
-                        ? Format("irradiance error against the truth (luminance, relative RMS; eval/metrics.py "
-                                 "irradiance): %.4f over the 32 upper normals, %.4f over all 64",
-                                 layout.irradiance_error_upper, layout.irradiance_error_sphere)
-                        : std::string("irradiance error: the truth is black (no light from outside the volume); "
-                                      "the estimate should be negligible"));
-  lines.push_back(Format("panoramas: exposure %.4g (1/p99 luminance of the ", layout.exposure) +
+    for (const std::string& line : TruthLines(layout)) lines.push_back(line);
+  lines.push_back(Format("panoramas: exposure %.4g (1 / the mean luminance over the sphere of the ", layout.exposure) +
                   (with_truth ? "truth" : "estimate") +
                   "), lines every 30 deg of elevation; lobe circles at half maximum");
   return lines;
 }
 
-// The panoramas' exposure: the truth's (1/p99 luminance) when it holds light, else the estimate's.
+// Mean luminance over the sphere, each pixel weighted by its solid angle.
+double MeanLuminance(const ImageF& panorama) {
+  double sum = 0;
+  for (int j = 0; j < panorama.height; ++j) {
+    double row = 0;
+    for (int i = 0; i < panorama.width; ++i) row += Luminance(panorama.Pixel(i, j), 3);
+    sum += row * EquirectPixelSolidAngle(panorama.width, panorama.height, j);
+  }
+  return sum / (4 * kPi);
+}
+
+// The panoramas' exposure: the mean radiance over the sphere shows at the
+// middle of the tone curve (x/(1+x) = 1/2). The mean, unlike a percentile of
+// the pixels, weighs each direction by the light it gives, whatever the
+// equirect stretching (two strip lights near the zenith fill a tenth of the
+// pixels, a sun a thousandth). The truth's when it holds light, else the estimate's.
 float PanoramaExposure(const ImageF& estimate, const ImageF* truth) {
-  if (truth != nullptr && std::any_of(truth->pixels.begin(), truth->pixels.end(), [](float v) { return v > 0; }))
-    return ExposureForPercentile(*truth);
-  return ExposureForPercentile(estimate);
+  const double mean = truth != nullptr && MeanLuminance(*truth) > 0 ? MeanLuminance(*truth) : MeanLuminance(estimate);
+  return mean > 0 ? static_cast<float>(1.0 / mean) : 1.0f;
 }
 
 // Signed luminance difference estimate − truth per pixel of the truth's grid,
-// coloured with ±1/exposure (the truth's p99 luminance) at the scale's ends.
+// coloured with ±1/exposure (the truth's mean luminance) at the scale's ends.
 Image8 DifferencePicture(const ImageF& estimate, const ImageF& truth, float exposure) {
   NERFAR_CHECK(estimate.width == truth.width && estimate.height == truth.height);
   Image8 picture(truth.width, truth.height, 3);
@@ -268,10 +368,12 @@ int PlacePanoramas(const EnvLight& env, const ImageF* truth, const EnvReportOpti
   layout.exposure = PanoramaExposure(estimate, truth);
   Image8 estimate_picture = ToneMapToDisplay(estimate, layout.exposure);
   DrawPanoramaGuides(estimate_picture);
-  DrawLobes(estimate_picture, env.lobes, kLabelledLobes);
+  DrawLobes(estimate_picture, env.lobes, kLabelledLobes, false);
   const int left = kGutter, right = 2 * kGutter + pw, row = top + kCaption;
   layout.estimate = {left, row, pw, ph};
-  pieces.push_back({estimate_picture, "estimate (" + std::to_string(env.lobes.size()) + " lobes, 5 brightest numbered)",
+  pieces.push_back({estimate_picture,
+                    "estimate: " + std::to_string(env.lobes.size()) + " lobes, the 5 brightest numbered; exposure " +
+                        Format("%.3g", layout.exposure),
                     layout.estimate});
   layout.truth = {right, row, pw, ph};
   if (truth == nullptr) {
@@ -281,9 +383,12 @@ int PlacePanoramas(const EnvLight& env, const ImageF* truth, const EnvReportOpti
   const ImageF estimate_on_truth_grid = RenderEquirect(env.lobes, truth->width, truth->height);
   layout.irradiance_error_upper = IrradianceError(estimate_on_truth_grid, *truth, true);
   layout.irradiance_error_sphere = IrradianceError(estimate_on_truth_grid, *truth, false);
+  layout.key_truth = KeyLightDirection(*truth);
+  layout.key_estimate = KeyLightDirection(estimate_on_truth_grid);
   Image8 truth_picture = Resized(ToneMapToDisplay(*truth, layout.exposure), pw, ph, true);
   DrawPanoramaGuides(truth_picture);
-  pieces.push_back({truth_picture, "truth, same exposure", layout.truth});
+  DrawLobes(truth_picture, env.lobes, kLabelledLobes, true);
+  pieces.push_back({truth_picture, "truth, same exposure (the estimate's 5 brightest lobes marked)", layout.truth});
   const int row2 = row + ph + kGutter + kCaption;
   Image8 difference = Resized(DifferencePicture(estimate_on_truth_grid, *truth, layout.exposure), pw, ph, true);
   DrawPanoramaGuides(difference);
@@ -327,7 +432,7 @@ int PlaceViews(const NerfField& field, const EnvEstimateReport& estimate, const 
     layout.views.push_back(rect);
     layout.view_cameras.push_back(camera);
     layout.view_poses.push_back(pose);
-    pieces.push_back({std::move(tile), "residual " + caption, rect});
+    pieces.push_back({std::move(tile), caption, rect});
   }
   if (progress) progress("report", chosen.size(), chosen.size());
   return layout.views.empty() ? top : layout.views.back().y + layout.views.back().height + kGutter;

@@ -84,9 +84,12 @@ struct EnvReportLayout {
   std::vector<PictureRect> views;  // the residual views
   std::vector<CameraIntrinsics> view_cameras;  // per view: the camera of its tile
   std::vector<Pose> view_poses;                // per view: T_world_camera
-  float exposure = 1;                          // of both panoramas (1/p99 luminance of the truth, else of the estimate)
+  float exposure = 1;  // of both panoramas: 1 / mean luminance over the sphere of the truth (else of the estimate)
   double irradiance_error_upper = 0, irradiance_error_sphere = 0;  // with truth (metrics.py irradiance [--upper])
-  std::vector<std::string> lines;                                  // the text block (also worth logging)
+  // With truth: the key light's direction in each (the mean direction of the
+  // pixels at least half as bright as the brightest; zero when black).
+  Vec3 key_truth, key_estimate;
+  std::vector<std::string> lines;  // the text block (also worth logging)
 };
 
 // The report picture of an estimate. `estimate` must hold the samples

@@ -105,16 +105,24 @@ void DrawPanoramaGuides(Image8& panorama) {
   DrawText(panorama, "-x", w - 18, h / 2 + 3, 0.8);
 }
 
-void DrawLobes(Image8& panorama, const SgMixture& lobes, int labelled) {
-  cv::Mat mat = AsMat(panorama);
+double LobeEnergy(const Sg& lobe) { return LuminanceOf(lobe.amplitude) * SgUnitIntegral(lobe.sharpness); }
+
+std::vector<size_t> LobesByEnergy(const SgMixture& lobes) {
   std::vector<double> energy;
-  for (const Sg& lobe : lobes) energy.push_back(LuminanceOf(lobe.amplitude) * SgUnitIntegral(lobe.sharpness));
+  for (const Sg& lobe : lobes) energy.push_back(LobeEnergy(lobe));
   std::vector<size_t> order(lobes.size());
   std::iota(order.begin(), order.end(), 0);
   std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return energy[a] > energy[b]; });
+  return order;
+}
+
+void DrawLobes(Image8& panorama, const SgMixture& lobes, int labelled, bool labelled_only) {
+  cv::Mat mat = AsMat(panorama);
+  const std::vector<size_t> order = LobesByEnergy(lobes);
   for (size_t rank = 0; rank < order.size(); ++rank) {
     const Sg& lobe = lobes[order[rank]];
     const bool numbered = static_cast<int>(rank) < labelled;
+    if (labelled_only && !numbered) break;
     DrawLobeCircle(mat, lobe, numbered ? 2 : 1);
     const Vec2 p = PanoramaPixel(Normalized(lobe.axis), mat.cols, mat.rows);
     const cv::Point c(static_cast<int>(p.x), static_cast<int>(p.y));

@@ -23,9 +23,13 @@ double LobeHalfMaxAngle(double sharpness);
 // Elevation lines every 30 degrees (the horizon solid), the ±x and ±y
 // azimuth lines, and their labels, drawn over a panorama picture.
 void DrawPanoramaGuides(Image8& panorama);
-// Each lobe's axis (a cross) and half-maximum circle; the `labelled`
-// brightest (by energy) numbered 1, 2, ... in that order.
-void DrawLobes(Image8& panorama, const SgMixture& lobes, int labelled);
+// A lobe's energy: the luminance of its integral over the sphere.
+double LobeEnergy(const Sg& lobe);
+// Lobe indices from the most to the least energy, ties in the mixture's order.
+std::vector<size_t> LobesByEnergy(const SgMixture& lobes);
+// The lobes' axes (crosses) and half-maximum circles: of every lobe, or of the
+// `labelled` brightest only; those numbered 1, 2, ... by energy.
+void DrawLobes(Image8& panorama, const SgMixture& lobes, int labelled, bool labelled_only);
 
 // A filled dot with a dark rim at continuous pixel coordinates.
 void DrawDot(Image8& image, const Vec2& pixel, double radius, const Colour& colour);

@@ -202,7 +202,7 @@ TEST(EnvReport, PictureShowsPanoramasAndSamplesWhereTheyProject) {
     EXPECT_EQ(r.width, options.panorama_width);
     EXPECT_EQ(r.height * 2, r.width);
   }
-  // The truth (uniform 0.5) sets the exposure: 1/p99 luminance.
+  // The truth (uniform 0.5) sets the exposure: 1 / its mean luminance.
   EXPECT_FLOAT_EQ(layout.exposure, 2.0f);
   EXPECT_TRUE(std::isfinite(layout.irradiance_error_upper));
 
@@ -262,9 +262,10 @@ TEST(EnvReport, WithoutTruthTheEstimateStandsAlone) {
   EXPECT_EQ(layout.difference.width, 0);
   EXPECT_EQ(layout.irradiance.width, 0);
   EXPECT_EQ(layout.views.size(), 2u);
-  // The estimate's own p99 luminance sets the exposure (the lobe's brightest sixth of the sphere ~ 1).
-  EXPECT_GT(layout.exposure, 0.5f);
-  EXPECT_LT(layout.exposure, 2.0f);
+  // The estimate's own mean radiance sets the exposure: the lobe's sphere
+  // integral 2πμ(1 − e^{−2λ})/λ over 4π, so k = 2λ / (1 − e^{−2λ}) at μ = 1.
+  // 1e-3: a 512 x 256 panorama's quadrature of a λ = 3 lobe (~1e-5).
+  EXPECT_NEAR(layout.exposure, 6.0 / (1.0 - std::exp(-6.0)), 1e-3);
 }
 
 TEST(EnvReport, BadTruthFilesNameTheFileAndTheProblem) {
