@@ -403,9 +403,15 @@ int PlacePanoramas(const EnvLight& env, const ImageF* truth, const EnvReportOpti
       {HemisphereDots(ph, normals, IrradianceRatios(estimate_on_truth_grid, *truth, normals), kResidualScaleLog2),
        "irradiance estimate / truth, upper normals", layout.irradiance});
   Image8 numbers(pw - ph - kGutter, ph, 3, 24);
-  const std::string lines[] = {"irradiance error", "(relative RMS,", " eval/metrics.py)",
+  const std::string lines[] = {"irradiance error",
+                               "(relative RMS,",
+                               " eval/metrics.py)",
                                Format("upper: %.4f", layout.irradiance_error_upper),
-                               Format("all 64: %.4f", layout.irradiance_error_sphere)};
+                               Format("all 64: %.4f", layout.irradiance_error_sphere),
+                               "",
+                               "dots: estimate / truth",
+                               "on the scale below",
+                               "(blue: too dark)"};
   for (size_t i = 0; i < std::size(lines); ++i) DrawText(numbers, lines[i], 4, 8 + 18 * static_cast<int>(i), 1.1);
   pieces.push_back({numbers, "", {right + ph + kGutter, row2, numbers.width, ph}});
   return row2 + ph + kGutter;
