@@ -66,7 +66,7 @@ std::vector<SampleInView> SamplesSeenInView(const CameraIntrinsics& camera, cons
 // --- The picture
 
 struct EnvReportOptions {
-  int views = 4;                // sampled views shown (spread over the directions they look from)
+  int views = 4;                // sampled views shown (at as many azimuths around the scene)
   int view_width = 512;         // each view's tile (its height from the sampled views' aspect)
   int view_render_width = 256;  // the NeRF rendering behind it, upsampled to the tile (rays cost time)
   int panorama_width = 512;     // each panorama's width (height: half)
@@ -79,9 +79,10 @@ struct PictureRect {
 
 // Where each part of the picture lies, and the numbers it states.
 struct EnvReportLayout {
-  PictureRect estimate, truth, difference,
-      irradiance;                  // panoramas (2:1) and the irradiance plot; the last three only with truth
-  std::vector<PictureRect> views;  // the residual views
+  // The panoramas (2:1) and the irradiance plot; without truth the truth's
+  // place holds a note, and the last two are absent.
+  PictureRect estimate, truth, difference, irradiance;
+  std::vector<PictureRect> views;              // the residual views
   std::vector<CameraIntrinsics> view_cameras;  // per view: the camera of its tile
   std::vector<Pose> view_poses;                // per view: T_world_camera
   float exposure = 1;  // of both panoramas: 1 / mean luminance over the sphere of the truth (else of the estimate)
@@ -89,7 +90,7 @@ struct EnvReportLayout {
   // With truth: the key light's direction in each (the mean direction of the
   // pixels at least half as bright as the brightest; zero when black).
   Vec3 key_truth, key_estimate;
-  std::vector<std::string> lines;  // the text block (also worth logging)
+  std::vector<std::string> lines;  // the text block
 };
 
 // The report picture of an estimate. `estimate` must hold the samples
