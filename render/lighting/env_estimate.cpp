@@ -53,6 +53,12 @@ EnvLight EstimateEnvironment(const NerfField& field, const EnvEstimateOptions& o
   env.threshold = options.negligible_ratio;
   env.evidence = local.fit.evidence;
   env.evidence_needed = local.fit.evidence_needed;
+  env.fit = {.samples = static_cast<long long>(samples.size()),
+             .relative_rms = local.fit.relative_rms,
+             .loss = local.fit.final_loss,
+             .near_only_fitted = local.fit.near_only_loss > 0,  // 0: the fit without environment did not run
+             .near_only_relative_rms = local.fit.near_only_relative_rms,
+             .near_only_loss = local.fit.near_only_loss};
   env.negligible = (env.env_to_near_surface < env.threshold && env.env_to_near_center < env.threshold) ||
                    !local.fit.environment_supported;
   env.options_json = options.ToJson();

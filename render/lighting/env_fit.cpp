@@ -109,10 +109,31 @@ FitState PrepareFit(const EnvSurfaceSamples& samples, const Aabb& aabb, const En
   return st;
 }
 
+// The model's radiance L = a/π · S per sample (what it predicts for L_o).
+std::vector<Vec3f> ModelledRadiance(const FitState& st, const Eigen::MatrixXd& S) {
+  std::vector<Vec3f> model(st.s->size());
+  for (size_t i = 0; i < model.size(); ++i) {
+    const Vec3& a = st.albedo[st.cell[i]];
+    model[i] = Vec3f(Vec3{a.x / kPi * S(i, 0), a.y / kPi * S(i, 1), a.z / kPi * S(i, 2)});
+  }
+  return model;
+}
+
+// RMS of (model − L_o) over RMS of L_o, in luminance.
+double RelativeRms(const std::vector<Vec3f>& model, const std::vector<Vec3f>& observed) {
+  double err2 = 0, ref2 = 0;
+  for (size_t i = 0; i < observed.size(); ++i) {
+    const double obs = Y(ToD(observed[i]));
+    err2 += std::pow(Y(ToD(model[i])) - obs, 2);
+    ref2 += obs * obs;
+  }
+  return ref2 > 0 ? std::sqrt(err2 / ref2) : 0;
+}
+
 // The same model without environment (L_o = a/π · g·E_nerf), fitted by the
-// same alternation; its robust loss per sample.
+// same alternation; its robust loss per sample and its relative RMS.
 double NearFieldOnlyLoss(const EnvSurfaceSamples& samples, const Aabb& aabb, const EnvEstimateOptions& options,
-                         int steps) {
+                         int steps, double* relative_rms) {
   FitState st = PrepareFit(samples, aabb, options);
   st.A = Eigen::MatrixXd::Zero(static_cast<Eigen::Index>(samples.size()), 0);
   st.mu = Eigen::MatrixXd::Zero(0, 3);
@@ -123,7 +144,9 @@ double NearFieldOnlyLoss(const EnvSurfaceSamples& samples, const Aabb& aabb, con
     SolveScale(st);
     Loss(st, Shading(st), true, &st);
   }
-  return Loss(st, Shading(st), false, nullptr);
+  const Eigen::MatrixXd S = Shading(st);
+  *relative_rms = RelativeRms(ModelledRadiance(st, S), samples.radiance);
+  return Loss(st, S, false, nullptr);
 }
 
 }  // namespace
@@ -199,17 +222,11 @@ SgMixture FitEnvironment(const EnvSurfaceSamples& samples, const Aabb& aabb, con
   const Eigen::MatrixXd S = Shading(st);
   local.final_loss = Loss(st, S, false, nullptr);
   local.active_lobes = static_cast<int>(result.size());
-  double albedo_sum = 0, err2 = 0, ref2 = 0;
-  for (size_t i = 0; i < samples.size(); ++i) {
-    const Vec3& a = st.albedo[st.cell[i]];
-    albedo_sum += Y(a);
-    const Vec3 model{a.x / kPi * S(i, 0), a.y / kPi * S(i, 1), a.z / kPi * S(i, 2)};
-    const double obs = Y(ToD(samples.radiance[i]));
-    err2 += std::pow(Y(model) - obs, 2);
-    ref2 += obs * obs;
-  }
+  double albedo_sum = 0;
+  for (size_t i = 0; i < samples.size(); ++i) albedo_sum += Y(st.albedo[st.cell[i]]);
   local.mean_albedo = albedo_sum / samples.size();
-  local.relative_rms = ref2 > 0 ? std::sqrt(err2 / ref2) : 0;
+  local.modelled = ModelledRadiance(st, S);
+  local.relative_rms = RelativeRms(local.modelled, samples.radiance);
   local.near_field_gain = st.gain;
   // Model selection: the environment must explain what the near field
   // cannot by more than its own parameters would explain of noise. The loss
@@ -218,7 +235,7 @@ SgMixture FitEnvironment(const EnvSurfaceSamples& samples, const Aabb& aabb, con
   // alone must exceed BIC's (k/2)·ln n, k = 6 parameters per active lobe
   // (axis 2, sharpness 1, RGB amplitude 3).
   if (!options.ignore_near_field && options.evidence_bic_factor > 0) {
-    local.near_only_loss = NearFieldOnlyLoss(samples, aabb, options, total_steps);
+    local.near_only_loss = NearFieldOnlyLoss(samples, aabb, options, total_steps, &local.near_only_relative_rms);
     const double n = static_cast<double>(samples.size()), s2 = options.robust_scale * options.robust_scale;
     local.evidence = n * (local.near_only_loss - local.final_loss) / s2;
     local.evidence_needed = options.evidence_bic_factor * 0.5 * kSgLobeParameters * local.active_lobes * std::log(n);

@@ -29,6 +29,9 @@ struct EnvFitReport {
   double evidence = 0;                // n·(near_only_loss − final_loss)/s²: the environment's log-likelihood gain
   double evidence_needed = 0;         // evidence_bic_factor · (k/2)·ln n, k = kSgLobeParameters · active lobes
   bool environment_supported = true;  // evidence > evidence_needed
+  double near_only_relative_rms = 0;  // relative_rms of that fit without environment (0 when it was not run)
+  // Per sample: the fitted model's radiance a/π·(g·E_nerf + E_env), what it predicts for L_o.
+  std::vector<Vec3f> modelled;
 };
 
 // Free parameters of one SG lobe in the model selection: axis 2, sharpness 1, RGB amplitude 3.

@@ -31,6 +31,9 @@ struct EnvViewReport {
   int rendered = 0, accepted = 0;
   std::vector<double> scores;  // BRISQUE score per rendered view (−1: BRISQUE disabled)
   std::vector<bool> kept;      // per rendered view
+  // The views' camera (shared by all) and poses T_world_camera (OpenCV axes), per rendered view.
+  CameraIntrinsics camera;
+  std::vector<Pose> poses;
   // Picked pixels of the kept views: tried, and dropped as not surface-like,
   // without a usable normal, or seen too grazing.
   long pixels_tried = 0, pixels_not_surface = 0, pixels_no_normal = 0, pixels_grazing = 0;

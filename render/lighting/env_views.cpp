@@ -243,11 +243,13 @@ EnvSurfaceSamples SampleSurfaces(const NerfField& field, const EnvEstimateOption
     const bool ok = !use_brisque || pick.score <= options.brisque_max;
     local.scores.push_back(pick.score);
     local.kept.push_back(ok);
+    local.poses.push_back(pose);
     if (ok) ++accepted;
     views.push_back(std::move(pick));
     if (progress) progress("views", static_cast<size_t>(accepted), static_cast<size_t>(options.views));
   }
   local.rendered = static_cast<int>(views.size());
+  local.camera = camera;
   if (accepted < options.views) {
     const int passed = accepted;
     // Too few views passed: take the best-scoring of the rest (the paper repeats
