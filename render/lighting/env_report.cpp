@@ -316,9 +316,9 @@ double MeanLuminance(const ImageF& panorama) {
 // The panoramas' exposure: the mean radiance over the sphere shows at the
 // middle of the tone curve (x/(1+x) = 1/2). The mean, unlike a percentile of
 // the pixels, weighs each direction by its solid angle, whatever the equirect
-// stretching: the shared overhead scene's strip lights near the zenith fill
-// 1.9 % of its env.exr's pixels, so its 99th percentile is a strip and
-// everything else showed black. The truth's when it holds light, else the estimate's.
+// stretching: sources near a pole fill many more pixels than their solid
+// angle, so a percentile can land on a source and show everything else
+// black. The truth's when it holds light, else the estimate's.
 float PanoramaExposure(const ImageF& estimate, const ImageF* truth) {
   const double mean = truth != nullptr && MeanLuminance(*truth) > 0 ? MeanLuminance(*truth) : MeanLuminance(estimate);
   return mean > 0 ? static_cast<float>(1.0 / mean) : 1.0f;
