@@ -65,6 +65,17 @@ struct IncidentLightOptions {
   // than a point value that hits or misses a small source. 0: no refinement.
   int refine_rays = 16;  // fast preset: 0
   double refine_contrast = 2.0;
+  // Environment lobes sharper than the N directions resolve (a sun, a lamp
+  // a few degrees wide: CompactSharpness) pass to the light analytically:
+  // each keeps its axis, sharpness and radiance, times the scene's
+  // transmittance towards it (LobeTransmittance over `lobe_bundle_rays`
+  // rays spread as the lobe); the directions and the SG fit carry the near
+  // field and the broad environment, with the lobes left of the budget.
+  // false: every lobe through the directions and the fit, as before.
+  bool analytic_compact_lobes = true;
+  // Rays of one compact lobe's transmittance bundle: its visible share is
+  // resolved in steps of 1/rays (16: 6 %, below the SG fit's own error).
+  int lobe_bundle_rays = 16;
   // Every problem as "field: what is wrong (what was expected)".
   std::vector<std::string> Validate() const;
 };
@@ -92,6 +103,32 @@ struct LightObjectVolume {
   Pose T_world_object;
   double scale = 1.0;
 };
+
+// The sharpness from which N even directions no longer carry a lobe: an SG
+// is a Gaussian of angular width σ = 1/√λ, and N directions lie h = √(4π/N)
+// apart; on a lattice a sum over them integrates the lobe to within about
+// e^{−2π²σ²/h²} (aliasing). The Fibonacci set is no perfect lattice: its sum
+// errs by 0.2-0.4 % RMS over axes (1-4 % at worst, N = 512..4096) at
+// σ = h/√2, but 2 % RMS (6-11 % worst) at σ = h/2 and 17 % (40 %) at h/2.8,
+// where a lobe falls between the directions and its energy, centre and
+// width depend on where they happen to lie. So a lobe is sharper than the
+// directions carry from σ < h/√2, λ = 2/h² = N/(2π) (163 at N = 1024: a
+// lobe ~4.5° wide).
+double CompactSharpness(int directions);
+
+// The environment split into the lobes the directions carry (`broad`) and
+// the compact ones (sharper than CompactSharpness(directions)) passed on
+// analytically; at most `max_compact` of those, the most energetic (by
+// luminance integral): the rest stay broad. Order kept within each part.
+void SplitCompactLobes(const SgMixture& environment, int directions, int max_compact, SgMixture* broad,
+                       SgMixture* compact);
+
+// The scene's transmittance (1 − Ô, mean over `rays` directions spread as
+// the lobe, SgQuadrature) from
+// `center` towards each lobe, the rays starting where they leave `volume`
+// (optional, ObjectExitDistances) as the light's other rays do. In [0, 1].
+std::vector<double> LobeTransmittance(const SceneField& scene, const Vec3& center, const SgMixture& lobes, int rays,
+                                      const LightObjectVolume* volume = nullptr);
 
 // Per direction d, the distance t at which the ray center + t·d leaves the
 // object's mesh for the last time (its farthest crossing of a triangle);
@@ -165,7 +202,12 @@ class IncidentLight {
 
   bool valid() const { return valid_; }
   const SgMixture& light() const { return light_; }
+  // The directions' radiance: without the compact lobes (compact()) when
+  // those pass analytically.
   const RadianceSamples& samples() const { return samples_; }
+  // The environment's compact lobes as they reach the centre (attenuated by
+  // the scene's transmittance; part of light()); empty without any.
+  const SgMixture& compact() const { return compact_; }
   const Vec3& center() const { return center_; }
   // The fitted lobes' distances (LobeDistances; empty without parallax).
   const std::vector<double>& lobe_distances() const { return distances_; }
@@ -209,6 +251,10 @@ class IncidentLight {
   RadianceSamples samples_;
   std::vector<float> opacity_, depth_;
   SgMixture light_;
+  SgMixture fitted_;   // the fitted part of light_ (the warm start)
+  SgMixture compact_;  // the analytic part of light_ (compact environment lobes)
+  bool analytic_ = false;
+  int bundle_rays_ = 0;
   std::vector<double> distances_;
   // DistancesFor's cache: the light and centre it was computed for.
   SgMixture given_light_;

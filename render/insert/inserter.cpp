@@ -173,7 +173,10 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
     specular.assign(n_objects, PrefilteredRadiance());
     for (size_t o = 0; o < n_objects; ++o) {
       const RadianceSamples* samples = objects[o].light_override ? objects[o].light_samples : &lights_[o].samples();
-      if (samples != nullptr) specular[o] = PrefilteredRadiance(*samples, options_.specular_levels);
+      // The compact lobes that passed analytically reach the map as lobes.
+      const SgMixture no_lobes;
+      const SgMixture& compact = objects[o].light_override ? no_lobes : lights_[o].compact();
+      if (samples != nullptr) specular[o] = PrefilteredRadiance(*samples, options_.specular_levels, compact);
       // Parallax-corrected reflections: the distances the samples' light comes from.
       if (!options_.specular_parallax || specular[o].empty()) continue;
       if (objects[o].light_override && objects[o].light_sample_distances)
@@ -218,8 +221,7 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
   t0 = InsertClock::now();
   RenderShadows({scene_, options_, camera, T_world_camera, objects, spheres, used_lights_, g, receivers,
                  options_.kappa_from_samples ? &shadow_sources : nullptr},
-                preps,
-                kappa_cache_, frame, layers, times);
+                preps, kappa_cache_, frame, layers, times);
   times.kappa_ms = MsSince(t0);
 
   // Pixels partly covered by an object whose centre misses it.
