@@ -120,7 +120,7 @@ RadianceSamples SampleIncidentLight(const SceneField& scene, const SgMixture& en
                                     const std::vector<Vec3>& directions, LightSource source,
                                     std::vector<float>* opacity, std::vector<float>* depth,
                                     const std::vector<float>* start, int refine_rays, double refine_contrast,
-                                    size_t* refined) {
+                                    size_t* refined, const SgMixture* beside) {
   const size_t n = directions.size();
   RadianceSamples samples;
   samples.directions = directions;
@@ -146,6 +146,7 @@ RadianceSamples SampleIncidentLight(const SceneField& scene, const SgMixture& en
     std::vector<double> y(n);
     double mean = 0.0;
     for (size_t i = 0; i < n; ++i) mean += (y[i] = LuminanceOf(samples.radiance[i])) / static_cast<double>(n);
+    if (beside) mean += LuminanceOf(Integral(*beside)) / (4.0 * kPi);
     // Neighbours: within 1.8 spacings of an even set (spacing √(4π/N)),
     // found in the z band of that width (directions sorted by z).
     const double spacing = std::sqrt(4.0 * kPi / static_cast<double>(n));
@@ -480,13 +481,13 @@ IncidentLight::Update IncidentLight::Refresh(const SceneField& scene, const SgMi
   compact_.clear();
   if (analytic) SplitCompactLobes(environment, options.directions, options.fit.lobes / 2, &broad, &compact_);
   auto t0 = std::chrono::steady_clock::now();
-  samples_ = SampleIncidentLight(scene, broad, center, dirs_, options.source, &opacity_, &depth_, starts,
-                                 options.refine_rays, options.refine_contrast, &refined_);
   if (!compact_.empty() && options.source == LightSource::kFull) {
     const std::vector<double> seen =
         LobeTransmittance(scene, center, compact_, options.lobe_bundle_rays, starts != nullptr ? volume : nullptr);
     for (size_t k = 0; k < compact_.size(); ++k) compact_[k].amplitude = compact_[k].amplitude * seen[k];
   }
+  samples_ = SampleIncidentLight(scene, broad, center, dirs_, options.source, &opacity_, &depth_, starts,
+                                 options.refine_rays, options.refine_contrast, &refined_, &compact_);
   update.sample_ms = MillisecondsSince(t0);
   double total = 0.0;
   for (const Vec3& l : samples_.radiance) total += LuminanceOf(l);

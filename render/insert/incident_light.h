@@ -90,12 +90,15 @@ struct IncidentLightOptions {
 // directions must then be an even set such as FibonacciSphere's); `refined`
 // (optional) receives how many did. A refined direction's opacity is its
 // cell's mean, its depth the centre ray's, and its sub-rays start at the
-// centre ray's start.
+// centre ray's start. `beside` (optional): lobes that reach the centre
+// apart from the directions (the compact ones passed analytically); their
+// mean radiance counts in the refinement's "above the mean" as if sampled.
 RadianceSamples SampleIncidentLight(const SceneField& scene, const SgMixture& environment, const Vec3& center,
                                     const std::vector<Vec3>& directions, LightSource source,
                                     std::vector<float>* opacity = nullptr, std::vector<float>* depth = nullptr,
                                     const std::vector<float>* start = nullptr, int refine_rays = 0,
-                                    double refine_contrast = 2.0, size_t* refined = nullptr);
+                                    double refine_contrast = 2.0, size_t* refined = nullptr,
+                                    const SgMixture* beside = nullptr);
 
 // The object whose light is taken: its mesh as posed in the world (a loan).
 struct LightObjectVolume {
