@@ -198,7 +198,8 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
       const RadianceSamples* samples = objects[o].light_override ? objects[o].light_samples : &lights_[o].samples();
       if (samples != nullptr)
         shadow_sources[o] = BuildShadowSources(*samples, used_lights_[o], parallax[o], objects,
-                                               options_.kappa_sample_bins, options_.kappa_sample_min_radius);
+                                               options_.kappa_sample_bins, options_.kappa_sample_min_radius,
+                                               objects[o].light_override ? SgMixture{} : lights_[o].compact());
     }
   }
   // Self-shadow γ per mesh vertex, kept while the objects and the light
