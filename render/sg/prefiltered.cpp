@@ -152,8 +152,8 @@ inline void AddLevel(const float* rgb, int size, float fsize, float a, float b, 
   for (int c = 0; c < 3; ++c) acc[c] += w00 * p00[c] + w01 * p00[3 + c] + w10 * p10[c] + w11 * p10[3 + c];
 }
 
-// The finest map rows a level gets for compact lobes (n = 384 texels a side).
-constexpr int kMaxCompactRows = 256;
+// The finest map a level gets for compact lobes: n × n texels (~0.01 rad).
+constexpr int kMaxCompactSize = 384;
 
 }  // namespace
 
@@ -428,7 +428,7 @@ void AddCompactLobes(const CompactPoints& points, double alpha, int n, std::vect
           out[0] += sum.x * inv_norm, out[1] += sum.y * inv_norm, out[2] += sum.z * inv_norm;
         }
       },
-      4);
+      16);
   FillFoldedBorder(rgb.data(), n, 3);
 }
 
@@ -438,14 +438,18 @@ void AddCompactLobes(const CompactPoints& points, double alpha, int n, std::vect
 std::vector<float> Upsample(const std::vector<float>& coarse, int coarse_n, int n) {
   const int padded = n + 2;
   std::vector<float> rgb(size_t(padded) * padded * 3, 0.0f);
-  for (int row = 0; row < n; ++row)
-    for (int col = 0; col < n; ++col) {
-      const Vec3f R = TexelDirection(col, row, n);
-      float a, b;
-      OctahedralEncode(R.x, R.y, R.z, &a, &b);
-      float* out = &rgb[((row + 1) * padded + col + 1) * 3];
-      AddLevel(coarse.data(), coarse_n, static_cast<float>(coarse_n), a, b, 1.0f, out);
-    }
+  ParallelFor(
+      static_cast<size_t>(n),
+      [&](size_t row) {
+        for (int col = 0; col < n; ++col) {
+          const Vec3f R = TexelDirection(col, static_cast<int>(row), n);
+          float a, b;
+          OctahedralEncode(R.x, R.y, R.z, &a, &b);
+          float* out = &rgb[((row + 1) * padded + col + 1) * 3];
+          AddLevel(coarse.data(), coarse_n, static_cast<float>(coarse_n), a, b, 1.0f, out);
+        }
+      },
+      16);
   FillFoldedBorder(rgb.data(), n, 3);
   return rgb;
 }
@@ -473,13 +477,14 @@ PrefilteredRadiance::PrefilteredRadiance(const RadianceSamples& samples, int lev
     std::vector<float> rgb = FilterSamples(bucketed, alpha, n_samples);
     int n = n_samples;
     if (!points.axis.empty()) {
-      // Compact lobes: a map fine enough for the sharpest one's reflection
-      // (the filter's width and half the lobe's, at most kMaxCompactRows
-      // rows), the samples' part read from theirs; each lobe filtered with
-      // the BRDF's α widened only by the map's texel (2/n).
+      // Compact lobes: a map fine enough for the sharpest one's reflection,
+      // whose width is about the filter's and half the lobe's: its texels,
+      // 2√3/n rad at the octahedron's face centres (where they are widest),
+      // a third of that (bilinear reads then keep a peak within ~2 %), at
+      // most kMaxCompactSize a side; the samples' part read from their own
+      // map; each lobe filtered with the BRDF's α widened only by a texel.
       const double width = std::sqrt(alpha_brdf * alpha_brdf + 0.25 * points.min_width * points.min_width);
-      const int rows = std::max(equirect_rows, std::min(static_cast<int>(std::ceil(kPi / width)), kMaxCompactRows));
-      n = (3 * rows + 1) / 2;
+      n = std::max(n_samples, std::min(static_cast<int>(std::ceil(6.0 * std::sqrt(3.0) / width)), kMaxCompactSize));
       if (n != n_samples) rgb = Upsample(rgb, n_samples, n);
       AddCompactLobes(points, std::sqrt(alpha_brdf * alpha_brdf + 1.0 / (double(n) * n)), n, rgb);
     }

@@ -74,8 +74,9 @@ class PrefilteredRadiance {
   // passed analytically, render/insert): each filtered through 64
   // directions of equal share (SgQuadrature) with the BRDF's own α widened
   // by the map's texel only, not by the samples' spacing; the levels are
-  // then made fine enough for the sharpest lobe's reflection (up to 256
-  // equirect rows), the samples' part read bilinearly from their own map.
+  // then made fine enough for the sharpest lobe's reflection (texels a
+  // third of its width, at most 384 a side), the samples' part read
+  // bilinearly from their own map.
   PrefilteredRadiance(const RadianceSamples& samples, int levels, const SgMixture& compact = {});
   bool empty() const { return levels_.empty(); }
   int level_count() const { return static_cast<int>(levels_.size()); }
