@@ -1,8 +1,10 @@
 // render/insert: the shadow κ (paper eqs. 8-9) of a small distant source —
-// a sun of angular radius r, a uniform disc, with a dim sky — cast by a box
-// on the table, against brute force: visibility ray-traced against the box's
-// true triangles from each receiver, integrated over the sun's disc itself
-// (800 points) and the sky (4000 Fibonacci directions). The light given to
+// a sun of angular radius r, a uniform disc — cast by a box on the table,
+// against brute force: visibility ray-traced against the box's true
+// triangles from each receiver, integrated over the sun's disc itself (800
+// points). No sky: a broad lobe's κ is f_h's half-space model bounded by the
+// occluder's cap (ShadowRatioCapped), an approximation of its own that would
+// hide the sun's shadow in this comparison. The light given to
 // the inserter is the disc's moment-matched SG (equal integral, λ = 4/r²:
 // the disc's mean squared angle r²/2 is the SG's 2/λ), as an environment
 // estimate or the incident light's analytic lobes carry it. A hard edge for
@@ -52,25 +54,20 @@ struct Sun {
   Vec3 axis = Normalized(Vec3{0.5, 0.2, 0.75});
   double radius = 0.02;  // angular radius of the disc, radians
   double radiance = 2000.0;
-  // No sky: a broad lobe's κ is f_h's half-space model bounded by the
-  // occluder's cap (ShadowRatioCapped), an approximation of its own that
-  // would hide the sun's shadow in this comparison.
-  Sg sky{{0, 0, 1}, 1.0, {0.0, 0.0, 0.0}};
   double SolidAngle() const { return 2.0 * kPi * (1.0 - std::cos(radius)); }
-  // The moment-matched SG of the disc and the sky.
+  // The disc's moment-matched SG.
   SgMixture Light() const {
     Sg sun;
     sun.axis = axis;
     sun.sharpness = 4.0 / (radius * radius);
     const double mu = radiance * SolidAngle() / SgUnitIntegral(sun.sharpness);
     sun.amplitude = {mu, mu, mu};
-    return {sun, sky};
+    return {sun};
   }
 };
 
-// κ at table point x (normal +z) under the true disc and the sky.
+// κ at table point x (normal +z) under the true disc.
 double BruteForceKappa(const Sun& sun, const WorldBox& box, const Vec3& x) {
-  static const std::vector<Vec3> sky_dirs = FibonacciSphere(4000);
   constexpr int kDisc = 800;
   const Vec3 a = std::abs(sun.axis.x) < 0.9 ? Vec3{1, 0, 0} : Vec3{0, 1, 0};
   const Vec3 t1 = Normalized(Cross(sun.axis, a)), t2 = Cross(sun.axis, t1);
@@ -81,13 +78,6 @@ double BruteForceKappa(const Sun& sun, const WorldBox& box, const Vec3& x) {
     const double phi = k * kPi * (3.0 - std::sqrt(5.0));
     const Vec3 d = Normalized(sun.axis + (t1 * std::cos(phi) + t2 * std::sin(phi)) * rho);
     const double w = w_disc * std::max(d.z, 0.0);
-    all += w;
-    if (!box.Blocks(x, d)) seen += w;
-  }
-  const double w_sky = 4.0 * kPi / sky_dirs.size();
-  for (const Vec3& d : sky_dirs) {
-    if (d.z <= 0) continue;
-    const double w = LuminanceOf(Evaluate(sun.sky, d)) * d.z * w_sky;
     all += w;
     if (!box.Blocks(x, d)) seen += w;
   }
@@ -158,9 +148,8 @@ Profile Measure(const Sun& sun, bool lattice) {
           {layers.kappa.at(x - layers.kappa_rect.x0, y - layers.kappa_rect.y0), BruteForceKappa(sun, world, q)});
       lowest = std::min(lowest, pairs.back().second);
     }
-  // The sun's step from the deepest shadow (the sun wholly hidden: the sky's
-  // share is left) to 1: umbra within 5 % of its bottom, penumbra between
-  // 20 % and 80 % of it.
+  // The step from the deepest shadow (the sun wholly hidden) to 1: umbra
+  // within 5 % of its bottom, penumbra between 20 % and 80 % of it.
   const auto step = [&](double k) { return (k - lowest) / std::max(1.0 - lowest, 1e-9); };
   Profile p;
   double diff = 0, shadow = 0, umbra_n = 0;
