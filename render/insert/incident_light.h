@@ -4,6 +4,9 @@
 // opacity-weighted colour (so this is the paper's (1 − Ô)L_env + Ô·L_nerf).
 // The samples are fitted with SGs (render/sg FitSg), warm-started from the
 // previous fit, and the result is kept while the centre does not move.
+// Environment lobes sharper than the N directions resolve (a sun) skip the
+// sampling and the fit: they join the fitted lobes as they are, times the
+// scene's transmittance towards them (CompactSharpness, LobeTransmittance).
 // World frame, metres, linear RGB radiance.
 #pragma once
 
