@@ -34,6 +34,7 @@
 #include "render/insert/ssdf_visibility.h"
 #include "render/lighting/env_light.h"
 #include "render/nerf/nerf_file.h"
+#include "render/sg/compact_sources.h"
 #include "render/sg/fit.h"
 #include "render/sg/sphere.h"
 #include "render/ssdf/ssdf.h"
@@ -388,6 +389,7 @@ int RunInsert(const CommandArgs& args) {
   }
   SgMixture probe_light;
   RadianceSamples probe_samples;  // the probe's pixels (down to 128 × 64) for the prefiltered specular term
+  SgMixture probe_compact;        // its compact sources, beside those samples
   if (!light_probe.empty()) {
     const ImageF panorama = ReadExrRgb(light_probe);
     const bool halve = panorama.width % 128 == 0 && panorama.height % 64 == 0 && panorama.width > 128;
@@ -397,9 +399,22 @@ int RunInsert(const CommandArgs& args) {
     // than a pixel left its width, and so its energy, to the fit's guess:
     // lighting error 0.31 -> 0.05 (overhead, sphere), 0.06 -> 0.02
     // (sunroom); lamps and window within ±0.03 (ground-truth inputs).
-    probe_light = FitSg(probe_samples, options.light.fit);
-    LogInfo("insert: lighting every object with " + light_probe + " fitted with " + std::to_string(probe_light.size()) +
-            " SGs");
+    // Compact sources (a sun one or two pixels wide) out first, as lobes of
+    // their own energy; the fit takes the rest with the lobes they leave.
+    const CompactSplit split =
+        SplitCompactSources(probe_samples, options.light.fit.lobes / 2, options.light.fit.hdr_floor);
+    probe_samples = split.rest;
+    probe_compact = split.lobes;
+    SgFitOptions fit = options.light.fit;
+    fit.lobes -= static_cast<int>(probe_compact.size());
+    probe_light = FitSg(probe_samples, fit);
+    probe_light.insert(probe_light.end(), probe_compact.begin(), probe_compact.end());
+    std::string compact_list;
+    for (const Sg& lobe : probe_compact)
+      compact_list += " (λ " + std::to_string(static_cast<int>(lobe.sharpness)) + ", " +
+                      std::to_string(LuminanceOf(Integral(lobe))).substr(0, 6) + " Y·sr)";
+    LogInfo("insert: lighting every object with " + light_probe + " as " + std::to_string(probe_compact.size()) +
+            " compact sources" + compact_list + " and " + std::to_string(fit.lobes) + " fitted SGs");
   }
   // The probe's lobe distances per object, from a NeRF's depth at its centre.
   std::vector<std::vector<double>> probe_lobe_distances(loaded.size());
@@ -458,7 +473,8 @@ int RunInsert(const CommandArgs& args) {
     o.material = loaded[i].material;
     o.visibility = loaded[i].visibility.get();
     o.light_center = loaded[i].placement.center_world;
-    if (!light_probe.empty()) o.light_override = &probe_light, o.light_samples = &probe_samples;
+    if (!light_probe.empty())
+      o.light_override = &probe_light, o.light_samples = &probe_samples, o.light_compact = &probe_compact;
     if (!probe_lobe_distances[i].empty()) o.light_distances = &probe_lobe_distances[i];
     if (!probe_reflection_distances[i].empty()) o.light_sample_distances = &probe_reflection_distances[i];
   }

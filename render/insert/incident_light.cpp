@@ -209,8 +209,6 @@ RadianceSamples SampleIncidentLight(const SceneField& scene, const SgMixture& en
   return samples;
 }
 
-double CompactSharpness(int directions) { return std::max(directions, 1) / (2.0 * kPi); }
-
 void SplitCompactLobes(const SgMixture& environment, int directions, int max_compact, SgMixture* broad,
                        SgMixture* compact) {
   broad->clear();

@@ -16,6 +16,7 @@
 #include "calib/core/image.h"
 #include "render/insert/scene_field.h"
 #include "render/mesh/mesh.h"
+#include "render/sg/compact_sources.h"
 #include "render/sg/fit.h"
 #include "render/sg/sg.h"
 #include "render/sg/sphere.h"
@@ -109,18 +110,6 @@ struct LightObjectVolume {
   Pose T_world_object;
   double scale = 1.0;
 };
-
-// The sharpness from which N even directions no longer carry a lobe: an SG
-// is a Gaussian of angular width σ = 1/√λ, and N directions lie h = √(4π/N)
-// apart; on a lattice a sum over them integrates the lobe to within about
-// e^{−2π²σ²/h²} (aliasing). The Fibonacci set is no perfect lattice: its sum
-// errs by 0.2-0.4 % RMS over axes (1-4 % at worst, N = 512..4096) at
-// σ = h/√2, but 2 % RMS (6-11 % worst) at σ = h/2 and 17 % (40 %) at h/2.8,
-// where a lobe falls between the directions and its energy, centre and
-// width depend on where they happen to lie. So a lobe is sharper than the
-// directions carry from σ < h/√2, λ = 2/h² = N/(2π) (163 at N = 1024: a
-// lobe ~4.5° wide).
-double CompactSharpness(int directions);
 
 // The environment split into the lobes the directions carry (`broad`) and
 // the compact ones (sharper than CompactSharpness(directions)) passed on

@@ -23,6 +23,16 @@ struct LightPrepCache {
   std::vector<ShadowSources> shadow_sources;  // per object (InsertOptions::kappa_from_samples), same key
 };
 
+namespace {
+// The lobes beside an object's light samples: the incident light's analytic
+// ones, or those given with an override (a probe's compact sources).
+const SgMixture& CompactLobes(const InsertObject& object, const IncidentLight& light) {
+  static const SgMixture kNone;
+  if (!object.light_override) return light.compact();
+  return object.light_compact ? *object.light_compact : kNone;
+}
+}  // namespace
+
 ImageF ExpandLayer(const ImageF& layer, const PixelRect& rect, int width, int height, float fill) {
   const int channels = layer.channels > 0 ? layer.channels : 1;
   ImageF full(width, height, channels, fill);
@@ -173,10 +183,9 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
     specular.assign(n_objects, PrefilteredRadiance());
     for (size_t o = 0; o < n_objects; ++o) {
       const RadianceSamples* samples = objects[o].light_override ? objects[o].light_samples : &lights_[o].samples();
-      // The compact lobes that passed analytically reach the map as lobes.
-      const SgMixture no_lobes;
-      const SgMixture& compact = objects[o].light_override ? no_lobes : lights_[o].compact();
-      if (samples != nullptr) specular[o] = PrefilteredRadiance(*samples, options_.specular_levels, compact);
+      // The compact lobes given beside the samples reach the map as lobes.
+      if (samples != nullptr)
+        specular[o] = PrefilteredRadiance(*samples, options_.specular_levels, CompactLobes(objects[o], lights_[o]));
       // Parallax-corrected reflections: the distances the samples' light comes from.
       if (!options_.specular_parallax || specular[o].empty()) continue;
       if (objects[o].light_override && objects[o].light_sample_distances)
@@ -197,9 +206,9 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
     for (size_t o = 0; o < n_objects; ++o) {
       const RadianceSamples* samples = objects[o].light_override ? objects[o].light_samples : &lights_[o].samples();
       if (samples != nullptr)
-        shadow_sources[o] = BuildShadowSources(*samples, used_lights_[o], parallax[o], objects,
-                                               options_.kappa_sample_bins, options_.kappa_sample_min_radius,
-                                               objects[o].light_override ? SgMixture{} : lights_[o].compact());
+        shadow_sources[o] =
+            BuildShadowSources(*samples, used_lights_[o], parallax[o], objects, options_.kappa_sample_bins,
+                               options_.kappa_sample_min_radius, CompactLobes(objects[o], lights_[o]));
     }
   }
   // Self-shadow γ per mesh vertex, kept while the objects and the light
