@@ -105,6 +105,8 @@ std::string InsertOptions::ToJson() const {
   j["light_start_tolerance_m"] = light.start_tolerance_m;
   j["light_refine_rays"] = light.refine_rays;
   j["light_refine_contrast"] = light.refine_contrast;
+  j["light_analytic_compact_lobes"] = light.analytic_compact_lobes;
+  j["light_lobe_bundle_rays"] = light.lobe_bundle_rays;
   j["sg_lobes"] = light.fit.lobes;
   j["sg_cold_iterations"] = light.fit.cold_iterations;
   j["sg_warm_iterations"] = light.fit.warm_iterations;

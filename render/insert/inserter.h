@@ -50,6 +50,10 @@ struct InsertObject {
   // With light_override: the radiance samples it stands for (e.g. the probe's
   // pixels), for the prefiltered specular term; nullptr: SG specular.
   const RadianceSamples* light_samples = nullptr;
+  // With light_samples: lobes given beside them (compact sources taken out
+  // of a probe, SplitCompactSources), which the prefiltered map filters as
+  // lobes; nullptr: none.
+  const SgMixture* light_compact = nullptr;
   // With light_samples: how far each direction's light comes from, seen
   // from the light centre (parallax-corrected reflections,
   // InsertOptions::specular_parallax); nullptr: none.
