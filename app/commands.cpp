@@ -7,9 +7,11 @@ const std::vector<Command>& AllCommands() {
   static const std::vector<Command> commands = {
       {"help", "list the commands, or show one command's help", RunHelp},
       {"version", "print the version and the libraries it was built with", RunVersion},
+      {"board", "a tag board to print: vector PDF at exact scale, PNGs and its board.json (the first step)", RunBoard},
       {"calibrate", "camera intrinsics and distortion from AprilTag board views (camera.json)", RunCalibrate},
       {"cameras", "list the cameras attached (V4L2, libcamera) with formats and controls", RunCameras},
-      {"track", "camera pose per frame from the board's AprilTags; poses.json in the transforms.json convention", RunTrack},
+      {"track", "camera pose per frame from the board's AprilTags; poses.json in the transforms.json convention",
+       RunTrack},
       {"capture", "an HDR capture session: tracked, sharp, spread-out views written as a dataset", RunCapture},
       {"synth", "render a procedural tabletop scene with exact ground truth (dataset layout)", RunSynth},
       {"train", "train the HDR NeRF of a dataset (checkpoints, resumes, presets)", RunTrain},

@@ -26,6 +26,7 @@ int RunBench(const CommandArgs& args);
 int RunEnv(const CommandArgs& args);
 int RunInsert(const CommandArgs& args);
 int RunBake(const CommandArgs& args);
+int RunBoard(const CommandArgs& args);
 int RunCalibrate(const CommandArgs& args);
 int RunCapture(const CommandArgs& args);
 int RunSynth(const CommandArgs& args);

@@ -199,9 +199,9 @@ struct RayLossTerms {
 };
 
 // Returns the ray's loss, Σ_ch (C - y)² / (C + ε)² / 3 (for a clipped channel
-// only while C < y) + the opacity, distortion and sparsity terms, and writes per sample the gradient with respect to log σ
-// and to the log radiance of each channel (times gradient_scale; C held fixed
-// in the denominator as sg(C)), and the sample's rendering weight T·α.
+// only while C < y) + the opacity, distortion and sparsity terms, and writes per sample the gradient with respect to
+// log σ and to the log radiance of each channel (times gradient_scale; C held fixed in the denominator as sg(C)), and
+// the sample's rendering weight T·α.
 double RayLossAndGradient(const RaySample* samples, size_t count, const float target[3], const RayLossTerms& terms,
                           float* g_log_sigma, Vec3f* g_log_color, float* weights);
 
