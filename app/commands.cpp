@@ -14,6 +14,8 @@ const std::vector<Command>& AllCommands() {
        RunTrack},
       {"capture", "an HDR capture session: tracked, sharp, spread-out views written as a dataset", RunCapture},
       {"synth", "render a procedural tabletop scene with exact ground truth (dataset layout)", RunSynth},
+      {"import", "bring a capture made with other tools (transforms.json) into nerfar's frame: metres, z up, a box",
+       RunImport},
       {"train", "train the HDR NeRF of a dataset (checkpoints, resumes, presets)", RunTrain},
       {"env", "estimate the distant environment light (32 SGs, env.json) that the NeRF does not hold", RunEnv},
       {"render", "render a NeRF at a dataset's cameras: colour, depth, opacity EXR and psnr_tm report", RunRender},

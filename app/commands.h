@@ -30,6 +30,7 @@ int RunBoard(const CommandArgs& args);
 int RunCalibrate(const CommandArgs& args);
 int RunCapture(const CommandArgs& args);
 int RunSynth(const CommandArgs& args);
+int RunImport(const CommandArgs& args);
 int RunTrain(const CommandArgs& args);
 int RunRender(const CommandArgs& args);
 int RunTrack(const CommandArgs& args);

@@ -6,6 +6,7 @@
 
 #include "calib/camera_keys.h"
 #include "calib/core/error.h"
+#include "calib/scene_frame.h"
 
 namespace nerfar {
 namespace {
@@ -29,17 +30,6 @@ double Median(std::vector<double> values) {
   return values[mid];
 }
 
-// Solves the symmetric 3x3 system a x = b by Cramer's rule; false when a is
-// singular relative to its scale.
-bool Solve3(const Mat3& a, const Vec3& b, Vec3& x) {
-  const Vec3 c0 = a.Column(0), c1 = a.Column(1), c2 = a.Column(2);
-  const double det = Dot(c0, Cross(c1, c2));
-  const double scale = Length(c0) * Length(c1) * Length(c2);
-  if (!(std::abs(det) > 1e-6 * scale)) return false;
-  x = {Dot(b, Cross(c1, c2)) / det, Dot(c0, Cross(b, c2)) / det, Dot(c0, Cross(c1, b)) / det};
-  return true;
-}
-
 }  // namespace
 
 Aabb BoxAroundBoard(const Board& board, double margin_m, double height_m) {
@@ -55,16 +45,12 @@ Aabb BoxAroundBoard(const Board& board, double margin_m, double height_m) {
 }
 
 bool LookAtPoint(const std::vector<Pose>& T_world_cameras, Vec3& point) {
-  // Σ (I - d dᵀ) p = Σ (I - d dᵀ) c over the axes (centre c, unit direction d).
-  Mat3 a{{0, 0, 0, 0, 0, 0, 0, 0, 0}};
-  Vec3 b;
+  std::vector<Vec3> origins, directions;
   for (const Pose& pose : T_world_cameras) {
-    const Vec3 d = OpticalAxis(pose), c = pose.translation;
-    for (int i = 0; i < 3; ++i)
-      for (int j = 0; j < 3; ++j) a(i, j) += (i == j ? 1.0 : 0.0) - d[i] * d[j];
-    b += c - d * Dot(d, c);
+    origins.push_back(pose.translation);
+    directions.push_back(OpticalAxis(pose));
   }
-  return T_world_cameras.size() >= 2 && Solve3(a, b, point);
+  return ClosestPointToLines(origins, directions, point);
 }
 
 Aabb BoxFromCameras(const Dataset& dataset, std::string* how) {
