@@ -19,6 +19,8 @@
 #include "calib/core/metrics.h"
 #include "calib/core/parallel.h"
 #include "calib/core/random.h"
+#include "calib/linear_image.h"
+#include "calib/scene_box.h"
 #include "render/nerf/nerf_internal.h"
 
 namespace nerfar {
@@ -27,39 +29,75 @@ using nerf_detail::Corners;
 
 // ------------------------------------------------------------------ data
 
+namespace {
+
+// The views of one split, loaded in parallel.
+std::vector<NerfView> LoadViews(const Dataset& set, const Linearisation& linearisation) {
+  std::vector<NerfView> views(set.frames.size());
+  ParallelFor(
+      set.frames.size(),
+      [&](size_t n) {
+        const DatasetFrame& frame = set.frames[n];
+        NerfView& v = views[n];
+        v.name = std::filesystem::path(frame.file_path).stem().string();
+        v.image_path = frame.image_path;
+        v.camera = set.CameraOf(frame);
+        v.T_world_camera = frame.T_world_camera;
+        LinearImage image = ReadLinearImage(frame.image_path, linearisation);
+        v.rgb = std::move(image.rgb);
+        v.clipped = std::move(image.clipped);
+        if (v.rgb.width != v.camera.width || v.rgb.height != v.camera.height)
+          ThrowInputError(frame.image_path, "image is " + std::to_string(v.rgb.width) + "x" +
+                                                std::to_string(v.rgb.height) + " (expected " +
+                                                std::to_string(v.camera.width) + "x" + std::to_string(v.camera.height) +
+                                                " from the transforms file)");
+        for (float& x : v.rgb.pixels) x = std::max(x, 0.0f);  // radiance is non-negative
+        if (!frame.mask_path.empty()) v.mask = ReadMask(frame.mask_path, v.camera.width, v.camera.height);
+      },
+      1);
+  return views;
+}
+
+// One log line on how display-referred frames were read, and how much clipped.
+void LogLinearisation(const std::vector<NerfView>& views, const Linearisation& linearisation) {
+  size_t display = 0, pixels = 0, clipped = 0;
+  for (const NerfView& v : views) {
+    if (v.clipped.empty()) continue;
+    ++display;
+    pixels += v.clipped.PixelCount();
+    for (std::uint8_t flags : v.clipped.pixels) clipped += flags != 0;
+  }
+  if (display == 0) return;
+  char share[32];
+  std::snprintf(share, sizeof share, "%.2f%%", 100.0 * double(clipped) / double(std::max<size_t>(pixels, 1)));
+  LogInfo("train: " + std::to_string(display) + " PNG/JPEG images linearised through " + linearisation.Describe() +
+          "; " + share + " of their pixels clipped (a lower bound in training)");
+}
+
+}  // namespace
+
 NerfTrainData ReadNerfTrainData(const std::string& dataset_dir) {
   NerfTrainData data;
   const Dataset train = ReadDataset(DatasetSplitPath(dataset_dir, "train"));
-  if (!train.aabb) ThrowInputError(train.path, "no aabb (expected the NeRF box, [[min], [max]] in metres)");
-  data.aabb = *train.aabb;
+  if (train.aabb) {
+    data.aabb = *train.aabb;
+  } else {
+    const std::string board_path = (std::filesystem::path(dataset_dir) / "board.json").string();
+    std::error_code board_error;
+    std::optional<Board> board;
+    if (std::filesystem::is_regular_file(board_path, board_error)) board = ReadBoard(board_path);
+    const SceneBox box = DeriveSceneBox(train, board ? &*board : nullptr);
+    data.aabb = box.box;
+    LogInfo("train: " + train.path + " gives no aabb: " + box.how);
+  }
   data.source = train.path;
-  std::optional<Dataset> test;
+  const Linearisation linearisation = DatasetLinearisation(dataset_dir);
+  data.train = LoadViews(train, linearisation);
   const std::string test_path = DatasetSplitPath(dataset_dir, "test");
   std::error_code error;
-  if (std::filesystem::is_regular_file(test_path, error)) test = ReadDataset(test_path);
-  auto load = [](const Dataset& set, std::vector<NerfView>& views) {
-    views.resize(set.frames.size());
-    ParallelFor(
-        set.frames.size(),
-        [&](size_t n) {
-          const DatasetFrame& frame = set.frames[n];
-          NerfView& v = views[n];
-          v.name = std::filesystem::path(frame.file_path).stem().string();
-          v.image_path = frame.image_path;
-          v.camera = set.camera;
-          v.T_world_camera = frame.T_world_camera;
-          v.rgb = ReadExrRgb(frame.image_path);
-          if (v.rgb.width != set.camera.width || v.rgb.height != set.camera.height)
-            ThrowInputError(frame.image_path, "image is " + std::to_string(v.rgb.width) + "x" +
-                                                  std::to_string(v.rgb.height) + " (expected " +
-                                                  std::to_string(set.camera.width) + "x" +
-                                                  std::to_string(set.camera.height) + " from the transforms file)");
-          for (float& x : v.rgb.pixels) x = std::max(x, 0.0f);  // radiance is non-negative
-        },
-        1);
-  };
-  load(train, data.train);
-  if (test) load(*test, data.held_out);
+  if (std::filesystem::is_regular_file(test_path, error))
+    data.held_out = LoadViews(ReadDataset(test_path), linearisation);
+  LogLinearisation(data.train, linearisation);
   if (data.train.empty()) ThrowInputError(train.path, "no training frames (expected at least one)");
   return data;
 }
@@ -283,7 +321,9 @@ double RayLossAndGradient(const RaySample* s, size_t n, const float target[3], c
   float g_c[3];
   for (int ch = 0; ch < 3; ++ch) {
     const float pred = color[ch], denom = pred + eps;
-    const float diff = pred - target[ch];
+    // A clipped channel says only that the radiance is at least the target.
+    const bool bound_met = (terms.clipped_channels >> ch & 1u) != 0 && pred >= target[ch];
+    const float diff = bound_met ? 0.0f : pred - target[ch];
     loss += double(diff) * diff / (double(denom) * denom) / 3.0;
     g_c[ch] = 2.0f * diff / (denom * denom) / 3.0f * scale;
   }
@@ -532,6 +572,8 @@ double NerfTrainer::State::DoStep() {
         const NerfView& view = data.train[view_index];
         const uint64_t local = pixel - pixel_offsets[view_index];
         const int px = int(local % uint64_t(view.camera.width)), py = int(local / uint64_t(view.camera.width));
+        // A masked pixel teaches nothing (not even whether something is there).
+        if (!view.mask.empty() && view.mask.at(px, py) == 0) continue;
         const float* target = view.rgb.Pixel(px, py);
         const double sx = px + UnitFloat(h1), sy = py + UnitFloat(h2);
         const Vec3 dir_c =
@@ -580,6 +622,7 @@ double NerfTrainer::State::DoStep() {
         weights.resize(n);
         for (size_t i = 0; i < n; ++i) ray_samples[i] = samples[i].ray;
         nerf_train_detail::RayLossTerms terms = base_terms;
+        if (!view.clipped.empty()) terms.clipped_channels = view.clipped.at(px, py);
         if (background) {
           terms.opacity_weight = bg_w;
           terms.opacity_target = 0.0f;

@@ -37,7 +37,7 @@ TEST(App, HelpListsTheCommands) {
 }
 
 TEST(App, EveryCommandHasHelp) {
-  for (const char* command : {"bench", "version"}) {
+  for (const char* command : {"bench", "version", "board", "import"}) {
     const Result result = RunNerfar(std::string(command) + " --help");
     EXPECT_EQ(result.exit_code, 0) << command;
     EXPECT_NE(result.output.find("usage: nerfar"), std::string::npos) << command << ": " << result.output;

@@ -1046,6 +1046,61 @@ TEST(NerfTrain, RayLossGradientMatchesFiniteDifferences) {
   }
 }
 
+// A clipped channel's target is a lower bound: where the rendering is above it
+// the channel adds neither loss nor gradient (as if the target were the
+// rendering itself); below it the loss is the ordinary one. Both expectations
+// come from the unclipped path, which the finite-difference test checks.
+TEST(NerfTrain, ClippedChannelIsALowerBound) {
+  const size_t n = 12;
+  std::vector<nerf_train_detail::RaySample> s(n);
+  for (size_t i = 0; i < n; ++i) {
+    s[i].dt = 0.01f;
+    s[i].t = 0.5f + 0.01f * float(i);
+    s[i].sigma = 20.0f + 10.0f * float(i);
+    s[i].color = Vec3f(0.5f + 0.1f * float(i), 2.0f, 0.2f);
+  }
+  float rendered[3] = {0, 0, 0};
+  {
+    std::vector<float> g_sigma(n), weights(n);
+    std::vector<Vec3f> g_color(n);
+    const float zero[3] = {0, 0, 0};
+    nerf_train_detail::RayLossAndGradient(s.data(), n, zero, {}, g_sigma.data(), g_color.data(), weights.data());
+    for (size_t i = 0; i < n; ++i)
+      for (int ch = 0; ch < 3; ++ch) rendered[ch] += weights[i] * s[i].color[ch];
+  }
+  ASSERT_GT(rendered[1], 0.5f);  // precondition: a mostly opaque ray of green radiance ~2
+  struct Result {
+    double loss;
+    std::vector<float> g_sigma;
+    std::vector<Vec3f> g_color;
+  };
+  const auto run = [&](const float target[3], unsigned clipped) {
+    nerf_train_detail::RayLossTerms terms;
+    terms.epsilon = 0.3f;
+    terms.clipped_channels = clipped;
+    Result r{0, std::vector<float>(n), std::vector<Vec3f>(n)};
+    std::vector<float> weights(n);
+    r.loss = nerf_train_detail::RayLossAndGradient(s.data(), n, target, terms, r.g_sigma.data(), r.g_color.data(),
+                                                   weights.data());
+    return r;
+  };
+  // Green clipped at half the rendering: the same as a target equal to the rendering.
+  const float below[3] = {0.4f, 0.5f * rendered[1], 0.1f};
+  const float matched[3] = {0.4f, rendered[1], 0.1f};
+  const Result clipped = run(below, 1u << 1), reference = run(matched, 0);
+  EXPECT_EQ(clipped.loss, reference.loss);
+  for (size_t i = 0; i < n; ++i) {
+    EXPECT_EQ(clipped.g_sigma[i], reference.g_sigma[i]);
+    EXPECT_EQ(clipped.g_color[i], reference.g_color[i]);
+  }
+  // Green clipped at twice the rendering: the ordinary loss, pulling it up.
+  const float above[3] = {0.4f, 2.0f * rendered[1], 0.1f};
+  const Result bound = run(above, 1u << 1), plain = run(above, 0);
+  EXPECT_EQ(bound.loss, plain.loss);
+  for (size_t i = 0; i < n; ++i) EXPECT_EQ(bound.g_color[i], plain.g_color[i]);
+  EXPECT_LT(bound.g_color[0][1], 0.0f);  // descent raises the green radiance
+}
+
 // Where the transmittance along `ray` falls to 0.9 and to 0.1, by brute-force
 // quadrature of field.Density at 1 mm steps (independent of the marcher).
 std::pair<double, double> TransmittanceCrossings(const NerfField& f, const NerfRay& ray) {
