@@ -197,7 +197,9 @@ TEST(CompactShadow, SmallSunCastsAHardShadowLargeOneASoftOne) {
     for (const Profile& p : {hard, soft}) {
       EXPECT_LT(p.normalised_error, 0.25);
       EXPECT_NEAR(p.umbra_ours, p.umbra_ref, lattice ? 0.08 : 0.05);
-      if (!lattice) EXPECT_NEAR(p.width_ours, p.width_ref, 0.1);
+      if (!lattice) {
+        EXPECT_NEAR(p.width_ours, p.width_ref, 0.1);
+      }
     }
     EXPECT_LT(hard.width_ours, 0.9 * soft.width_ours);
   }
