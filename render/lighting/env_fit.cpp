@@ -15,7 +15,6 @@
 namespace nerfar {
 
 using env_internal::Channel;
-using env_internal::Dictionary;
 using env_internal::FitState;
 using env_internal::LobeIrradianceMatrix;
 using env_internal::Loss;
@@ -126,10 +125,189 @@ double NearFieldOnlyLoss(const EnvSurfaceSamples& samples, const Aabb& aabb, con
   return Loss(st, Shading(st), false, nullptr);
 }
 
+// One alternation step: gain, light, albedo, scale, robust weights. The gain
+// first: at the start (no light yet) it takes all that the near field's
+// pattern explains before any lobe can. Returns the robust loss.
+double AlternationStep(FitState& st) {
+  SolveGain(st);
+  SolveLight(st);
+  SolveAlbedo(st, Shading(st));
+  SolveScale(st);
+  return Loss(st, Shading(st), true, &st);
+}
+
+void Iterate(FitState& st, int count, int* step, int total_steps, const EnvProgress& progress) {
+  for (int it = 0; it < count; ++it, ++*step) {
+    const double loss = AlternationStep(st);
+    double albedo = 0, light = 0;
+    for (size_t i = 0; i < st.s->size(); ++i) albedo += Y(st.albedo[st.cell[i]]) / st.s->size();
+    for (Eigen::Index k = 0; k < st.mu.rows(); ++k) light += st.mu(k, 1) * st.lobe_integral[k];
+    LogVerbose("env fit: step " + std::to_string(*step) + " loss " + std::to_string(loss) + " mean albedo " +
+               std::to_string(albedo) + " light green integral " + std::to_string(light));
+    if (progress) progress("fit", static_cast<size_t>(*step + 1), static_cast<size_t>(total_steps));
+  }
+}
+
+// Appends a lobe (amplitude 0) as a column of the fit.
+void AppendLobe(FitState& st, const Vec3& axis, double sharpness, bool source, const EnvShadowRays& shadow,
+                const EnvEstimateOptions& o) {
+  const Eigen::MatrixXd column = LobeIrradianceMatrix(*st.s, {axis}, {sharpness}, shadow, o.source_bundle_rays, o.seed);
+  st.A.conservativeResize(Eigen::NoChange, st.A.cols() + 1);
+  st.A.col(st.A.cols() - 1) = column.col(0);
+  st.mu.conservativeResize(st.mu.rows() + 1, Eigen::NoChange);
+  st.mu.row(st.mu.rows() - 1).setZero();
+  st.lobe_integral.push_back(SgUnitIntegral(sharpness));
+  st.lobes.Add(axis, sharpness, source);
+}
+
+// Sharp sources, one at a time: the search's best light is added as a lobe
+// and the whole model re-solved for a few steps; it is kept when its
+// log-likelihood gain (the robust loss as a Cauchy likelihood, as the
+// environment's own model selection) exceeds BIC's penalty for one lobe's
+// parameters, and the search goes on; otherwise the search stops. Returns
+// the sources kept.
+int AddSources(FitState& st, const EnvShadowRays& shadow, const EnvEstimateOptions& o, const EnvProgress& progress) {
+  const double n = static_cast<double>(st.s->size()), s2 = o.robust_scale * o.robust_scale;
+  const double penalty = o.evidence_bic_factor * 0.5 * kSgLobeParameters * std::log(n);
+  int kept = 0;
+  for (; kept < o.sources_max; ++kept) {
+    if (progress) progress("sources", static_cast<size_t>(kept), static_cast<size_t>(o.sources_max));
+    const env_internal::SourceCandidate found = env_internal::FindSource(st, shadow, o);
+    if (!(found.score > 0)) break;
+    // The trial and the model without it take the same steps.
+    FitState trial = st;
+    AppendLobe(trial, found.axis, found.sharpness, true, shadow, o);
+    int trial_step = 0, step = 0;
+    Iterate(trial, o.source_steps, &trial_step, 0, nullptr);
+    Iterate(st, o.source_steps, &step, 0, nullptr);
+    const double gain = n * (Loss(st, Shading(st), false, nullptr) - Loss(trial, Shading(trial), false, nullptr)) / s2;
+    const double elevation = std::asin(std::clamp(found.axis.z, -1.0, 1.0)) * 180 / kPi;
+    const double azimuth = std::atan2(found.axis.y, found.axis.x) * 180 / kPi;
+    LogInfo("env fit: source " + std::to_string(kept + 1) + " at azimuth " + std::to_string(azimuth) + " elevation " +
+            std::to_string(elevation) + " deg, sharpness " + std::to_string(found.sharpness) +
+            ": log-likelihood gain " + std::to_string(gain) + ", BIC penalty " + std::to_string(penalty) +
+            (gain > penalty ? " (kept)" : " (not supported: search ends)"));
+    if (!(gain > penalty)) break;
+    st = std::move(trial);
+  }
+  if (progress) progress("sources", static_cast<size_t>(o.sources_max), static_cast<size_t>(o.sources_max));
+  return kept;
+}
+
+// Removes column k of the fit.
+void RemoveLobe(FitState& st, Eigen::Index k) {
+  const Eigen::Index d = st.A.cols();
+  st.A.block(0, k, st.A.rows(), d - k - 1) = st.A.rightCols(d - k - 1).eval();
+  st.A.conservativeResize(Eigen::NoChange, d - 1);
+  st.mu.block(k, 0, d - k - 1, 3) = st.mu.bottomRows(d - k - 1).eval();
+  st.mu.conservativeResize(d - 1, Eigen::NoChange);
+  st.lobe_integral.erase(st.lobe_integral.begin() + k);
+  st.lobes.axes.erase(st.lobes.axes.begin() + k);
+  st.lobes.sharpness.erase(st.lobes.sharpness.begin() + k);
+  st.lobes.source.erase(st.lobes.source.begin() + k);
+  st.lobes.coloured.erase(st.lobes.coloured.begin() + k);
+}
+
+// Each source again, once the whole dictionary is in the model: removed when
+// keeping it no longer gains more log-likelihood than BIC's penalty (the
+// finer lobes may now explain what it did). Returns the sources left.
+int KeepSupportedSources(FitState& st, const EnvEstimateOptions& o) {
+  const double n = static_cast<double>(st.s->size()), s2 = o.robust_scale * o.robust_scale;
+  const double penalty = o.evidence_bic_factor * 0.5 * kSgLobeParameters * std::log(n);
+  for (Eigen::Index k = st.A.cols() - 1; k >= 0; --k) {
+    if (!st.lobes.source[k]) continue;
+    FitState trial = st;
+    RemoveLobe(trial, k);
+    int trial_step = 0, step = 0;
+    Iterate(trial, o.source_steps, &trial_step, 0, nullptr);
+    Iterate(st, o.source_steps, &step, 0, nullptr);
+    const double gain = n * (Loss(trial, Shading(trial), false, nullptr) - Loss(st, Shading(st), false, nullptr)) / s2;
+    LogVerbose("env fit: source at column " + std::to_string(k) + " with the whole dictionary: log-likelihood gain " +
+               std::to_string(gain) + ", BIC penalty " + std::to_string(penalty));
+    if (!(gain > penalty)) st = std::move(trial);
+  }
+  return static_cast<int>(std::count(st.lobes.source.begin(), st.lobes.source.end(), true));
+}
+
+// Per-lobe chroma, one lobe at a time: the lobe is given an RGB amplitude
+// (from grey) and the model re-solved for a few steps, as is the model
+// without the change; it keeps its colour when the log-likelihood gain
+// exceeds BIC's penalty for the chroma's two parameters. Albedo and light
+// trade colour freely, so a neutral scene gives no lobe the evidence (its
+// light stays grey) while a coloured source beside another (a blue sky beside
+// a white sun: the shadows bluer than the lit table) does. Only the lights'
+// relative colour is seen (a common tint goes to the albedo unless the near
+// field pins it), so the lobes are tried from the weakest up: the strongest,
+// tried last, stays the white point unless the data still asks otherwise,
+// as a camera white-balances to the dominant light.
+// Returns the lobes made coloured.
+int FreeChroma(FitState& st, const EnvEstimateOptions& o) {
+  const double n = static_cast<double>(st.s->size()), s2 = o.robust_scale * o.robust_scale;
+  const double penalty = o.evidence_bic_factor * 0.5 * kChromaParameters * std::log(n);
+  std::vector<Eigen::Index> order;
+  for (Eigen::Index k = 0; k < st.mu.rows(); ++k)
+    if (st.mu.row(k).maxCoeff() > 0) order.push_back(k);
+  const auto energy = [&](Eigen::Index k) { return st.mu.row(k).sum() * st.lobe_integral[k]; };
+  std::stable_sort(order.begin(), order.end(), [&](Eigen::Index a, Eigen::Index b) { return energy(a) < energy(b); });
+  int coloured = 0;
+  for (Eigen::Index k : order) {
+    FitState trial = st;
+    trial.lobes.coloured[k] = true;
+    int trial_step = 0, step = 0;
+    Iterate(trial, o.chroma_steps, &trial_step, 0, nullptr);
+    Iterate(st, o.chroma_steps, &step, 0, nullptr);
+    const double gain = n * (Loss(st, Shading(st), false, nullptr) - Loss(trial, Shading(trial), false, nullptr)) / s2;
+    if (!(gain > penalty)) continue;
+    st = std::move(trial);
+    ++coloured;
+  }
+  return coloured;
+}
+
+// Appends dictionary lobes [begin, end) (amplitude 0) with their columns.
+void AppendColumns(FitState& st, const env_internal::Dictionary& dict, const Eigen::MatrixXd& A_dict, size_t begin,
+                   size_t end) {
+  const Eigen::Index have = st.A.cols(), add = static_cast<Eigen::Index>(end - begin);
+  st.A.conservativeResize(Eigen::NoChange, have + add);
+  st.A.rightCols(add) = A_dict.middleCols(static_cast<Eigen::Index>(begin), add);
+  st.mu.conservativeResize(have + add, Eigen::NoChange);
+  st.mu.bottomRows(add).setZero();
+  for (size_t k = begin; k < end; ++k) {
+    st.lobe_integral.push_back(SgUnitIntegral(dict.sharpness[k]));
+    st.lobes.Add(dict.axes[k], dict.sharpness[k], false);
+  }
+}
+
+// Keeps the sources and the most energetic other lobes, `count` in all.
+void KeepStrongest(FitState& st, int count) {
+  const Eigen::Index d = st.A.cols();
+  std::vector<Eigen::Index> order(d);
+  std::iota(order.begin(), order.end(), 0);
+  std::vector<double> energy(d);
+  for (Eigen::Index k = 0; k < d; ++k)
+    energy[k] = st.lobes.source[k] ? 1e300 : Y(Vec3{st.mu(k, 0), st.mu(k, 1), st.mu(k, 2)}) * st.lobe_integral[k];
+  std::stable_sort(order.begin(), order.end(), [&](Eigen::Index a, Eigen::Index b) { return energy[a] > energy[b]; });
+  order.resize(std::min<size_t>(order.size(), static_cast<size_t>(count)));
+  std::sort(order.begin(), order.end());
+  FitState kept = st;
+  kept.A.resize(st.A.rows(), static_cast<Eigen::Index>(order.size()));
+  kept.mu.resize(static_cast<Eigen::Index>(order.size()), 3);
+  kept.lobe_integral.clear();
+  kept.lobes = {};
+  for (size_t k = 0; k < order.size(); ++k) {
+    kept.A.col(k) = st.A.col(order[k]);
+    kept.mu.row(k) = st.mu.row(order[k]);
+    kept.lobe_integral.push_back(st.lobe_integral[order[k]]);
+    kept.lobes.Add(st.lobes.axes[order[k]], st.lobes.sharpness[order[k]], st.lobes.source[order[k]],
+                   st.lobes.coloured[order[k]]);
+  }
+  st = std::move(kept);
+}
+
 }  // namespace
 
 SgMixture FitEnvironment(const EnvSurfaceSamples& samples, const Aabb& aabb, const EnvEstimateOptions& options,
-                         EnvFitReport* report, const EnvProgress& progress) {
+                         EnvFitReport* report, const EnvProgress& progress, const EnvShadowRays& shadow) {
   const std::vector<std::string> problems = options.Validate();
   if (!problems.empty()) ThrowInputError("env options", problems.front());
   NERFAR_CHECK_EQ(samples.e_nerf.size(), samples.size());
@@ -139,62 +317,39 @@ SgMixture FitEnvironment(const EnvSurfaceSamples& samples, const Aabb& aabb, con
     if (report) *report = local;
     return {};
   }
-  const Dictionary dict = MakeDictionary(options);
-  local.dictionary_size = static_cast<int>(dict.size());
   FitState st = PrepareFit(samples, aabb, options);
-  st.A = LobeIrradianceMatrix(samples, dict.axes, dict.sharpness);
-  for (size_t k = 0; k < dict.size(); ++k) st.lobe_integral.push_back(SgUnitIntegral(dict.sharpness[k]));
-  st.mu = Eigen::MatrixXd::Zero(st.A.cols(), 3);
-  const int total_steps = options.iterations + std::max(3, options.iterations / 2);
+  const int broad_steps = std::max(1, options.iterations / 2), final_steps = std::max(3, options.iterations / 2);
+  const int total_steps = broad_steps + options.iterations + final_steps;
   // Start: albedo at the prior, robust weights from the near field alone.
+  st.A = Eigen::MatrixXd::Zero(static_cast<Eigen::Index>(samples.size()), 0);
+  st.mu = Eigen::MatrixXd::Zero(0, 3);
   local.initial_loss = Loss(st, Shading(st), true, &st);
   int step = 0;
-  auto iterate = [&](int count) {
-    for (int it = 0; it < count; ++it, ++step) {
-      // The gain first: at the start (no light yet) it takes all that the
-      // near field's pattern explains before any lobe can.
-      SolveGain(st);
-      SolveLight(st);
-      SolveAlbedo(st, Shading(st));
-      SolveScale(st);
-      const double loss = Loss(st, Shading(st), true, &st);
-      double albedo = 0, light = 0;
-      for (size_t i = 0; i < samples.size(); ++i) albedo += Y(st.albedo[st.cell[i]]) / samples.size();
-      for (Eigen::Index k = 0; k < st.mu.rows(); ++k) light += st.mu(k, 1) * st.lobe_integral[k];
-      LogVerbose("env fit: step " + std::to_string(step) + " loss " + std::to_string(loss) + " mean albedo " +
-                 std::to_string(albedo) + " light green integral " + std::to_string(light));
-      if (progress) progress("fit", static_cast<size_t>(step + 1), static_cast<size_t>(total_steps));
-    }
-  };
-  iterate(options.iterations);
-
-  // Keep the M lobes carrying the most energy and re-solve with them only.
-  std::vector<Eigen::Index> order(st.A.cols());
-  std::iota(order.begin(), order.end(), 0);
-  std::vector<double> energy(st.A.cols());
-  for (Eigen::Index k = 0; k < st.A.cols(); ++k)
-    energy[k] = Y(Vec3{st.mu(k, 0), st.mu(k, 1), st.mu(k, 2)}) * SgUnitIntegral(dict.sharpness[k]);
-  std::stable_sort(order.begin(), order.end(), [&](Eigen::Index a, Eigen::Index b) { return energy[a] > energy[b]; });
-  order.resize(std::min<size_t>(order.size(), static_cast<size_t>(options.lobes)));
-  std::sort(order.begin(), order.end());
-  Eigen::MatrixXd A_kept(st.A.rows(), static_cast<Eigen::Index>(order.size()));
-  Eigen::MatrixXd mu_kept(static_cast<Eigen::Index>(order.size()), 3);
-  std::vector<double> kept_integral;
-  for (size_t k = 0; k < order.size(); ++k) {
-    kept_integral.push_back(st.lobe_integral[order[k]]);
-    A_kept.col(k) = st.A.col(order[k]);
-    mu_kept.row(k) = st.mu.row(order[k]);
-  }
-  st.A = std::move(A_kept);
-  st.mu = std::move(mu_kept);
-  st.lobe_integral = kept_integral;
-  iterate(total_steps - options.iterations);
+  const env_internal::Dictionary dict = MakeDictionary(options);
+  local.dictionary_size = static_cast<int>(dict.size());
+  const Eigen::MatrixXd A_dict = LobeIrradianceMatrix(samples, dict.axes, dict.sharpness);
+  // Sharp sources are searched for against the fit of the dictionary's first
+  // level (broad lobes) alone: the finer levels, hundreds of lobes of
+  // sharpness up to 48, bend to imitate a source's light without its
+  // shadows, and leave a residual that points nowhere.
+  const size_t broad = std::min(dict.size(), static_cast<size_t>(options.dictionary_base));
+  AppendColumns(st, dict, A_dict, 0, broad);
+  Iterate(st, broad_steps, &step, total_steps, progress);
+  if (shadow != nullptr) local.sources = AddSources(st, shadow, options, progress);
+  AppendColumns(st, dict, A_dict, broad, dict.size());
+  Iterate(st, options.iterations, &step, total_steps, progress);
+  if (local.sources > 0) local.sources = KeepSupportedSources(st, options);
+  KeepStrongest(st, options.lobes);
+  Iterate(st, final_steps, &step, total_steps, progress);
+  local.coloured_lobes = FreeChroma(st, options);
 
   SgMixture result;
-  for (size_t k = 0; k < order.size(); ++k) {
+  int parameters = 0;
+  for (Eigen::Index k = 0; k < st.mu.rows(); ++k) {
     const Vec3 mu{st.mu(k, 0), st.mu(k, 1), st.mu(k, 2)};
     if (!(mu.x > 0 || mu.y > 0 || mu.z > 0)) continue;
-    result.push_back({dict.axes[order[k]], dict.sharpness[order[k]], mu});
+    result.push_back({st.lobes.axes[k], st.lobes.sharpness[k], mu});
+    parameters += kSgLobeParameters + (st.lobes.coloured[k] ? kChromaParameters : 0);
   }
   const Eigen::MatrixXd S = Shading(st);
   local.final_loss = Loss(st, S, false, nullptr);
@@ -215,13 +370,13 @@ SgMixture FitEnvironment(const EnvSurfaceSamples& samples, const Aabb& aabb, con
   // cannot by more than its own parameters would explain of noise. The loss
   // is a Cauchy negative log-likelihood at scale s (up to constants):
   // n·loss/s². The environment's log-likelihood gain over the near field
-  // alone must exceed BIC's (k/2)·ln n, k = 6 parameters per active lobe
-  // (axis 2, sharpness 1, RGB amplitude 3).
+  // alone must exceed BIC's (k/2)·ln n, k the active lobes' parameters
+  // (axis 2, sharpness 1, amplitude 1; a coloured lobe's chroma 2 more).
   if (!options.ignore_near_field && options.evidence_bic_factor > 0) {
     local.near_only_loss = NearFieldOnlyLoss(samples, aabb, options, total_steps);
     const double n = static_cast<double>(samples.size()), s2 = options.robust_scale * options.robust_scale;
     local.evidence = n * (local.near_only_loss - local.final_loss) / s2;
-    local.evidence_needed = options.evidence_bic_factor * 0.5 * kSgLobeParameters * local.active_lobes * std::log(n);
+    local.evidence_needed = options.evidence_bic_factor * 0.5 * parameters * std::log(n);
     local.environment_supported = local.active_lobes > 0 && local.evidence > local.evidence_needed;
   }
   if (report) *report = local;

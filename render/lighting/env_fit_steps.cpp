@@ -2,6 +2,7 @@
 // light (NNLS), albedo, scale, near-field gain, and the robust loss.
 #include <algorithm>
 #include <cmath>
+#include <utility>
 #include <vector>
 
 #include "render/lighting/env_fit_internal.h"
@@ -12,6 +13,7 @@ namespace nerfar::env_internal {
 Eigen::VectorXd Nnls(const Eigen::MatrixXd& G, const Eigen::VectorXd& h) {
   const Eigen::Index d = G.rows();
   Eigen::VectorXd x = Eigen::VectorXd::Zero(d);
+  if (d == 0) return x;
   std::vector<bool> passive(d, false);
   const double tol = 1e-12 * std::max(1.0, G.diagonal().maxCoeff());
   for (int outer = 0; outer < 3 * d + 10; ++outer) {
@@ -88,6 +90,13 @@ double Loss(const FitState& st, const Eigen::MatrixXd& S, bool update_robust, Fi
 void SolveLight(FitState& st) {
   const size_t n = st.s->size();
   const Eigen::Index d = st.A.cols();
+  // Unknowns: one per grey lobe, three per coloured lobe.
+  std::vector<Eigen::Index> first(d);
+  Eigen::Index m = 0;
+  for (Eigen::Index k = 0; k < d; ++k) first[k] = std::exchange(m, m + (st.lobes.coloured[k] ? 3 : 1));
+  const auto slot = [&](Eigen::Index k, int c) { return first[k] + (st.lobes.coloured[k] ? c : 0); };
+  Eigen::MatrixXd G_all = Eigen::MatrixXd::Zero(m, m);
+  Eigen::VectorXd h_all = Eigen::VectorXd::Zero(m);
   for (int c = 0; c < 3; ++c) {
     Eigen::MatrixXd B(n, d);
     Eigen::VectorXd y(n);
@@ -103,9 +112,14 @@ void SolveLight(FitState& st) {
     // (below the floor, behind walls) stays dark instead of growing freely.
     // β relative to the data: w_e · |y|² per unit of typical irradiance.
     const double beta = st.energy_weight * y.squaredNorm() / std::max(1e-30, st.typical_irradiance);
-    for (Eigen::Index k = 0; k < d; ++k) h[k] -= beta * st.lobe_integral[k];
-    st.mu.col(c) = Nnls(G, h);
+    for (Eigen::Index k = 0; k < d; ++k) {
+      h_all[slot(k, c)] += h[k] - beta * st.lobe_integral[k];
+      for (Eigen::Index l = 0; l < d; ++l) G_all(slot(k, c), slot(l, c)) += G(k, l);
+    }
   }
+  const Eigen::VectorXd x = Nnls(G_all, h_all);
+  for (Eigen::Index k = 0; k < d; ++k)
+    for (int c = 0; c < 3; ++c) st.mu(k, c) = x[slot(k, c)];
 }
 
 void SolveAlbedo(FitState& st, const Eigen::MatrixXd& S) {
