@@ -14,8 +14,12 @@
 
 namespace nerfar {
 
+using env_internal::AddSources;
 using env_internal::Channel;
 using env_internal::FitState;
+using env_internal::FreeChroma;
+using env_internal::Iterate;
+using env_internal::KeepSupportedSources;
 using env_internal::LobeIrradianceMatrix;
 using env_internal::Loss;
 using env_internal::MakeDictionary;
@@ -26,6 +30,18 @@ using env_internal::SolveLight;
 using env_internal::SolveScale;
 using env_internal::ToD;
 using env_internal::Y;
+
+std::vector<bool> EmitterLikeSamples(const std::vector<Vec3f>& radiance) {
+  std::vector<bool> emitter(radiance.size(), false);
+  if (radiance.empty()) return emitter;
+  std::vector<double> y;
+  for (const Vec3f& l : radiance) y.push_back(LuminanceOf(ToD(l)));
+  std::vector<double> sorted = y;
+  std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+  const double limit = kEmitterLikeFactor * sorted[sorted.size() / 2];
+  for (size_t i = 0; i < y.size(); ++i) emitter[i] = y[i] > limit;
+  return emitter;
+}
 
 std::vector<double> NormalBalanceWeights(const std::vector<Vec3f>& normals, double power,
                                          const std::vector<Vec3f>* radiance) {
@@ -48,16 +64,12 @@ std::vector<double> NormalBalanceWeights(const std::vector<Vec3f>& normals, doub
   for (size_t i = 0; i < normals.size(); ++i) sum += w[i] = std::pow(1.0 / count[bin[i]], power);
   for (double& x : w) x *= static_cast<double>(normals.size()) / sum;  // mean 1
   if (radiance != nullptr && radiance->size() == normals.size()) {
-    // Emitter-like samples (luminance above kEmitterLikeFactor x the median)
-    // are not weighted up: a lamp's own surface, seen from its sides, fills
-    // sparse normal bins, and the fit would explain its glow with light.
-    std::vector<double> y;
-    for (const Vec3f& l : *radiance) y.push_back(LuminanceOf(ToD(l)));
-    std::vector<double> sorted = y;
-    std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
-    const double limit = kEmitterLikeFactor * sorted[sorted.size() / 2];
+    // Emitter-like samples are not weighted up: a lamp's own surface, seen
+    // from its sides, fills sparse normal bins, and the fit would explain its
+    // glow with light.
+    const std::vector<bool> emitter = EmitterLikeSamples(*radiance);
     for (size_t i = 0; i < w.size(); ++i)
-      if (y[i] > limit) w[i] = std::min(w[i], 1.0);
+      if (emitter[i]) w[i] = std::min(w[i], 1.0);
   }
   return w;
 }
@@ -93,6 +105,7 @@ FitState PrepareFit(const EnvSurfaceSamples& samples, const Aabb& aabb, const En
   st.cell = AlbedoCells(samples, aabb, options.albedo_cell_m, &cells);
   st.albedo.assign(cells, Vec3{1, 1, 1} * options.albedo_prior);
   st.balance = NormalBalanceWeights(samples.normals, options.normal_balance, &samples.radiance);
+  st.emitter = EmitterLikeSamples(samples.radiance);
   st.robust = st.balance;
   double mean_y = 0;
   for (const Vec3f& l : samples.radiance) mean_y += Y(ToD(l));
@@ -123,145 +136,6 @@ double NearFieldOnlyLoss(const EnvSurfaceSamples& samples, const Aabb& aabb, con
     Loss(st, Shading(st), true, &st);
   }
   return Loss(st, Shading(st), false, nullptr);
-}
-
-// One alternation step: gain, light, albedo, scale, robust weights. The gain
-// first: at the start (no light yet) it takes all that the near field's
-// pattern explains before any lobe can. Returns the robust loss.
-double AlternationStep(FitState& st) {
-  SolveGain(st);
-  SolveLight(st);
-  SolveAlbedo(st, Shading(st));
-  SolveScale(st);
-  return Loss(st, Shading(st), true, &st);
-}
-
-void Iterate(FitState& st, int count, int* step, int total_steps, const EnvProgress& progress) {
-  for (int it = 0; it < count; ++it, ++*step) {
-    const double loss = AlternationStep(st);
-    double albedo = 0, light = 0;
-    for (size_t i = 0; i < st.s->size(); ++i) albedo += Y(st.albedo[st.cell[i]]) / st.s->size();
-    for (Eigen::Index k = 0; k < st.mu.rows(); ++k) light += st.mu(k, 1) * st.lobe_integral[k];
-    LogVerbose("env fit: step " + std::to_string(*step) + " loss " + std::to_string(loss) + " mean albedo " +
-               std::to_string(albedo) + " light green integral " + std::to_string(light));
-    if (progress) progress("fit", static_cast<size_t>(*step + 1), static_cast<size_t>(total_steps));
-  }
-}
-
-// Appends a lobe (amplitude 0) as a column of the fit.
-void AppendLobe(FitState& st, const Vec3& axis, double sharpness, bool source, const EnvShadowRays& shadow,
-                const EnvEstimateOptions& o) {
-  const Eigen::MatrixXd column = LobeIrradianceMatrix(*st.s, {axis}, {sharpness}, shadow, o.source_bundle_rays, o.seed);
-  st.A.conservativeResize(Eigen::NoChange, st.A.cols() + 1);
-  st.A.col(st.A.cols() - 1) = column.col(0);
-  st.mu.conservativeResize(st.mu.rows() + 1, Eigen::NoChange);
-  st.mu.row(st.mu.rows() - 1).setZero();
-  st.lobe_integral.push_back(SgUnitIntegral(sharpness));
-  st.lobes.Add(axis, sharpness, source);
-}
-
-// Sharp sources, one at a time: the search's best light is added as a lobe
-// and the whole model re-solved for a few steps; it is kept when its
-// log-likelihood gain (the robust loss as a Cauchy likelihood, as the
-// environment's own model selection) exceeds BIC's penalty for one lobe's
-// parameters, and the search goes on; otherwise the search stops. Returns
-// the sources kept.
-int AddSources(FitState& st, const EnvShadowRays& shadow, const EnvEstimateOptions& o, const EnvProgress& progress) {
-  const double n = static_cast<double>(st.s->size()), s2 = o.robust_scale * o.robust_scale;
-  const double penalty = o.evidence_bic_factor * 0.5 * kSgLobeParameters * std::log(n);
-  int kept = 0;
-  for (; kept < o.sources_max; ++kept) {
-    if (progress) progress("sources", static_cast<size_t>(kept), static_cast<size_t>(o.sources_max));
-    const env_internal::SourceCandidate found = env_internal::FindSource(st, shadow, o);
-    if (!(found.score > 0)) break;
-    // The trial and the model without it take the same steps.
-    FitState trial = st;
-    AppendLobe(trial, found.axis, found.sharpness, true, shadow, o);
-    int trial_step = 0, step = 0;
-    Iterate(trial, o.source_steps, &trial_step, 0, nullptr);
-    Iterate(st, o.source_steps, &step, 0, nullptr);
-    const double gain = n * (Loss(st, Shading(st), false, nullptr) - Loss(trial, Shading(trial), false, nullptr)) / s2;
-    const double elevation = std::asin(std::clamp(found.axis.z, -1.0, 1.0)) * 180 / kPi;
-    const double azimuth = std::atan2(found.axis.y, found.axis.x) * 180 / kPi;
-    LogInfo("env fit: source " + std::to_string(kept + 1) + " at azimuth " + std::to_string(azimuth) + " elevation " +
-            std::to_string(elevation) + " deg, sharpness " + std::to_string(found.sharpness) +
-            ": log-likelihood gain " + std::to_string(gain) + ", BIC penalty " + std::to_string(penalty) +
-            (gain > penalty ? " (kept)" : " (not supported: search ends)"));
-    if (!(gain > penalty)) break;
-    st = std::move(trial);
-  }
-  if (progress) progress("sources", static_cast<size_t>(o.sources_max), static_cast<size_t>(o.sources_max));
-  return kept;
-}
-
-// Removes column k of the fit.
-void RemoveLobe(FitState& st, Eigen::Index k) {
-  const Eigen::Index d = st.A.cols();
-  st.A.block(0, k, st.A.rows(), d - k - 1) = st.A.rightCols(d - k - 1).eval();
-  st.A.conservativeResize(Eigen::NoChange, d - 1);
-  st.mu.block(k, 0, d - k - 1, 3) = st.mu.bottomRows(d - k - 1).eval();
-  st.mu.conservativeResize(d - 1, Eigen::NoChange);
-  st.lobe_integral.erase(st.lobe_integral.begin() + k);
-  st.lobes.axes.erase(st.lobes.axes.begin() + k);
-  st.lobes.sharpness.erase(st.lobes.sharpness.begin() + k);
-  st.lobes.source.erase(st.lobes.source.begin() + k);
-  st.lobes.coloured.erase(st.lobes.coloured.begin() + k);
-}
-
-// Each source again, once the whole dictionary is in the model: removed when
-// keeping it no longer gains more log-likelihood than BIC's penalty (the
-// finer lobes may now explain what it did). Returns the sources left.
-int KeepSupportedSources(FitState& st, const EnvEstimateOptions& o) {
-  const double n = static_cast<double>(st.s->size()), s2 = o.robust_scale * o.robust_scale;
-  const double penalty = o.evidence_bic_factor * 0.5 * kSgLobeParameters * std::log(n);
-  for (Eigen::Index k = st.A.cols() - 1; k >= 0; --k) {
-    if (!st.lobes.source[k]) continue;
-    FitState trial = st;
-    RemoveLobe(trial, k);
-    int trial_step = 0, step = 0;
-    Iterate(trial, o.source_steps, &trial_step, 0, nullptr);
-    Iterate(st, o.source_steps, &step, 0, nullptr);
-    const double gain = n * (Loss(trial, Shading(trial), false, nullptr) - Loss(st, Shading(st), false, nullptr)) / s2;
-    LogVerbose("env fit: source at column " + std::to_string(k) + " with the whole dictionary: log-likelihood gain " +
-               std::to_string(gain) + ", BIC penalty " + std::to_string(penalty));
-    if (!(gain > penalty)) st = std::move(trial);
-  }
-  return static_cast<int>(std::count(st.lobes.source.begin(), st.lobes.source.end(), true));
-}
-
-// Per-lobe chroma, one lobe at a time: the lobe is given an RGB amplitude
-// (from grey) and the model re-solved for a few steps, as is the model
-// without the change; it keeps its colour when the log-likelihood gain
-// exceeds BIC's penalty for the chroma's two parameters. Albedo and light
-// trade colour freely, so a neutral scene gives no lobe the evidence (its
-// light stays grey) while a coloured source beside another (a blue sky beside
-// a white sun: the shadows bluer than the lit table) does. Only the lights'
-// relative colour is seen (a common tint goes to the albedo unless the near
-// field pins it), so the lobes are tried from the weakest up: the strongest,
-// tried last, stays the white point unless the data still asks otherwise,
-// as a camera white-balances to the dominant light.
-// Returns the lobes made coloured.
-int FreeChroma(FitState& st, const EnvEstimateOptions& o) {
-  const double n = static_cast<double>(st.s->size()), s2 = o.robust_scale * o.robust_scale;
-  const double penalty = o.evidence_bic_factor * 0.5 * kChromaParameters * std::log(n);
-  std::vector<Eigen::Index> order;
-  for (Eigen::Index k = 0; k < st.mu.rows(); ++k)
-    if (st.mu.row(k).maxCoeff() > 0) order.push_back(k);
-  const auto energy = [&](Eigen::Index k) { return st.mu.row(k).sum() * st.lobe_integral[k]; };
-  std::stable_sort(order.begin(), order.end(), [&](Eigen::Index a, Eigen::Index b) { return energy(a) < energy(b); });
-  int coloured = 0;
-  for (Eigen::Index k : order) {
-    FitState trial = st;
-    trial.lobes.coloured[k] = true;
-    int trial_step = 0, step = 0;
-    Iterate(trial, o.chroma_steps, &trial_step, 0, nullptr);
-    Iterate(st, o.chroma_steps, &step, 0, nullptr);
-    const double gain = n * (Loss(st, Shading(st), false, nullptr) - Loss(trial, Shading(trial), false, nullptr)) / s2;
-    if (!(gain > penalty)) continue;
-    st = std::move(trial);
-    ++coloured;
-  }
-  return coloured;
 }
 
 // Appends dictionary lobes [begin, end) (amplitude 0) with their columns.

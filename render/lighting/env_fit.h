@@ -57,6 +57,9 @@ SgMixture FitEnvironment(const EnvSurfaceSamples& samples, const Aabb& aabb, con
 // kEmitterLikeFactor x the median luminance keep at most weight 1.
 constexpr int kNormalBalanceBins = 32;
 constexpr double kEmitterLikeFactor = 10;
+// Samples brighter than kEmitterLikeFactor x the median luminance: emitters
+// (they glow with light no reflection explains).
+std::vector<bool> EmitterLikeSamples(const std::vector<Vec3f>& radiance);
 std::vector<double> NormalBalanceWeights(const std::vector<Vec3f>& normals, double power,
                                          const std::vector<Vec3f>* radiance = nullptr);
 

@@ -53,6 +53,7 @@ struct FitState {
   std::vector<Vec3> albedo;     // per cell
   std::vector<double> robust;   // per sample IRLS weight (times balance)
   std::vector<double> balance;  // per sample weight of its normal's direction (NormalBalanceWeights)
+  std::vector<bool> emitter;    // per sample: emitter-like (EmitterLikeSamples)
   std::vector<Vec3> inv_scale;  // per sample and channel 1/(L + ε)
   double prior = 0.5, prior_weight = 0, robust_scale = 0.3;
   double energy_weight = 0, typical_irradiance = 1;
@@ -66,14 +67,25 @@ struct FitState {
 // Model shading S_ic = g·E_nerf + A μ (without albedo).
 Eigen::MatrixXd Shading(const FitState& st);
 // Robust (Cauchy on the log residual) loss per sample; with update_robust the
-// IRLS weights of `mutable_st` are refreshed.
-double Loss(const FitState& st, const Eigen::MatrixXd& S, bool update_robust, FitState* mutable_st);
+// IRLS weights of `mutable_st` are refreshed. With `skip`, the samples it
+// marks add nothing (still counted in the per-sample mean).
+double Loss(const FitState& st, const Eigen::MatrixXd& S, bool update_robust, FitState* mutable_st,
+            const std::vector<bool>* skip = nullptr);
+// The log-likelihood gain of `with` over `without` (the robust loss as a
+// Cauchy likelihood) on the reflecting samples: emitter-like ones glow with
+// light no reflection explains, and a lobe that lights them is no evidence of
+// a light outside.
+double ReflectingGain(const FitState& without, const FitState& with);
 // The lobes' amplitudes for fixed albedo and gain (NNLS over the three
 // channels at once: a grey lobe's one amplitude serves all three, a coloured
 // lobe has one per channel; minimum-energy prior).
 void SolveLight(FitState& st);
 // The albedo per cell for fixed shading (closed form, grey-world prior).
 void SolveAlbedo(FitState& st, const Eigen::MatrixXd& S);
+// One alternation step (gain, light, albedo, scale, robust weights); its robust loss.
+double AlternationStep(FitState& st);
+// `count` steps; progress ("fit", *step + 1, total_steps) after each when given.
+void Iterate(FitState& st, int count, int* step, int total_steps, const EnvProgress& progress);
 // The global scale a → a·t, μ → μ/t that the data leaves free when the near field is weak.
 void SolveScale(FitState& st);
 // The near-field gain g for fixed albedo and light, clamped to [1, gain_max].
@@ -119,5 +131,15 @@ struct SourceCandidate {
 // subset of samples), a continuous refinement of the best directions, then
 // the size (sharpness) that fits the penumbrae best. score 0: none helps.
 SourceCandidate FindSource(const FitState& st, const EnvShadowRays& shadow, const EnvEstimateOptions& o);
+
+// Model selection (env_fit_select.cpp). Sharp sources, one at a time: the
+// search's best light is added as a lobe and the model re-solved for
+// source_steps; kept when its log-likelihood gain beats BIC's penalty for one
+// lobe, else the search ends. Returns the sources added.
+int AddSources(FitState& st, const EnvShadowRays& shadow, const EnvEstimateOptions& o, const EnvProgress& progress);
+// Each source re-tested by removal; returns the sources left.
+int KeepSupportedSources(FitState& st, const EnvEstimateOptions& o);
+// Per-lobe chroma (grey unless the data supports a colour); returns the lobes made coloured.
+int FreeChroma(FitState& st, const EnvEstimateOptions& o);
 
 }  // namespace nerfar::env_internal

@@ -26,11 +26,17 @@ constexpr double kDistinctSpacings = 3;
 // Candidates scored per batch of shadow rays.
 constexpr size_t kCandidateBatch = 64;
 
-// m samples spread evenly over the n (all of them when m ≥ n).
-std::vector<uint32_t> EvenSubset(size_t n, size_t m) {
-  std::vector<uint32_t> subset;
+// About m of the samples, spread evenly, leaving out emitter-like ones: a
+// lamp's own surface glows with light no reflection explains, and would steer
+// the search towards whatever lights it.
+std::vector<uint32_t> EvenSubset(const FitState& st, size_t m) {
+  std::vector<uint32_t> reflecting;
+  for (size_t i = 0; i < st.emitter.size(); ++i)
+    if (!st.emitter[i]) reflecting.push_back(static_cast<uint32_t>(i));
+  const size_t n = reflecting.size();
   m = std::min(m, n);
-  for (size_t k = 0; k < m; ++k) subset.push_back(static_cast<uint32_t>(k * n / m));
+  std::vector<uint32_t> subset;
+  for (size_t k = 0; k < m; ++k) subset.push_back(reflecting[k * n / m]);
   return subset;
 }
 
@@ -150,8 +156,8 @@ double ResidualPull::Score(const std::vector<double>& b) const {
 }
 
 SourceCandidate FindSource(const FitState& st, const EnvShadowRays& shadow, const EnvEstimateOptions& o) {
-  const ResidualPull coarse(st, EvenSubset(st.s->size(), static_cast<size_t>(o.source_search_samples)));
-  const ResidualPull fine(st, EvenSubset(st.s->size(), static_cast<size_t>(o.source_refine_samples)));
+  const ResidualPull coarse(st, EvenSubset(st, static_cast<size_t>(o.source_search_samples)));
+  const ResidualPull fine(st, EvenSubset(st, static_cast<size_t>(o.source_refine_samples)));
   const std::vector<Vec3> grid = FibonacciSphere(o.source_candidates);
   const double spacing = std::sqrt(4 * kPi / o.source_candidates);
   const double point = o.source_sharpness_max;  // the search's point source
