@@ -36,10 +36,15 @@ EnvLight EstimateEnvironment(const NerfField& field, const EnvEstimateOptions& o
   local.seconds_near_field = elapsed() - t0;
   t0 = elapsed();
   EnvLight env;
-  env.lobes = FitEnvironment(samples, field.aabb, options, &local.fit, progress);
+  // Shadow rays through the NeRF; the baseline that ignores the NeRF's
+  // visibility (ignore_near_field) fits the dictionary alone, as before.
+  const EnvShadowRays shadow =
+      options.ignore_near_field ? nullptr : NerfShadowRays(field, options.shadow_render, samples.fog_density);
+  env.lobes = FitEnvironment(samples, field.aabb, options, &local.fit, progress, shadow);
   local.seconds_fit = elapsed() - t0;
 
-  const std::vector<Vec3> e_env = EnvironmentIrradiance(samples, env.lobes);
+  const std::vector<Vec3> e_env =
+      EnvironmentIrradiance(samples, env.lobes, shadow, options.source_bundle_rays, options.seed);
   double sum_env = 0, sum_nerf = 0;
   for (size_t i = 0; i < samples.size(); ++i) {
     sum_env += Y(e_env[i]);
