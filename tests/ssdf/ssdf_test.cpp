@@ -14,6 +14,7 @@
 #include <random>
 
 #include "calib/core/parallel.h"
+#include "tests/ssdf/format_fixtures.h"
 #include "tests/support/support.h"
 
 namespace nerfar {
@@ -554,6 +555,27 @@ TEST(File, SharedObjectsBakeAndLoadBackBitIdentical) {
     EXPECT_TRUE(SerializeSsdf(back) == testing::ReadText(path));
     EXPECT_EQ(back.mesh_reference, mesh.source);
   }
+}
+
+// A .ssdf written by an earlier build (tests/data/formats, see tests/make_format_fixtures.cpp)
+// reads with what was written into it and saves to the same bytes.
+TEST(OldFiles, SsdfReadsAndSavesToTheSameBytes) {
+  const std::string old = testing::ReadText(testing::TestDataPath("formats/tetra.ssdf"));
+  const SsdfField field = ParseSsdf(old, "tetra.ssdf");
+  const SsdfBakeOptions options = testing::FormatFixtureSsdfOptions();
+  EXPECT_EQ(field.grid(), options.grid);
+  EXPECT_EQ(field.dirs(), options.dirs);
+  EXPECT_EQ(field.components(), options.components);
+  EXPECT_EQ(field.mesh_reference, testing::FormatFixtureMesh().source);
+  ASSERT_TRUE(field.material.has_value());
+  const Material expected = testing::FormatFixtureMaterial();
+  EXPECT_EQ(field.material->albedo.y, expected.albedo.y);
+  EXPECT_EQ(field.material->roughness, expected.roughness);
+  EXPECT_EQ(field.material->metallic, expected.metallic);
+  EXPECT_EQ(field.material->f0, expected.f0);
+  EXPECT_EQ(field.material->albedo_texture, expected.albedo_texture);
+  EXPECT_NE(field.options_json.find("\"grid\":4"), std::string::npos) << field.options_json;
+  EXPECT_TRUE(SerializeSsdf(field) == old) << "the writer no longer writes the file it wrote";
 }
 
 }  // namespace
