@@ -12,6 +12,7 @@
 #include <sstream>
 
 #include "calib/core/atomic_file.h"
+#include "calib/core/binary_file.h"
 #include "calib/core/error.h"
 #include "calib/core/exr.h"
 #include "calib/core/image_io.h"
@@ -1031,137 +1032,95 @@ NerfField NerfTrainer::FinalField() const {
 
 // ------------------------------------------------------------ checkpoints
 
+// The checkpoint: the container of calib/core/binary_file.h (its version is in the magic), then
+// the identity (options JSON, dataset) as u64-length strings, step, level, Adam step, seconds
+// trained, the grid, and the field's and optimiser's arrays, each a u64 count and its values.
 namespace {
-constexpr char kCheckpointMagic[8] = {'N', 'E', 'R', 'F', 'C', 'K', 'P', '2'};
+constexpr BinaryFormat kCheckpointFormat{"nerfar training checkpoint", "NERFCKP2", false, 0, 0,
+                                         "delete it to start over"};
+constexpr size_t kMaxCheckpointBytes = size_t{16} << 30;
 
 template <typename T>
-void PutVec(std::string& out, const std::vector<T>& v) {
-  const uint64_t n = v.size();
-  out.append(reinterpret_cast<const char*>(&n), 8);
-  out.append(reinterpret_cast<const char*>(v.data()), v.size() * sizeof(T));
+void PutVec(ByteWriter& w, const std::vector<T>& v) {
+  w.Put(uint64_t(v.size()));
+  w.PutArray(v);
 }
+void PutString(ByteWriter& w, const std::string& s) {
+  w.Put(uint64_t(s.size()));
+  w.PutBytes(s);
+}
+
+// An array of `expected` values (the grid read before says how many).
 template <typename T>
-void Put(std::string& out, const T& v) {
-  out.append(reinterpret_cast<const char*>(&v), sizeof(T));
+std::vector<T> GetVec(ByteReader& r, uint64_t expected, const char* what) {
+  const uint64_t n = r.Get<uint64_t>(what);
+  if (n != expected)
+    r.Fail("checkpoint's " + std::string(what) + " has " + std::to_string(n) + " values (expected " +
+           std::to_string(expected) + ")");
+  return r.GetArray<T>(n, what);
 }
-void PutString(std::string& out, const std::string& s) {
-  Put(out, uint64_t(s.size()));
-  out += s;
-}
-
-class CheckpointReader {
- public:
-  CheckpointReader(const std::string& bytes, const std::string& path) : b_(bytes), path_(path) {}
-  void Need(uint64_t n) {
-    if (b_.size() - pos_ < n) ThrowInputError(path_, "checkpoint is truncated (delete it to start over)");
-  }
-  template <typename T>
-  T Get() {
-    Need(sizeof(T));
-    T v;
-    std::memcpy(&v, b_.data() + pos_, sizeof(T));
-    pos_ += sizeof(T);
-    return v;
-  }
-  template <typename T>
-  std::vector<T> GetVec(uint64_t expected) {
-    const uint64_t n = Get<uint64_t>();
-    if (n != expected)
-      ThrowInputError(
-          path_, "checkpoint array has " + std::to_string(n) + " values (expected " + std::to_string(expected) + ")");
-    Need(n * sizeof(T));
-    std::vector<T> v(n);
-    std::memcpy(v.data(), b_.data() + pos_, n * sizeof(T));
-    pos_ += n * sizeof(T);
-    return v;
-  }
-  std::string GetString() {
-    const uint64_t n = Get<uint64_t>();
-    Need(n);
-    std::string s = b_.substr(pos_, n);
-    pos_ += n;
-    return s;
-  }
-  bool AtEnd() const { return pos_ == b_.size(); }
-
- private:
-  const std::string& b_;
-  const std::string& path_;
-  size_t pos_ = 0;
-};
-
-uint64_t Checksum(const std::string& s, size_t n) {
-  uint64_t h = 1469598103934665603ull;
-  for (size_t i = 0; i < n; ++i) h = (h ^ static_cast<unsigned char>(s[i])) * 1099511628211ull;
-  return h;
+std::string GetString(ByteReader& r, const char* what) {
+  const uint64_t n = r.Get<uint64_t>(what);
+  return std::string(r.Take(n, what));
 }
 }  // namespace
 
 void NerfTrainer::SaveCheckpoint(const std::string& path) const {
   const State& s = *state_;
-  std::string out(kCheckpointMagic, 8);
+  BinaryFileWriter w(kCheckpointFormat);
   NerfTrainOptions identity = s.options;
   identity.max_seconds = 0;           // a resumed run may have another time budget
   identity.save_occupancy_sigma = 0;  // applies to the saved model only
-  PutString(out, identity.ToJson());
-  PutString(out, s.data.source + " " + std::to_string(s.data.train.size()));
-  Put(out, int32_t(s.step));
-  Put(out, int32_t(s.level));
-  Put(out, int32_t(s.adam_t));
-  Put(out, s.Elapsed());
+  PutString(w, identity.ToJson());
+  PutString(w, s.data.source + " " + std::to_string(s.data.train.size()));
+  w.Put(int32_t(s.step));
+  w.Put(int32_t(s.level));
+  w.Put(int32_t(s.adam_t));
+  w.Put(s.Elapsed());
   const NerfField& f = s.field;
-  Put(out, f.voxel_m);
-  for (int a = 0; a < 3; ++a) Put(out, int32_t(f.res[a]));
-  PutVec(out, f.brick_coords);
-  PutVec(out, f.density);
-  PutVec(out, f.color);
-  PutVec(out, f.occupancy);
-  PutVec(out, s.m_density);
-  PutVec(out, s.v_density);
-  PutVec(out, s.m_color);
-  PutVec(out, s.v_color);
-  PutVec(out, s.max_weight);
-  Put(out, Checksum(out, out.size()));
-  WriteFileAtomic(path, out);
+  w.Put(f.voxel_m);
+  for (int a = 0; a < 3; ++a) w.Put(int32_t(f.res[a]));
+  PutVec(w, f.brick_coords);
+  PutVec(w, f.density);
+  PutVec(w, f.color);
+  PutVec(w, f.occupancy);
+  PutVec(w, s.m_density);
+  PutVec(w, s.v_density);
+  PutVec(w, s.m_color);
+  PutVec(w, s.v_color);
+  PutVec(w, s.max_weight);
+  WriteBinaryFile(path, std::move(w));
 }
 
 void NerfTrainer::LoadCheckpoint(const std::string& path) {
   State& s = *state_;
-  const std::string bytes = ReadFileBytes(path, size_t{16} << 30);
-  if (bytes.size() < 16 || std::memcmp(bytes.data(), kCheckpointMagic, 8) != 0)
-    ThrowInputError(path, "not a nerfar training checkpoint (expected the magic 'NERFCKP2')");
-  uint64_t sum;
-  std::memcpy(&sum, bytes.data() + bytes.size() - 8, 8);
-  if (Checksum(bytes, bytes.size() - 8) != sum)
-    ThrowInputError(path, "checkpoint checksum mismatch (corrupt; delete it to start over)");
-  CheckpointReader r(bytes, path);
-  r.Get<uint64_t>();
+  const std::string bytes = ReadFileBytes(path, kMaxCheckpointBytes);
+  BinaryFile file = OpenBinaryFile(bytes, path, kCheckpointFormat);
+  ByteReader& r = file.fields;
   NerfTrainOptions identity = s.options;
   identity.max_seconds = 0;
   identity.save_occupancy_sigma = 0;
-  if (r.GetString() != identity.ToJson())
+  if (GetString(r, "options") != identity.ToJson())
     ThrowInputError(path,
                     "checkpoint was made with other training options (use the same preset and --set, or delete it)");
-  if (r.GetString() != s.data.source + " " + std::to_string(s.data.train.size()))
+  if (GetString(r, "dataset") != s.data.source + " " + std::to_string(s.data.train.size()))
     ThrowInputError(path, "checkpoint was made from another dataset (delete it to start over)");
-  const int step = r.Get<int32_t>(), level = r.Get<int32_t>(), adam_t = r.Get<int32_t>();
-  const double elapsed = r.Get<double>();
+  const int step = r.Get<int32_t>("step"), level = r.Get<int32_t>("level"), adam_t = r.Get<int32_t>("Adam step");
+  const double elapsed = r.Get<double>("seconds trained");
   NerfField f;
   f.aabb = s.data.aabb;
   f.origin = Vec3f(s.data.aabb.min);
-  f.voxel_m = r.Get<float>();
+  f.voxel_m = r.Get<float>("voxel size");
   for (int a = 0; a < 3; ++a) {
-    f.res[a] = r.Get<int32_t>();
+    f.res[a] = r.Get<int32_t>("resolution");
     if (f.res[a] < 2 || f.res[a] > 8192) ThrowInputError(path, "checkpoint grid resolution out of range");
     f.bricks[a] = (f.res[a] + 3) / 4;
   }
-  const uint64_t n_coords = r.Get<uint64_t>();
+  const uint64_t n_coords = r.Get<uint64_t>("brick list");
   if (n_coords % 3 != 0 || n_coords / 3 > size_t(f.bricks[0]) * f.bricks[1] * f.bricks[2])
     ThrowInputError(path, "checkpoint brick list is inconsistent");
-  r.Need(n_coords * 4);
+  std::vector<int32_t> values = r.GetArray<int32_t>(n_coords, "brick list");
   f.brick_table.assign(size_t(f.bricks[0]) * f.bricks[1] * f.bricks[2], -1);
-  std::vector<int32_t> values(n_coords);
-  for (uint64_t n = 0; n < n_coords; ++n) values[n] = r.Get<int32_t>();
   for (uint64_t b = 0; b < n_coords / 3; ++b) {
     const int x = values[3 * b], y = values[3 * b + 1], z = values[3 * b + 2];
     if (x < 0 || y < 0 || z < 0 || x >= f.bricks[0] || y >= f.bricks[1] || z >= f.bricks[2])
@@ -1172,16 +1131,16 @@ void NerfTrainer::LoadCheckpoint(const std::string& path) {
   }
   f.brick_coords = std::move(values);
   const uint64_t slots = n_coords / 3 * kNerfBrickSlots;
-  f.density = r.GetVec<float>(slots);
-  f.color = r.GetVec<float>(slots * kNerfColorCoeffs);
-  f.occupancy = r.GetVec<uint64_t>(n_coords / 3);
-  s.m_density = r.GetVec<float>(slots);
-  s.v_density = r.GetVec<float>(slots);
-  s.m_color = r.GetVec<float>(slots * kNerfColorCoeffs);
-  s.v_color = r.GetVec<float>(slots * kNerfColorCoeffs);
-  s.max_weight = r.GetVec<float>(slots);
-  r.Get<uint64_t>();
-  if (!r.AtEnd()) ThrowInputError(path, "checkpoint has trailing data");
+  f.density = GetVec<float>(r, slots, "density");
+  f.color = GetVec<float>(r, slots * kNerfColorCoeffs, "colour");
+  f.occupancy = GetVec<uint64_t>(r, n_coords / 3, "occupancy");
+  s.m_density = GetVec<float>(r, slots, "density moment 1");
+  s.v_density = GetVec<float>(r, slots, "density moment 2");
+  s.m_color = GetVec<float>(r, slots * kNerfColorCoeffs, "colour moment 1");
+  s.v_color = GetVec<float>(r, slots * kNerfColorCoeffs, "colour moment 2");
+  s.max_weight = GetVec<float>(r, slots, "sample weights");
+  if (r.remaining() != 0)
+    ThrowInputError(path, "checkpoint has " + std::to_string(r.remaining()) + " bytes of trailing data");
   const std::vector<std::string> problems = f.Validate();
   if (!problems.empty()) ThrowInputError(path, "checkpoint field: " + problems.front());
   s.field = std::move(f);

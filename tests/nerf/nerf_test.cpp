@@ -12,6 +12,7 @@
 #include <fstream>
 #include <random>
 
+#include "calib/core/binary_file.h"
 #include "calib/core/error.h"
 #include "calib/core/metrics.h"
 #include "calib/core/parallel.h"
@@ -428,13 +429,6 @@ TEST(NerfFile, QuantisationErrorIsWithinTheStatedBound) {
   }
 }
 
-// FNV-1a, as the file's checksum is stated to be.
-uint64_t Fnv1aForTest(const std::string& bytes) {
-  uint64_t h = 1469598103934665603ull;
-  for (unsigned char c : bytes) h = (h ^ c) * 1099511628211ull;
-  return h;
-}
-
 template <typename T>
 void PutForTest(std::string& out, const T& v) {
   out.append(reinterpret_cast<const char*>(&v), sizeof(T));
@@ -465,7 +459,7 @@ TEST(NerfFile, ReadsVersion1Files) {
     PutForTest(v1, half(f.density[s]));
     for (int m = 0; m < kNerfColorCoeffs; ++m) PutForTest(v1, half(f.color[s * kNerfColorCoeffs + m]));
   }
-  PutForTest(v1, Fnv1aForTest(v1));
+  PutForTest(v1, BinaryChecksum(v1));
   const NerfField g = ParseNerf(v1, "old.nerf");
   ASSERT_EQ(g.BrickCount(), f.BrickCount());
   for (size_t s = 0; s < f.SlotCount(); ++s) {
@@ -491,7 +485,7 @@ TEST(NerfFile, CorruptPayloadWithAValidChecksumIsRejected) {
   for (size_t at : {good.size() / 3, good.size() / 2, good.size() - 20}) {
     std::string bad = good.substr(0, good.size() - 8);
     bad[at] = char(bad[at] ^ 0x5a);
-    PutForTest(bad, Fnv1aForTest(bad));
+    PutForTest(bad, BinaryChecksum(bad));
     try {
       ParseNerf(bad, "bad.nerf");
       ADD_FAILURE() << "accepted a corrupt payload (byte " << at << ")";
@@ -517,7 +511,7 @@ TEST(NerfFile, RandomlyCorruptedFilesWithValidChecksumsNeverCrash) {
       const size_t at = trial < 150 ? rng() % std::min<size_t>(bad.size(), 160) : rng() % bad.size();  // header first
       bad[at] = char(rng() & 0xff);
     }
-    PutForTest(bad, Fnv1aForTest(bad));
+    PutForTest(bad, BinaryChecksum(bad));
     try {
       const NerfField f = ParseNerf(bad, "fuzz.nerf");
       EXPECT_TRUE(f.Validate().empty()) << "trial " << trial;

@@ -13,6 +13,7 @@
 #include <filesystem>
 #include <random>
 
+#include "calib/core/binary_file.h"
 #include "calib/core/parallel.h"
 #include "tests/ssdf/format_fixtures.h"
 #include "tests/support/support.h"
@@ -423,12 +424,6 @@ TEST(Bake, IndependentOfTheThreadCount) {
 
 // ---------------------------------------------------------------- file
 
-uint64_t Fnv1a(const std::string& s, size_t size) {
-  uint64_t h = 1469598103934665603ull;
-  for (size_t i = 0; i < size; ++i) h = (h ^ static_cast<unsigned char>(s[i])) * 1099511628211ull;
-  return h;
-}
-
 void ExpectRejected(const std::string& bytes, const std::string& fragment) {
   try {
     ParseSsdf(bytes, "field.ssdf");
@@ -486,7 +481,7 @@ TEST(File, CorruptAndTruncatedFilesAreRejected) {
 
   // Well-formed checksum, bad contents: every check still runs.
   const auto resealed = [](std::string bytes) {
-    const uint64_t h = Fnv1a(bytes, bytes.size() - 8);
+    const uint64_t h = BinaryChecksum(std::string_view(bytes).substr(0, bytes.size() - 8));
     std::memcpy(bytes.data() + bytes.size() - 8, &h, 8);
     return bytes;
   };
@@ -526,7 +521,7 @@ TEST(File, RandomlyDamagedHeadersNeverCrash) {
   for (int i = 0; i < 500; ++i) {
     std::string bytes = good;
     for (int k = 0; k < 3; ++k) bytes[where(rng)] = static_cast<char>(byte(rng));
-    const uint64_t h = Fnv1a(bytes, bytes.size() - 8);
+    const uint64_t h = BinaryChecksum(std::string_view(bytes).substr(0, bytes.size() - 8));
     std::memcpy(bytes.data() + bytes.size() - 8, &h, 8);
     try {
       const SsdfField field = ParseSsdf(bytes, "field.ssdf");
