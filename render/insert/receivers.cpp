@@ -60,6 +60,37 @@ void ReceiversFromDepth(const ImageF& depth_z, const CameraIntrinsics& camera, c
     }
 }
 
+void ReceiversOnPlane(const SceneField& scene, const SupportPlane& plane, const Vec3f& eye,
+                      const std::vector<Vec3f>& dirs, const std::vector<float>& t_near, std::vector<float>& t,
+                      std::vector<uint8_t>& on_plane) {
+  on_plane.assign(t.size(), 0);
+  // Where the transmittance was still 1 − q: the ray marched again up to
+  // its 1/2 point (the same samples as the march that found it).
+  SceneRays front;
+  std::vector<float> level, t_plane;
+  std::vector<size_t> candidate;
+  for (size_t i = 0; i < t.size(); ++i) {
+    const float cosine = Dot(dirs[i], plane.normal);
+    if (!(cosine < 0.0f) || !(t[i] > t_near[i])) continue;  // the plane seen from behind, or along it
+    const float t_p = Dot(plane.point - eye, plane.normal) / cosine;
+    if (!(t_p >= t_near[i])) continue;
+    front.Add(eye, dirs[i], t_near[i], t[i]);
+    level.push_back(1.0f - kSupportTerminationShare);
+    t_plane.push_back(t_p);
+    candidate.push_back(i);
+  }
+  if (candidate.empty()) return;
+  std::vector<float> t_front;
+  scene.TransmittanceDepths(front, level, t_front);
+  for (size_t k = 0; k < candidate.size(); ++k) {
+    const size_t i = candidate[k];
+    const float before = t[i] - std::min(t_front[k], t[i]);
+    if (t_plane[k] < t[i] - before || t_plane[k] > t[i] + before) continue;  // the ray ends off the plane
+    t[i] = t_plane[k];
+    on_plane[i] = 1;
+  }
+}
+
 int ReuseReceiver(const ReceiverFrame& r, const Vec3f& eye, const Vec3f& d, int x, int y, float tolerance, Vec3f& point,
                   Vec3f& normal) {
   const size_t nx = r.xs.size(), ny = r.ys.size();
@@ -101,10 +132,10 @@ int ReuseReceiver(const ReceiverFrame& r, const Vec3f& eye, const Vec3f& d, int 
   if (!cell(x, y, idx)) return 0;
   int surfaces = 0;
   for (size_t c : idx) surfaces += r.state[c] == 1;
+  const Vec3f old_eye(r.T_world_camera.translation);
   if (surfaces == 0) {
     // No surface around the same pixel of the last view: kept while this
     // pixel's ray moved by less than a grid step (its eye by the tolerance).
-    const Vec3f old_eye(r.T_world_camera.translation);
     const Vec3f old_d = CameraRayDirection(r.camera, r.T_world_camera, x, y);
     const float max_angle = static_cast<float>(r.step / std::max(r.camera.fx, r.camera.fy));
     return Length(eye - old_eye) <= tolerance && Dot(d, old_d) >= std::cos(max_angle) ? 2 : 0;
@@ -134,6 +165,15 @@ int ReuseReceiver(const ReceiverFrame& r, const Vec3f& eye, const Vec3f& d, int 
     const float t = Dot(mean - eye, n) / cosine;
     if (!(t > 0.0f)) return 0;
     const Vec3f p = eye + d * t;
+    // Something nearer than p that the last view saw elsewhere (an object
+    // in front of the table) may hide p from this eye; the last frame cannot
+    // tell. As the eye moves by m, a surface at the last frame's nearest
+    // receiver distance shifts against p by f·m·(1/nearest − 1/|p − eye|)
+    // pixels: within a grid step it can cover p only next to a depth edge,
+    // where the cell's plane test fails; past it, march.
+    const float shift = static_cast<float>(std::max(r.camera.fx, r.camera.fy)) * Length(eye - old_eye) *
+                        (1.0f / r.nearest - 1.0f / Length(p - eye));
+    if (!(shift <= float(r.step))) return 0;
     const Vec3 c = r.T_camera_world * Vec3(p);
     if (!(c.z > 1e-6)) return 0;
     const double u = r.camera.fx * c.x / c.z + r.camera.cx - 0.5, v = r.camera.fy * c.y / c.z + r.camera.cy - 0.5;

@@ -207,6 +207,14 @@ std::vector<uint8_t> HiddenNodes(const std::vector<int>& xs, const std::vector<i
   return hidden;
 }
 
+// What decides where a marched receiver lies (ReceiverFrame::rule).
+std::vector<float> ReceiverRule(const ShadowPassInputs& in) {
+  std::vector<float> rule = {static_cast<float>(in.options.receiver_min_opacity)};
+  if (in.support != nullptr)
+    for (const Vec3f& v : {in.support->point, in.support->normal}) rule.insert(rule.end(), {v.x, v.y, v.z});
+  return rule;
+}
+
 }  // namespace
 
 void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, std::unique_ptr<KappaCache>& cache_owner,
@@ -247,9 +255,10 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
                                  double(options.kappa_coarse_factor),
                                  options.kappa_refine_delta,
                                  options.kappa_plane_upsampling ? 1.0 : 0.0,
-                                 options.receiver_min_opacity,
                                  options.shadow_epsilon_snap ? 1.0 : 0.0,
                                  options.kappa_skip_covered ? 1.0 : 0.0};
+      const std::vector<float> rule = ReceiverRule(in);
+      key.insert(key.end(), rule.begin(), rule.end());
       for (size_t j : casters) AppendObjectKey(objects[j], key);
       for (const SgMixture& light : lights) AppendLightKey(light, key);
       // Near lobes re-aimed at each receiver change κ as much as the light does.
@@ -346,8 +355,7 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
       double find_ms = 0, kappa_ms = 0;
       // The last frame's receivers, when they can stand for marching.
       const bool reuse_receivers = cache != nullptr && receivers.distance == nullptr && options.kappa_receiver_reuse &&
-                                   cache->receivers.valid &&
-                                   cache->receivers.min_opacity == static_cast<float>(options.receiver_min_opacity);
+                                   cache->receivers.valid && cache->receivers.rule == ReceiverRule(in);
       const bool cell_normals = cache != nullptr && receivers.distance == nullptr && options.receiver_normal_per_cell;
       const float reuse_tolerance = static_cast<float>(options.kappa_reuse_tolerance_radii * smallest);
       const KappaContext context{&casters, &spheres, &preps, &lights, reach, one_minus_eps, in.sources};
@@ -421,6 +429,33 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
       // Receivers of one pass's nodes found, per row: the surface nodes
       // (opacity above the threshold, finite point) and their own normals.
       std::vector<std::vector<CellCandidate>> found(ny);
+      // Marched receivers with a surface (opacity ≥ receiver_min_opacity and
+      // 1/2: `out.depth` is where the transmittance crossed 1/2) taken onto
+      // the support plane, with its normal, where they end on it
+      // (ReceiversOnPlane).
+      const auto place_on_support = [&](const std::vector<size_t>& march, const SceneSamples& out,
+                                        const SceneRays& rays, const std::vector<Vec3f>& dirs,
+                                        const std::vector<float>& opacity, std::vector<Vec3f>& normals,
+                                        std::vector<Vec3f>& points) {
+        std::vector<size_t> surface;
+        std::vector<Vec3f> surface_dirs;
+        std::vector<float> t, t_near;
+        for (size_t m = 0; m < march.size(); ++m) {
+          const size_t ix = march[m];
+          if (opacity[ix] < std::max(min_opacity, 0.5f) || !std::isfinite(out.depth[m])) continue;
+          surface.push_back(ix);
+          surface_dirs.push_back(dirs[ix]);
+          t.push_back(out.depth[m]);
+          t_near.push_back(rays.t_near[m]);
+        }
+        std::vector<uint8_t> on_plane;
+        ReceiversOnPlane(scene, *in.support, eye, surface_dirs, t_near, t, on_plane);
+        for (size_t k = 0; k < surface.size(); ++k)
+          if (on_plane[k]) {
+            points[surface[k]] = eye + dirs[surface[k]] * t[k];
+            normals[surface[k]] = in.support->normal;
+          }
+      };
       // The receivers at the grid nodes (row, cols[j]) of one row:
       // node_state 2 (no surface) or 1 with node_point and the receiver's own
       // normal in node_normal (not yet unit; replaced by its cell's normal
@@ -474,6 +509,7 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
             }
             scene.Normals(marched_points, marched_normals);
             for (size_t m = 0; m < march.size(); ++m) normals[march[m]] = marched_normals[m];
+            if (in.support != nullptr) place_on_support(march, out, rays, dirs, opacity, normals, points);
           }
         }
         if (receivers.normal) {
@@ -764,7 +800,7 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
         // stay unknown).
         ReceiverFrame& kept = cache->receivers;
         kept.valid = true;
-        kept.min_opacity = static_cast<float>(options.receiver_min_opacity);
+        kept.rule = ReceiverRule(in);
         kept.camera = camera;
         kept.T_world_camera = T_world_camera;
         kept.T_camera_world = T_world_camera.Inverse();
@@ -774,6 +810,9 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
         kept.cy = cy;
         kept.factor = factor;
         kept.step = step;
+        kept.nearest = std::numeric_limits<float>::infinity();
+        for (size_t i = 0; i < node_state.size(); ++i)
+          if (node_state[i] == 1) kept.nearest = std::min(kept.nearest, Length(node_point[i] - eye));
         kept.state = std::move(node_state);
         kept.point = std::move(node_point);
         kept.normal = std::move(node_normal);

@@ -59,6 +59,7 @@ struct ShadowPassInputs {
   const ObjectGBuffer& gbuffer;          // object pixels keep their composite
   const ReceiverOverride& receivers;
   const std::vector<ShadowSources>* sources = nullptr;  // per object, κ from samples (KappaContext::sources)
+  const SupportPlane* support = nullptr;                // receivers ending on it are taken onto it
 };
 
 // κ over the casters' reach rectangle into layers.kappa / kappa_rect /

@@ -61,6 +61,8 @@ std::vector<std::string> NerfRenderOptions::Validate() const {
   if (!(min_transmittance >= 0.0f && min_transmittance < 1.0f))
     problems.push_back("min_transmittance: (expected 0 <= T < 1)");
   if (!(min_alpha >= 0.0f && min_alpha < 1.0f)) problems.push_back("min_alpha: (expected 0 <= a < 1)");
+  if (!(surface_transmittance > 0.0f && surface_transmittance < 1.0f))
+    problems.push_back("surface_transmittance: (expected 0 < T < 1)");
   return problems;
 }
 
@@ -494,6 +496,7 @@ NerfRayResult NerfField::RenderRay(const NerfRay& ray, const NerfRenderOptions& 
   const float t0 = ray.t_near, t1 = ray.t_far;
   if (!(t1 > t0) || empty()) return result;
   const float step = options.step_voxels * voxel_m;
+  const float level = options.surface_transmittance;
   const nerf_detail::RaySteps steps(*this, ray, step, 0.5f);
   const bool coarse = SkipGridCurrent();
   int64_t n = 0, n_end = steps.count;
@@ -621,9 +624,9 @@ NerfRayResult NerfField::RenderRay(const NerfRay& ray, const NerfRenderOptions& 
     for (int ch = 0; ch < 3; ++ch) result.color[ch] += w * value[ch];
     depth_sum += w * t;
     const float next = transmittance * (1.0f - alpha);
-    if (transmittance > 0.5f && next <= 0.5f) {
-      // T(x) = T exp(-σ x) inside the interval (sample at its middle): T(x) = 0.5 at x = ln(2T)/σ.
-      const float x = std::min(std::log(2.0f * transmittance) / sigma, dt);
+    if (transmittance > level && next <= level) {
+      // T(x) = T exp(-σ x) inside the interval (sample at its middle): T(x) = level at x = ln(T/level)/σ.
+      const float x = std::min(std::log(transmittance / level) / sigma, dt);
       result.surface_depth = t - 0.5f * dt + x;
     }
     transmittance = next;
@@ -631,7 +634,7 @@ NerfRayResult NerfField::RenderRay(const NerfRay& ray, const NerfRenderOptions& 
   }
   result.opacity = 1.0f - transmittance;
   result.depth = result.opacity > 0.0f ? depth_sum / result.opacity : 0.0f;
-  if (!(result.opacity >= 0.5f) || result.surface_depth == 0.0f) result.surface_depth = result.depth;
+  if (!(result.opacity >= 1.0f - level) || result.surface_depth == 0.0f) result.surface_depth = result.depth;
   return result;
 }
 
