@@ -91,6 +91,55 @@ void ReceiversOnPlane(const SceneField& scene, const SupportPlane& plane, const 
   }
 }
 
+namespace {
+
+// Whether something the last frame saw may lie between `eye` and p, a
+// point on the plane (plane_point, plane_normal) of the last-frame receivers
+// it was reused from: the last view cannot see what this eye sees past an
+// object's edge. The part of the segment eye → p at least the last frame's
+// nearest receiver distance from the last eye is projected into the last
+// view and walked at coarse grid steps from p's pixel (the coarse nodes are
+// always known; an occluder narrower than a coarse cell can slip through);
+// a receiver there off p's plane by more than `tolerance` and
+// nearer the last eye than the segment's point means the segment passes
+// inside or behind a surface the last view saw: true (march). Also true when
+// the walk is longer than kMaxWalkSteps coarse steps (an eye moved too far
+// to check cheaply).
+bool HiddenFromEye(const ReceiverFrame& r, const Vec3f& eye, const Vec3f& p, const Vec3f& plane_point,
+                   const Vec3f& plane_normal, float tolerance) {
+  constexpr int kMaxWalkSteps = 16;
+  const Vec3 last_eye = r.T_world_camera.translation;
+  const double length = Length(Vec3(p - eye));
+  const double u_min = std::clamp((r.nearest - Length(Vec3(eye) - last_eye)) / length, 0.0, 1.0);
+  const auto pixel = [&](const Vec3& w, double& u, double& v) {
+    const Vec3 c = r.T_camera_world * w;
+    if (!(c.z > 1e-6)) return false;
+    u = r.camera.fx * c.x / c.z + r.camera.cx - 0.5;
+    v = r.camera.fy * c.y / c.z + r.camera.cy - 0.5;
+    return true;
+  };
+  const Vec3 a = Vec3(eye) + Vec3(p - eye) * u_min, b(p);
+  double ua, va, ub, vb;
+  if (!pixel(a, ua, va) || !pixel(b, ub, vb)) return true;
+  const double coarse_step = double(r.step) * double(r.factor);
+  const int steps = static_cast<int>(std::ceil(std::hypot(ua - ub, va - vb) / coarse_step));
+  if (steps > kMaxWalkSteps) return true;
+  for (int k = 1; k <= steps; ++k) {
+    const Vec3 s = b + (a - b) * (double(k) / steps);
+    double u, v;
+    if (!pixel(s, u, v)) return true;
+    const double fx = (u - r.xs.front()) / coarse_step, fy = (v - r.ys.front()) / coarse_step;
+    if (fx < -0.5 || fy < -0.5 || fx > r.cx.size() - 0.5 || fy > r.cy.size() - 0.5) continue;
+    const size_t node = r.cy[std::min<size_t>(std::lround(fy), r.cy.size() - 1)] * r.xs.size() +
+                        r.cx[std::min<size_t>(std::lround(fx), r.cx.size() - 1)];
+    if (r.state[node] != 1 || std::abs(Dot(r.point[node] - plane_point, plane_normal)) <= tolerance) continue;
+    if (Length(Vec3(r.point[node]) - last_eye) < Length(s - last_eye)) return true;
+  }
+  return false;
+}
+
+}  // namespace
+
 int ReuseReceiver(const ReceiverFrame& r, const Vec3f& eye, const Vec3f& d, int x, int y, float tolerance, Vec3f& point,
                   Vec3f& normal) {
   const size_t nx = r.xs.size(), ny = r.ys.size();
@@ -165,15 +214,7 @@ int ReuseReceiver(const ReceiverFrame& r, const Vec3f& eye, const Vec3f& d, int 
     const float t = Dot(mean - eye, n) / cosine;
     if (!(t > 0.0f)) return 0;
     const Vec3f p = eye + d * t;
-    // Something nearer than p that the last view saw elsewhere (an object
-    // in front of the table) may hide p from this eye; the last frame cannot
-    // tell. As the eye moves by m, a surface at the last frame's nearest
-    // receiver distance shifts against p by f·m·(1/nearest − 1/|p − eye|)
-    // pixels: within a grid step it can cover p only next to a depth edge,
-    // where the cell's plane test fails; past it, march.
-    const float shift = static_cast<float>(std::max(r.camera.fx, r.camera.fy)) * Length(eye - old_eye) *
-                        (1.0f / r.nearest - 1.0f / Length(p - eye));
-    if (!(shift <= float(r.step))) return 0;
+    if (HiddenFromEye(r, eye, p, mean, n, tolerance)) return 0;
     const Vec3 c = r.T_camera_world * Vec3(p);
     if (!(c.z > 1e-6)) return 0;
     const double u = r.camera.fx * c.x / c.z + r.camera.cx - 0.5, v = r.camera.fy * c.y / c.z + r.camera.cy - 0.5;

@@ -3,8 +3,8 @@
 // the tag board's plane (PlaneOfBoard), receivers of a foggy trained-field
 // table taken onto the plane from every view while an object's top and face
 // stay (ReceiversOnPlane), κ over a foggy table with the plane against κ over
-// the exact table, and last-frame receivers refused once the eye moved far
-// enough to uncover what the last frame could not see (ReuseReceiver).
+// the exact table, and last-frame receivers given only where the new eye
+// sees them (ReuseReceiver past a box the last view saw the table behind).
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -200,9 +200,37 @@ TEST(SupportPlane, KappaOverAFoggyTableMatchesTheExactTable) {
   EXPECT_GT(without.Relative(), 0.2);
 }
 
-// The last frame's receivers on the table z = 0 at every grid node (one
-// level: factor 1), seen from `eye`.
-ReceiverFrame TableReceivers(const CameraIntrinsics& camera, const Pose& cam) {
+// The table z = 0 with a box standing on it (x, y within ±0.05, 8 cm
+// tall): the first surface a ray meets, and its normal.
+struct BoxOnTable {
+  double half = 0.05, height = 0.08;
+  bool Hit(const Vec3& o, const Vec3& d, Vec3& point, Vec3& normal) const {
+    double best = std::numeric_limits<double>::infinity();
+    const auto consider = [&](double t, const Vec3& n, bool inside) {
+      if (t > 1e-9 && t < best && inside) best = t, normal = n;
+    };
+    for (int axis = 0; axis < 3; ++axis)
+      for (const double side : {-1.0, 1.0}) {
+        const double plane = axis == 2 ? (side > 0 ? height : 0.0) : side * half;
+        if (d[axis] == 0.0) continue;
+        const double t = (plane - o[axis]) / d[axis];
+        const Vec3 q = o + d * t;
+        const bool inside =
+            std::abs(q.x) <= half + 1e-12 && std::abs(q.y) <= half + 1e-12 && q.z >= -1e-12 && q.z <= height + 1e-12;
+        Vec3 n{};
+        n[axis] = axis == 2 && side < 0 ? -1.0 : side;
+        if (!(axis == 2 && side < 0)) consider(t, n, inside);
+      }
+    if (d.z < 0) consider(-o.z / d.z, {0, 0, 1}, true);  // the table
+    if (!std::isfinite(best)) return false;
+    point = o + d * best;
+    return true;
+  }
+};
+
+// The last frame's receivers at every grid node (one level: factor 1) of a
+// view of the box on the table.
+ReceiverFrame LastFrame(const BoxOnTable& scene, const CameraIntrinsics& camera, const Pose& cam) {
   ReceiverFrame r;
   r.valid = true;
   r.camera = camera;
@@ -216,44 +244,55 @@ ReceiverFrame TableReceivers(const CameraIntrinsics& camera, const Pose& cam) {
   r.nearest = std::numeric_limits<float>::infinity();
   for (int y : r.ys)
     for (int x : r.xs) {
-      const Vec3f d = CameraRayDirection(camera, cam, x, y);
-      const Vec3f eye(cam.translation);
-      const Vec3f p = eye + d * (-eye.z / d.z);
-      r.state.push_back(1);
-      r.point.push_back(p);
-      r.normal.push_back({0, 0, 1});
-      r.nearest = std::min(r.nearest, Length(p - eye));
+      Vec3 p, n;
+      const bool hit = scene.Hit(cam.translation, Vec3(CameraRayDirection(camera, cam, x, y)), p, n);
+      r.state.push_back(hit ? 1 : 2);
+      r.point.push_back(Vec3f(p));
+      r.normal.push_back(Vec3f(n));
+      if (hit) r.nearest = std::min(r.nearest, float(Length(p - cam.translation)));
     }
   return r;
 }
 
-TEST(ReuseReceiver, RefusedOnceTheEyeMovedFarEnoughToUncoverSomethingNew) {
-  const CameraIntrinsics camera = testing::TestCamera(64, 48);
-  const Vec3 target{0.0, 0.0, 0.0};
-  const Pose last = LookAt({0.3, -0.3, 0.4}, target);
-  const ReceiverFrame r = TableReceivers(camera, last);
-  // The shift against the nearest receiver, f·m·(1/nearest − 1/|p − eye|),
-  // stays within one grid step (2 px) for m = 1 mm (f = 57.6 px, nearest
-  // ~0.5 m: < 0.1 px) and passes it for m = 10 cm (~3 px for a point 25 %
-  // farther than the nearest).
-  for (const double moved : {0.001, 0.1}) {
-    const Pose now = LookAt(last.translation + Vec3{moved, 0.0, 0.0}, target);
-    int reused = 0, asked = 0;
-    for (int y = 8; y < 40; y += 4)
-      for (int x = 8; x < 56; x += 4) {
-        Vec3f point, normal;
-        const int given =
-            ReuseReceiver(r, Vec3f(now.translation), CameraRayDirection(camera, now, x, y), x, y, 1e-4f, point, normal);
+// New views of the box on the table, 2 mm and 8 cm from the last: the
+// last frame must never give a table point where this eye sees the box (the
+// far view has such pixels: table the last view saw that the box hides now),
+// while it still gives most of what both see. (Other misses, of a few
+// millimetres where a cell's plane spans the box's edge, are the reuse
+// tolerance's and not counted here.)
+TEST(ReuseReceiver, NeverGivesTheTableBehindAnObjectThisEyeSees) {
+  const BoxOnTable scene;
+  const CameraIntrinsics camera = testing::TestCamera(96, 72);
+  const Vec3 target{0.0, 0.0, 0.02};
+  const Pose last = LookAt({0.35, -0.3, 0.3}, target);
+  const ReceiverFrame r = LastFrame(scene, camera, last);
+  for (const double moved : {0.002, 0.08}) {
+    // The far view also aims aside, so that the last view's pixels where
+    // this one sees the box show the table (the plane a reuse starts from).
+    const Pose now = LookAt(last.translation + Vec3{-moved, -moved, 0.0}, target + Vec3{moved, -moved, 0.0});
+    int given = 0, asked = 0, behind_box = 0, uncovered = 0;
+    for (int y = 1; y < camera.height - 2; y += 2)
+      for (int x = 1; x < camera.width - 2; x += 2) {
+        const Vec3f d = CameraRayDirection(camera, now, x, y);
+        Vec3 truth, n;
+        if (!scene.Hit(now.translation, Vec3(d), truth, n)) continue;
         ++asked;
-        if (given == 1) {
-          ++reused;
-          EXPECT_NEAR(point.z, 0.0f, 1e-5);
+        const bool box = truth.z > 1e-3;
+        if (box) {
+          // The table along this ray, and whether the last view saw it.
+          const Vec3 table = now.translation + Vec3(d) * (-now.translation.z / d.z);
+          Vec3 seen, m;
+          scene.Hit(last.translation, Normalized(table - last.translation), seen, m);
+          if (Length(seen - table) < 1e-3) ++uncovered;
         }
+        Vec3f point, normal;
+        if (ReuseReceiver(r, Vec3f(now.translation), d, x, y, 1e-3f, point, normal) != 1) continue;
+        ++given;
+        if (box && std::abs(point.z) < 1e-3f) ++behind_box;
       }
-    if (moved < 0.01)
-      EXPECT_EQ(reused, asked);
-    else
-      EXPECT_LT(reused, asked / 2) << "reused " << reused << " of " << asked;
+    EXPECT_EQ(behind_box, 0) << "moved " << moved << ": given " << given << " of " << asked;
+    EXPECT_GT(given, moved < 0.01 ? asked * 9 / 10 : asked / 2) << "moved " << moved;
+    if (moved > 0.01) EXPECT_GE(uncovered, 5);
   }
 }
 
