@@ -255,6 +255,17 @@ std::vector<float> ReceiverRule(const ShadowPassInputs& in) {
 
 }  // namespace
 
+KappaSpacing KappaSpacingFor(const InsertOptions& options, int width) {
+  const int factor = std::max(1, options.kappa_coarse_factor);
+  if (options.kappa_grid_width <= 0) return {options.kappa_step, size_t(factor)};
+  const double scale = double(width) / double(options.kappa_grid_width);
+  KappaSpacing s;
+  s.step = std::max(1, static_cast<int>(std::lround(options.kappa_step * scale)));
+  const int coarse = std::max(s.step, static_cast<int>(std::lround(options.kappa_step * factor * scale)));
+  s.factor = static_cast<size_t>(std::max(1, static_cast<int>(std::lround(double(coarse) / s.step))));
+  return s;
+}
+
 void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, std::unique_ptr<KappaCache>& cache_owner,
                    ImageF& frame, InsertLayers& layers, InsertTimings& times) {
   const SceneField& scene = in.scene;
@@ -279,6 +290,7 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
                                      options.shadow_reach_radii * spheres[j].radius));
     rect = ClipToImage(rect, camera.width, camera.height);
     // The world lattice of κ, dropped when a caster or a light changed.
+    const KappaSpacing spacing_px = KappaSpacingFor(options, camera.width);
     KappaCache* cache = nullptr;
     double spacing = 0.0;
     float smallest = std::numeric_limits<float>::infinity();
@@ -289,8 +301,8 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
       std::vector<double> key = {spacing,
                                  options.shadow_reach_radii,
                                  options.shadow_epsilon,
-                                 double(options.kappa_step),
-                                 double(options.kappa_coarse_factor),
+                                 double(spacing_px.step),
+                                 double(spacing_px.factor),
                                  options.kappa_refine_delta,
                                  options.kappa_plane_upsampling ? 1.0 : 0.0,
                                  options.shadow_epsilon_snap ? 1.0 : 0.0,
@@ -343,7 +355,7 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
         if (shadow.empty()) {
           rect = {};
         } else {
-          const int unit = options.kappa_step * std::max(1, options.kappa_coarse_factor);
+          const int unit = spacing_px.step * static_cast<int>(spacing_px.factor);
           const auto down = [&](int v, int origin) { return origin + (std::max(v, origin) - origin) / unit * unit; };
           PixelRect r{down(shadow.x0 - unit, rect.x0), down(shadow.y0 - unit, rect.y0),
                       down(shadow.x1 + 2 * unit, rect.x0) + 1, down(shadow.y1 + 2 * unit, rect.y0) + 1};
@@ -374,7 +386,7 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
       // Light owners: each receiver takes the light of its nearest object
       // (relative to size); queries of every caster at each owner's lobe axes.
       for (size_t o = 0; o < n_objects; ++o) PrepareLight(lights[o], objects, preps[o]);
-      const int step = options.kappa_step;
+      const int step = spacing_px.step;
       const auto grid_axis = [step](int lo, int hi) {
         std::vector<int> s;
         for (int v = lo; v < hi; v += step) s.push_back(v);
@@ -599,7 +611,7 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
       // Coarse to fine: κ at every coarse_factor-th node; cells whose corners
       // differ by more than kappa_refine_delta get all their nodes, the
       // others are interpolated (κ varies slowly away from edges).
-      size_t factor = static_cast<size_t>(std::max(1, options.kappa_coarse_factor));
+      size_t factor = spacing_px.factor;
       if (nx < 2 * factor || ny < 2 * factor) factor = 1;  // too small a grid to coarsen
       const auto coarse_axis = [factor](size_t n) {
         std::vector<size_t> c;
