@@ -169,7 +169,9 @@ int RunInsert(const CommandArgs& args) {
   parser.Option("--sg-lobes", &sg_lobes, "M",
                 "SG lobes of the incident light (balanced: " + shown(balanced.light.fit.lobes) + ")");
   parser.Option("--kappa-step", &kappa_step, "S",
-                "κ every S pixels, interpolated between (balanced: " + shown(balanced.kappa_step) + ")");
+                "κ every S pixels of a 1280-pixel-wide frame (other widths scale it), interpolated between "
+                "(balanced: " +
+                    shown(balanced.kappa_step) + ")");
   int shade_step = -1;
   parser.Option("--shade-step", &shade_step, "S",
                 "diffuse and self-shadow every S pixels of the object, interpolated where smooth (balanced: " +
