@@ -110,6 +110,15 @@ bool HiddenFromEye(const ReceiverFrame& r, const Vec3f& eye, const Vec3f& p, con
   constexpr int kMaxWalkSteps = 16;
   const Vec3 last_eye = r.T_world_camera.translation;
   const double length = Length(Vec3(p - eye));
+  // How far, at most, a surface at the nearest receiver distance can shift
+  // against p between the two views: f·m·(1/nearest − 1/|p − eye|) pixels
+  // for an eye moved by m. Under half a coarse cell the walk's one sample
+  // would fall in p's own cell, whose corners the plane test already holds
+  // to p's plane: nothing to walk (a hand-held frame's usual case).
+  const double coarse_step = double(r.step) * double(r.factor);
+  const double shift =
+      std::max(r.camera.fx, r.camera.fy) * Length(Vec3(eye) - last_eye) * (1.0 / r.nearest - 1.0 / length);
+  if (shift < 0.5 * coarse_step) return false;
   const double u_min = std::clamp((r.nearest - Length(Vec3(eye) - last_eye)) / length, 0.0, 1.0);
   const auto pixel = [&](const Vec3& w, double& u, double& v) {
     const Vec3 c = r.T_camera_world * w;
@@ -121,7 +130,6 @@ bool HiddenFromEye(const ReceiverFrame& r, const Vec3f& eye, const Vec3f& p, con
   const Vec3 a = Vec3(eye) + Vec3(p - eye) * u_min, b(p);
   double ua, va, ub, vb;
   if (!pixel(a, ua, va) || !pixel(b, ub, vb)) return true;
-  const double coarse_step = double(r.step) * double(r.factor);
   const int steps = static_cast<int>(std::ceil(std::hypot(ua - ub, va - vb) / coarse_step));
   if (steps > kMaxWalkSteps) return true;
   for (int k = 1; k <= steps; ++k) {
