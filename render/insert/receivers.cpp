@@ -110,14 +110,17 @@ bool HiddenFromEye(const ReceiverFrame& r, const Vec3f& eye, const Vec3f& p, con
   constexpr int kMaxWalkSteps = 16;
   const Vec3 last_eye = r.T_world_camera.translation;
   const double length = Length(Vec3(p - eye));
-  // How far, at most, a surface at the nearest receiver distance can shift
-  // against p between the two views: f·m·(1/nearest − 1/|p − eye|) pixels
-  // for an eye moved by m. Under half a coarse cell the walk's one sample
-  // would fall in p's own cell, whose corners the plane test already holds
-  // to p's plane: nothing to walk (a hand-held frame's usual case).
+  // What the last frame saw lies at least nearest − m from this eye (moved
+  // by m): nothing of it can come between eye and p when p is nearer than
+  // that, and it shifts against p between the two views by at most
+  // f·m·(1/(nearest − m) − 1/|p − eye|) pixels. Under half a coarse cell
+  // the walk's one sample would fall in p's own cell, whose corners the
+  // plane test already holds to p's plane: nothing to walk (a hand-held
+  // frame's usual case).
   const double coarse_step = double(r.step) * double(r.factor);
-  const double shift =
-      std::max(r.camera.fx, r.camera.fy) * Length(Vec3(eye) - last_eye) * (1.0 / r.nearest - 1.0 / length);
+  const double moved = Length(Vec3(eye) - last_eye), near = r.nearest - moved;
+  if (length <= near) return false;
+  const double shift = near > 0.0 ? std::max(r.camera.fx, r.camera.fy) * moved * (1.0 / near - 1.0 / length) : HUGE_VAL;
   if (shift < 0.5 * coarse_step) return false;
   const double u_min = std::clamp((r.nearest - Length(Vec3(eye) - last_eye)) / length, 0.0, 1.0);
   const auto pixel = [&](const Vec3& w, double& u, double& v) {
