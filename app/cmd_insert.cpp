@@ -132,6 +132,7 @@ int RunInsert(const CommandArgs& args) {
   double shadow_reach = -1, self_shadow_offset = -1, receiver_min_opacity = -1;
   bool no_self_shadow = false, no_shadows = false, paper_gamma = false, truth_geometry = false;
   bool light_from_centre = false, no_seen_radiance = false, expected_depth = false;
+  bool no_support_plane = false;
   bool no_see_through = false;
   int seen_views = -1;
   double seen_group_cm = -1;
@@ -168,7 +169,9 @@ int RunInsert(const CommandArgs& args) {
   parser.Option("--sg-lobes", &sg_lobes, "M",
                 "SG lobes of the incident light (balanced: " + shown(balanced.light.fit.lobes) + ")");
   parser.Option("--kappa-step", &kappa_step, "S",
-                "κ every S pixels, interpolated between (balanced: " + shown(balanced.kappa_step) + ")");
+                "κ every S pixels of a 1280-pixel-wide frame (other widths scale it), interpolated between "
+                "(balanced: " +
+                    shown(balanced.kappa_step) + ")");
   int shade_step = -1;
   parser.Option("--shade-step", &shade_step, "S",
                 "diffuse and self-shadow every S pixels of the object, interpolated where smooth (balanced: " +
@@ -237,6 +240,9 @@ int RunInsert(const CommandArgs& args) {
   parser.Flag("--seen-whole-band", &seen_whole_band,
               "seen radiance from views over the whole capture band (default: the views that see the face the "
               "light ray meets, the band only where none does)");
+  parser.Flag("--no-support-plane", &no_support_plane,
+              "κ receivers from the NeRF alone (default: where the dataset has a board.json, receivers whose "
+              "rays end on the tag board's plane are taken onto it)");
   parser.Flag("--no-kappa-snap", &no_kappa_snap, "keep κ in [1 - ε, 1) as computed (default: taken as 1)");
   parser.Flag("--kappa-under-objects", &kappa_under_objects,
               "κ also at grid nodes only the objects' pixels cover (default: skipped)");
@@ -480,6 +486,13 @@ int RunInsert(const CommandArgs& args) {
   }
 
   Inserter inserter(scene, environment.lobes, options);
+  const fs::path board_path = fs::path(dataset_dir) / "board.json";
+  if (!no_support_plane && !truth_geometry && fs::exists(board_path) && !dataset.frames.empty()) {
+    const SupportPlane plane =
+        PlaneOfBoard(ReadBoard(board_path.string()), dataset.frames.front().T_world_camera.translation);
+    inserter.set_support_plane(plane);
+    LogInfo("insert: shadow receivers that end on the board's plane (" + board_path.string() + ") are taken onto it");
+  }
   Json views = Json::array();
   std::vector<double> psnrs, shadow_errors;
   // Object psnr over all views' mask pixels together: a view where the object

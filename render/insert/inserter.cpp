@@ -230,7 +230,7 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
   // 5. Shadows κ on the scene where an object can shadow.
   t0 = InsertClock::now();
   RenderShadows({scene_, options_, camera, T_world_camera, objects, spheres, used_lights_, g, receivers,
-                 options_.kappa_from_samples ? &shadow_sources : nullptr},
+                 options_.kappa_from_samples ? &shadow_sources : nullptr, support_ ? &*support_ : nullptr},
                 preps, kappa_cache_, frame, layers, times);
   times.kappa_ms = MsSince(t0);
 

@@ -61,6 +61,8 @@ std::vector<std::string> NerfRenderOptions::Validate() const {
   if (!(min_transmittance >= 0.0f && min_transmittance < 1.0f))
     problems.push_back("min_transmittance: (expected 0 <= T < 1)");
   if (!(min_alpha >= 0.0f && min_alpha < 1.0f)) problems.push_back("min_alpha: (expected 0 <= a < 1)");
+  if (!(surface_transmittance > 0.0f && surface_transmittance < 1.0f))
+    problems.push_back("surface_transmittance: (expected 0 < T < 1)");
   return problems;
 }
 
@@ -562,6 +564,8 @@ struct MarchBrick {
 // Front-to-back compositing of a ray's samples into colour, opacity and depths.
 class RayCompositor {
  public:
+  // level: the transmittance at which the surface's depth is taken (NerfRenderOptions::surface_transmittance).
+  explicit RayCompositor(float level) : level_(level) {}
   // Adds the sample at t (middle of an interval dt) of opacity alpha and radiance rgb; false once
   // the transmittance falls below min_transmittance (the ray is done).
   bool Add(float t, float dt, float sigma, float alpha, const float rgb[3], float min_transmittance,
@@ -570,22 +574,23 @@ class RayCompositor {
     for (int ch = 0; ch < 3; ++ch) result.color[ch] += w * rgb[ch];
     depth_sum_ += w * t;
     const float next = transmittance_ * (1.0f - alpha);
-    if (transmittance_ > 0.5f && next <= 0.5f) {
-      // T(x) = T exp(-σ x) inside the interval (sample at its middle): T(x) = 0.5 at x = ln(2T)/σ.
-      const float x = std::min(std::log(2.0f * transmittance_) / sigma, dt);
+    if (transmittance_ > level_ && next <= level_) {
+      // T(x) = T exp(-σ x) inside the interval (sample at its middle): T(x) = level at x = ln(T/level)/σ.
+      const float x = std::min(std::log(transmittance_ / level_) / sigma, dt);
       result.surface_depth = t - 0.5f * dt + x;
     }
     transmittance_ = next;
     return !(transmittance_ < min_transmittance);
   }
-  // Opacity, mean depth and, where the ray never crossed T = 0.5, the mean depth as the surface's.
+  // Opacity, mean depth and, where the ray never crossed the level, the mean depth as the surface's.
   void Finish(NerfRayResult& result) const {
     result.opacity = 1.0f - transmittance_;
     result.depth = result.opacity > 0.0f ? depth_sum_ / result.opacity : 0.0f;
-    if (!(result.opacity >= 0.5f) || result.surface_depth == 0.0f) result.surface_depth = result.depth;
+    if (!(result.opacity >= 1.0f - level_) || result.surface_depth == 0.0f) result.surface_depth = result.depth;
   }
 
  private:
+  float level_;
   float transmittance_ = 1.0f, depth_sum_ = 0.0f;
 };
 
@@ -610,7 +615,7 @@ NerfRayResult NerfField::RenderRay(const NerfRay& ray, const NerfRenderOptions& 
   // With a current render copy every cell is read from it (every brick with an occupied cell has a block).
   const bool use_copy = options.use_render_copy && RenderCopyCurrent();
   MarchBrick brick;
-  RayCompositor compositor;
+  RayCompositor compositor(options.surface_transmittance);
   // The occupied cell of the current sample: its corners from the float arrays, or (copy_v0 set)
   // the lanes of its corner 0 in the render copy's block, seen from this ray through copy_block.
   // Locals, not a class: held in one, GCC no longer vectorised CopyBlock::Set (measured with
