@@ -31,6 +31,7 @@
 #include "calib/core/log.h"
 #include "calib/dataset.h"
 #include "calib/hdr.h"
+#include "calib/scene_box.h"
 #include "tracking/frame_sources.h"
 #include "tracking/tracker.h"
 
@@ -50,9 +51,9 @@ struct CaptureOptions {
   double sharpness_ratio = 0.5;     // frames below this fraction of the median sharpness are blurred
   double max_rms_px = 1.0;          // pose quality needed
   int min_tags = 2;
-  int max_frames = 100000;     // frames read at most
-  double aabb_margin_m = 0.1;  // NeRF box: tag extents grown by this in x and y
-  double aabb_height_m = 0.6;  // NeRF box top (z); bottom at -0.05
+  int max_frames = 100000;                  // frames read at most
+  double aabb_margin_m = kBoardBoxMarginM;  // NeRF box: tag extents grown by this in x and y
+  double aabb_height_m = kBoardBoxHeightM;  // NeRF box top (z); bottom at -kBoardBoxBelowM
 };
 
 // Variance of the Laplacian of the grey frame: high for sharp frames.
@@ -107,18 +108,6 @@ struct DirectionCoverage {
     return empty;
   }
 };
-
-Aabb BoardBox(const Board& board, double margin, double height) {
-  Aabb box{{1e9, 1e9, -0.05}, {-1e9, -1e9, height}};
-  for (const BoardTag& tag : board.tags)
-    for (const Vec3& c : tag.corners) {
-      box.min.x = std::min(box.min.x, c.x - margin);
-      box.min.y = std::min(box.min.y, c.y - margin);
-      box.max.x = std::max(box.max.x, c.x + margin);
-      box.max.y = std::max(box.max.y, c.y + margin);
-    }
-  return box;
-}
 
 // The folder an image-folder source reads (for the EXR originals), or "".
 std::string ImageFolderOf(const std::string& source) {
@@ -228,7 +217,7 @@ class CaptureSession {
     if (dataset.camera.width != width || dataset.camera.height != height)
       dataset.camera = dataset.camera.Scaled(width, height);
     dataset.camera_model = camera_file_.camera_model;
-    dataset.aabb = BoardBox(board_, options_.aabb_margin_m, options_.aabb_height_m);
+    dataset.aabb = BoxAroundBoard(board_, options_.aabb_margin_m, options_.aabb_height_m);
     dataset.frames = train_;
     WriteDataset(options_.output + "/transforms_train.json", dataset);
     WriteDataset(options_.output + "/transforms.json", dataset);

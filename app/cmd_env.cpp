@@ -1,8 +1,13 @@
-// nerfar env scene.nerf -o env.json [--preview env.exr] [--preset P] [--set key=value]...
+// nerfar env scene.nerf -o env.json [--preview env.exr] [--report FILE|DIR | --no-report] [--truth env.exr]
+//            [--preset P] [--set key=value]...
 // Estimates the distant environment light that the NeRF does not hold (paper
-// §4.2) as SG lobes, writes env.json (render/lighting/env_light.h) and an
-// equirect preview; says when the estimate is negligible against the near field.
+// §4.2) as SG lobes, writes env.json (render/lighting/env_light.h), an
+// equirect preview and the report picture (render/lighting/env_report.h);
+// states the fit's residual and, with a true panorama, the irradiance error;
+// says when the estimate is negligible against the near field.
+#include <chrono>
 #include <cstdio>
+#include <filesystem>
 #include <memory>
 #include <string>
 
@@ -10,28 +15,75 @@
 #include "app/commands.h"
 #include "calib/core/atomic_file.h"
 #include "calib/core/error.h"
+#include "calib/core/image_io.h"
 #include "calib/core/log.h"
 #include "calib/core/output_guard.h"
 #include "render/lighting/env_estimate.h"
 #include "render/lighting/env_light.h"
+#include "render/lighting/env_report.h"
 #include "render/nerf/nerf_file.h"
+#include "render/sg/sphere.h"
 
 namespace nerfar {
+namespace {
+
+// The report picture's path: --report FILE as given; --report DIR (an
+// existing folder, or a name ending in '/') or no --report: NAME_report.png
+// there or beside the output (env.json -> env_report.png).
+std::string ReportPath(const std::string& output, const std::string& report) {
+  namespace fs = std::filesystem;
+  const std::string name = fs::path(output).stem().string() + "_report.png";
+  if (report.empty()) return (fs::path(output).parent_path() / name).string();
+  std::error_code error;
+  if (report.back() == '/' || fs::is_directory(report, error)) return (fs::path(report) / name).string();
+  const std::string extension = fs::path(report).extension().string();
+  if (extension != ".png" && extension != ".jpg" && extension != ".jpeg")
+    throw InputError("nerfar env: --report " + report + ": not a folder, and not a .png or .jpg file");
+  return report;
+}
+
+void LogFitResidual(const EnvLight& env) {
+  const EnvFitResidual& fit = env.fit;
+  char line[400];
+  std::snprintf(line, sizeof line,
+                "env: fit residual over %lld surface samples: relative RMS %.4f, robust loss %.5f per sample",
+                fit.samples, fit.relative_rms, fit.loss);
+  std::string text = line;
+  if (fit.near_only_fitted) {
+    std::snprintf(line, sizeof line, "; near field only: relative RMS %.4f, robust loss %.5f",
+                  fit.near_only_relative_rms, fit.near_only_loss);
+    text += line;
+  }
+  LogInfo(text);
+}
+
+}  // namespace
 
 int RunEnv(const CommandArgs& args) {
-  std::string nerf_path, output, preview, dump, preset = "balanced";
+  std::string nerf_path, output, preview, dump, report_option, truth_path, preset = "balanced";
+  bool no_report = false;
   std::vector<std::string> sets;
   ArgParser parser("env", "Estimate the distant environment light (32 SGs) of a NeRF by inverse rendering.");
   parser.Positional("NERF", &nerf_path, "trained model (.nerf)");
   parser.Option("-o", &output, "FILE", "output env.json");
   parser.Option("--preview", &preview, "FILE", "also write a 256x128 equirect EXR of the estimate");
-  parser.Option("--dump-samples", &dump, "FILE",
-                "also write the surface samples as CSV (position, normal, observed L, E_nerf, E_env; diagnostics)");
+  parser.Option(
+      "--dump-samples", &dump, "FILE",
+      "also write the surface samples as CSV (position, normal, observed L, E_nerf, E_env, the fit's modelled L; "
+      "diagnostics)");
+  parser.Option("--report", &report_option, "FILE|DIR",
+                "report picture (PNG): the estimate's panorama with its lobes, the fit's residual over the surface "
+                "samples in 4 of the sampled views, the numbers; default NAME_report.png beside -o (a folder: in it)");
+  parser.Flag("--no-report", &no_report, "write no report picture (saves rendering 4 views)");
+  parser.Option("--truth", &truth_path, "FILE",
+                "true environment panorama (equirect EXR, as scenes/*/env.exr): in the report beside the estimate "
+                "with their difference, and the irradiance error over the upper hemisphere (eval/metrics.py "
+                "irradiance --upper) printed");
   parser.Option("--preset", &preset, "P", "fast | balanced (default) | accurate");
   parser.Option("--set", &sets, "KEY=VALUE", "override one option (repeatable; see below)");
   parser.Epilog("Options (--set): " + EnvEstimateOptions::Preset("balanced").ToJson() +
                 "\nBaseline that ignores the NeRF's light and visibility: --set ignore_near_field=true\n"
-                "Example: nerfar env window.nerf -o env.json --preview env.exr --preset fast");
+                "Example: nerfar env window.nerf -o env.json --preview env.exr --truth scenes/window/env.exr");
   if (!parser.Parse(args)) return 0;
   if (output.empty()) throw InputError("nerfar env: -o FILE is required (see 'nerfar env --help')");
   EnvEstimateOptions options = EnvEstimateOptions::Preset(preset);
@@ -44,7 +96,12 @@ int RunEnv(const CommandArgs& args) {
       list.ThrowIfAny();
     }
   }
-  CheckOutputsSpareInputs({output, preview, dump}, {nerf_path});
+  if (no_report && !report_option.empty())
+    throw InputError("nerfar env: --report and --no-report contradict each other");
+  const std::string report_path = no_report ? "" : ReportPath(output, report_option);
+  CheckOutputsSpareInputs({output, preview, dump, report_path}, {nerf_path, truth_path});
+  // The truth is read before the estimate, so that a bad file fails at once.
+  const ImageF truth = truth_path.empty() ? ImageF() : ReadTruePanorama(truth_path);
   const NerfField field = LoadNerf(nerf_path);
   LogInfo("env: " + nerf_path + "; preset " + preset + "; options " + options.ToJson());
 
@@ -60,21 +117,26 @@ int RunEnv(const CommandArgs& args) {
     bar->Update(done);
   };
   EnvEstimateReport report;
-  report.keep_samples = !dump.empty();
+  report.keep_samples = !dump.empty() || !report_path.empty();
   EnvLight env = EstimateEnvironment(field, options, &report, progress);
   if (bar) bar->Finish();
+  bar.reset();
   env.source = nerf_path;
   WriteEnvLight(output, env);
   if (!preview.empty()) WriteEnvPreview(preview, env);
   if (!dump.empty()) {
-    std::string csv = "x,y,z,nx,ny,nz,L_r,L_g,L_b,Enerf_r,Enerf_g,Enerf_b,Eenv_r,Eenv_g,Eenv_b\n";
+    std::string csv =
+        "x,y,z,nx,ny,nz,L_r,L_g,L_b,Enerf_r,Enerf_g,Enerf_b,Eenv_r,Eenv_g,Eenv_b,Lmodel_r,Lmodel_g,Lmodel_b\n";
     const EnvSurfaceSamples& s = report.surface;
+    const std::vector<Vec3f>& model = report.fit.modelled;
     for (size_t i = 0; i < s.size(); ++i) {
-      char row[400];
-      std::snprintf(row, sizeof row, "%.5f,%.5f,%.5f,%.4f,%.4f,%.4f,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g\n",
+      char row[500];
+      std::snprintf(row, sizeof row,
+                    "%.5f,%.5f,%.5f,%.4f,%.4f,%.4f,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g\n",
                     s.positions[i].x, s.positions[i].y, s.positions[i].z, s.normals[i].x, s.normals[i].y,
                     s.normals[i].z, s.radiance[i].x, s.radiance[i].y, s.radiance[i].z, s.e_nerf[i].x, s.e_nerf[i].y,
-                    s.e_nerf[i].z, report.e_env[i].x, report.e_env[i].y, report.e_env[i].z);
+                    s.e_nerf[i].z, report.e_env[i].x, report.e_env[i].y, report.e_env[i].z, model[i].x, model[i].y,
+                    model[i].z);
       csv += row;
     }
     WriteFileAtomic(dump, csv);
@@ -112,6 +174,28 @@ int RunEnv(const CommandArgs& args) {
                  ? "below " + std::to_string(env.threshold) + " of the near field"
                  : "the near field alone explains the observations as well, up to the environment's parameters") +
             "): all light is inside the NeRF; env.json says so and insertion drops the environment term");
+  LogFitResidual(env);
+  if (!truth.empty()) {
+    const ImageF estimate = RenderEquirect(env.lobes, truth.width, truth.height);
+    std::snprintf(line, sizeof line,
+                  "env: irradiance error against %s (luminance, relative RMS; eval/metrics.py irradiance): %.4f over "
+                  "the 32 upper-hemisphere normals (--upper), %.4f over all 64",
+                  truth_path.c_str(), IrradianceError(estimate, truth, true), IrradianceError(estimate, truth, false));
+    LogInfo(line);
+  }
+  if (!report_path.empty()) {
+    const auto start = std::chrono::steady_clock::now();
+    EnvReportOptions report_options;
+    report_options.render = options.render;
+    const Image8 picture =
+        RenderEnvReport(field, env, report, truth.empty() ? nullptr : &truth, report_options, nullptr, progress);
+    if (bar) bar->Finish();
+    const std::string folder = std::filesystem::path(report_path).parent_path().string();
+    if (!folder.empty()) MakeDirectories(folder);
+    WriteImage8(report_path, picture);
+    LogInfo("env: wrote the report " + report_path + " (" +
+            FormatDuration(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count()) + ")");
+  }
   LogInfo("env: wrote " + output + (preview.empty() ? "" : " and " + preview));
   return 0;
 }

@@ -22,6 +22,23 @@ std::string FormatNumber(double v) {
   return buffer;
 }
 
+// What to do with a lens the OpenCV model (k1 k2 p1 p2 k3) does not describe.
+constexpr char kUndistortFirst[] =
+    "fisheye and other lens models are not supported: undistort the images first, e.g. with COLMAP's "
+    "image_undistorter, and use the pinhole camera it writes";
+
+// instant-ngp's is_fisheye and the fourth radial term of OpenCV's fisheye
+// model (nerfstudio writes k4 for OPENCV_FISHEYE): accepted when they say
+// "pinhole", refused otherwise.
+void RejectFisheyeKeys(JsonObjectReader& reader) {
+  if (reader.Has("is_fisheye") && reader.Bool("is_fisheye"))
+    reader.problems().Add(reader.PointerTo("is_fisheye"), std::string("is true (") + kUndistortFirst + ")");
+  const std::optional<double> k4 = reader.OptionalNumber("k4");
+  if (k4.has_value() && *k4 != 0.0)
+    reader.problems().Add(reader.PointerTo("k4"),
+                          "is " + FormatNumber(*k4) + " (expected 0 or absent; " + kUndistortFirst + ")");
+}
+
 double FocalFromAngle(int size_px, double angle_rad) { return 0.5 * size_px / std::tan(0.5 * angle_rad); }
 
 // One focal length: fl (may be absent if the angle is given), angle optional.
@@ -56,6 +73,13 @@ double ReadFocal(JsonObjectReader& reader, const char* fl_key, const char* angle
 
 }  // namespace
 
+const std::vector<std::string>& CameraKeyNames() {
+  static const std::vector<std::string> names = {
+      "camera_model", "w",  "h",  "fl_x", "fl_y", "camera_angle_x", "camera_angle_y", "cx", "cy", "k1",
+      "k2",           "p1", "p2", "k3",   "k4",   "is_fisheye"};
+  return names;
+}
+
 double FieldOfView(int size_px, double focal_px) { return 2.0 * std::atan(0.5 * size_px / focal_px); }
 
 std::string ReadCameraKeys(JsonObjectReader& reader, CameraIntrinsics& camera) {
@@ -64,14 +88,17 @@ std::string ReadCameraKeys(JsonObjectReader& reader, CameraIntrinsics& camera) {
     if (*m == "OPENCV" || *m == "PINHOLE") {
       model = *m;
     } else {
-      reader.problems().Add(reader.PointerTo("camera_model"), "is \"" + *m + "\" (expected \"OPENCV\" or \"PINHOLE\")");
+      reader.problems().Add(reader.PointerTo("camera_model"),
+                            "is \"" + *m + "\" (expected \"OPENCV\" or \"PINHOLE\"; " + kUndistortFirst + ")");
     }
   }
+  RejectFisheyeKeys(reader);
   size_t before = reader.problems().items().size();
-  camera.width = static_cast<int>(reader.Integer("w", 1, kMaxImageSide));
+  // Whole numbers written as floats (instant-ngp's "w": 1080.0) are sizes too.
+  camera.width = static_cast<int>(reader.WholeNumber("w", 1, kMaxImageSide));
   const bool width_ok = reader.problems().items().size() == before;
   before = reader.problems().items().size();
-  camera.height = static_cast<int>(reader.Integer("h", 1, kMaxImageSide));
+  camera.height = static_cast<int>(reader.WholeNumber("h", 1, kMaxImageSide));
   const bool height_ok = reader.problems().items().size() == before;
   camera.fx = ReadFocal(reader, "fl_x", "camera_angle_x", width_ok ? camera.width : 0, std::nullopt);
   // fl_y defaults to fl_x; when fl_x itself is bad that was reported already.

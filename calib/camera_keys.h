@@ -1,9 +1,12 @@
 // The intrinsics keys shared by transforms.json and camera.json (fl_x, fl_y,
 // cx, cy, w, h, camera_angle_x/y, camera_model, k1 k2 p1 p2 k3): one reader
 // and one writer for both files. Pixel conventions as in calib/camera.h.
+// instant-ngp's and nerfstudio's spellings are read too: sizes written as
+// whole floats (1080.0), is_fisheye false and k4 0 (a fisheye is refused).
 #pragma once
 
 #include <string>
+#include <vector>
 
 #include "calib/camera.h"
 #include "calib/core/json.h"
@@ -17,6 +20,10 @@ namespace nerfar {
 // fl_x/fl_y. fl_x (fl_y) may be omitted when camera_angle_x (_y) is given;
 // fl_y defaults to fl_x; absent distortion terms are 0.
 std::string ReadCameraKeys(JsonObjectReader& reader, CameraIntrinsics& camera);
+
+// Every key ReadCameraKeys may read (for readers that tell a typo of one of
+// them from another tool's key).
+const std::vector<std::string>& CameraKeyNames();
 
 // Writes the same keys (camera_angle_x/y included, computed from the focal
 // lengths) into `object`, which must be a JSON object.

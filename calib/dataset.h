@@ -6,6 +6,13 @@
 // every pose is OpenCV (x right, y down, z forward): the one conversion is
 // PoseFromTransformMatrix / TransformMatrixFromPose, used only at this file
 // boundary.
+//
+// The files other tools write are read as they are: instant-ngp (sizes as
+// whole floats, aabb_scale / scale / offset, per-frame sharpness, file paths
+// without an extension), nerfstudio (per-frame intrinsics, mask_path,
+// applied_transform, ply_file_path) and the COLMAP conversions of both. A key
+// nerfar does not read is ignored and listed once (Dataset::ignored_keys, and
+// the log); a key within a typo of one it reads is an error.
 #pragma once
 
 #include <array>
@@ -26,23 +33,42 @@ struct DatasetFrame {
   std::string file_path;   // as written in the JSON, relative to the dataset folder
   std::string image_path;  // resolved path
   Pose T_world_camera;     // OpenCV camera convention
+  // nerfstudio's mask_path: a grey image, 0 where the pixel is not to be
+  // learnt from (a moving person, the tripod). Both empty when none.
+  std::string mask_file;  // as written
+  std::string mask_path;  // resolved
+  // This frame's own intrinsics, when Dataset::per_frame_cameras (read them
+  // through Dataset::CameraOf).
+  CameraIntrinsics camera;
 };
 
 struct Dataset {
   std::string path;  // the transforms file read or written
   std::string dir;   // folder that file_path is relative to
   std::string camera_model = "OPENCV";
-  CameraIntrinsics camera;
+  CameraIntrinsics camera;         // the shared intrinsics (the first frame's when frames give their own)
+  bool per_frame_cameras = false;  // frames carry their own intrinsics (written per frame)
   std::optional<Aabb> aabb;
+  // instant-ngp's reconstruction box in the file's frame: 0.5 ± aabb_scale / 2
+  // in its unit cube, mapped back through scale and offset (defaults 0.33 and
+  // 0.5 as its loader has them). Present when the file gives aabb_scale.
+  std::optional<Aabb> ngp_box;
+  // Keys read but not used, each "key" or "frames[].key (in N frames)", listed once.
+  std::vector<std::string> ignored_keys;
   std::vector<DatasetFrame> frames;
+
+  // The intrinsics of one of its frames.
+  const CameraIntrinsics& CameraOf(const DatasetFrame& frame) const {
+    return per_frame_cameras ? frame.camera : camera;
+  }
 };
 
 // The one OpenGL <-> OpenCV conversion (right-multiplication by diag(1,-1,-1,1)).
 Pose PoseFromTransformMatrix(const std::array<double, 16>& camera_to_world_opengl);
 std::array<double, 16> TransformMatrixFromPose(const Pose& T_world_camera);
 
-// Reads and validates a transforms file (every problem listed, unknown keys
-// rejected, image files checked to exist when check_images).
+// Reads and validates a transforms file (every problem listed, typos of our
+// keys rejected, image and mask files checked to exist when check_images).
 Dataset ReadDataset(const std::string& transforms_path, bool check_images = true);
 // Writes a transforms file (atomic) in the same convention.
 void WriteDataset(const std::string& transforms_path, const Dataset& dataset);

@@ -14,6 +14,7 @@ packages=(
   libv4l-dev libcamera-dev
   libglfw3-dev libgl-dev libimgui-dev
   xvfb xauth xdotool libgl1-mesa-dri ffmpeg
+  poppler-utils python3-opencv python3-numpy
 )
 
 missing=()

@@ -1,5 +1,5 @@
-// calib/core: EXR and PNG round trips, strict JSON, atomic files, math,
-// threads, tone mapping and metrics.
+// calib/core: EXR and PNG round trips, strict JSON, atomic files, the binary
+// container, math, threads, tone mapping and metrics.
 #include <fcntl.h>
 #include <gtest/gtest.h>
 #include <sys/syscall.h>
@@ -8,6 +8,7 @@
 #include <climits>
 #include <cmath>
 #include <csignal>
+#include <cstring>
 #include <filesystem>
 #include <mutex>
 #include <nlohmann/json.hpp>
@@ -16,6 +17,7 @@
 #include <vector>
 
 #include "calib/core/atomic_file.h"
+#include "calib/core/binary_file.h"
 #include "calib/core/error.h"
 #include "calib/core/exr.h"
 #include "calib/core/image_io.h"
@@ -523,6 +525,85 @@ TEST(Log, DurationsReadNaturally) {
   EXPECT_EQ(FormatDuration(0.25), "250ms");
   EXPECT_EQ(FormatDuration(12.34), "12.3s");
   EXPECT_EQ(FormatDuration(65), "1m05s");
+}
+
+// ---- the binary container (calib/core/binary_file.h)
+
+constexpr BinaryFormat kTestFormat{"test file", "NERFTEST", true, 2, 3, "make it again"};
+
+TEST(BinaryFile, ChecksumIsFnv1aFromTheFormatsBasis) {
+  // FNV-1a: h = (h ^ byte) · 1099511628211 per byte, from the formats' basis (binary_file.h).
+  constexpr uint64_t kBasis = 1469598103934665603ull, kPrime = 1099511628211ull;
+  EXPECT_EQ(BinaryChecksum(""), kBasis);
+  EXPECT_EQ(BinaryChecksum("a"), (kBasis ^ 0x61) * kPrime);
+  EXPECT_EQ(BinaryChecksum("ab"), (((kBasis ^ 0x61) * kPrime) ^ 0x62) * kPrime);
+  EXPECT_NE(BinaryChecksum("ab"), BinaryChecksum("ba"));
+}
+
+TEST(BinaryFile, WriterLaysOutMagicVersionFieldsChecksum) {
+  BinaryFileWriter w(kTestFormat, 3);
+  w.Put(uint16_t{0x0201});
+  w.PutArray(std::vector<float>{1.0f});
+  const std::string bytes = std::move(w).Seal();
+  const std::string body = std::string("NERFTEST") + std::string("\x03\x00\x00\x00", 4) + "\x01\x02" +
+                           std::string("\x00\x00\x80\x3f", 4);  // 1.0f, little-endian
+  ASSERT_EQ(bytes.size(), body.size() + 8);
+  EXPECT_EQ(bytes.substr(0, body.size()), body);
+  uint64_t sum;
+  std::memcpy(&sum, bytes.data() + body.size(), 8);
+  EXPECT_EQ(sum, BinaryChecksum(body));
+}
+
+TEST(BinaryFile, OpenChecksMagicVersionAndChecksumInThatOrder) {
+  BinaryFileWriter w(kTestFormat, 2);
+  w.Put(uint32_t{7});
+  const std::string good = std::move(w).Seal();
+  BinaryFile file = OpenBinaryFile(good, "t.bin", kTestFormat);
+  EXPECT_EQ(file.version, 2u);
+  EXPECT_EQ(file.fields.remaining(), 4u) << "the fields end before the checksum";
+  EXPECT_EQ(file.fields.Get<uint32_t>("seven"), 7u);
+
+  std::string magic = good;
+  magic[3] = 'X';
+  EXPECT_NE(InputErrorOf([&] { OpenBinaryFile(magic, "t.bin", kTestFormat); }).find("not a test file"),
+            std::string::npos);
+  EXPECT_NE(InputErrorOf([&] { OpenBinaryFile(good.substr(0, 15), "t.bin", kTestFormat); }).find("truncated"),
+            std::string::npos);
+  std::string newer = good;
+  newer[8] = 4;  // the checksum no longer matches either: the version is named first
+  EXPECT_NE(InputErrorOf([&] { OpenBinaryFile(newer, "t.bin", kTestFormat); }).find("version 4 (expected 2 to 3; "),
+            std::string::npos);
+  std::string flipped = good;
+  flipped[13] ^= 0x10;
+  const std::string message = InputErrorOf([&] { OpenBinaryFile(flipped, "t.bin", kTestFormat); });
+  EXPECT_NE(message.find("t.bin"), std::string::npos) << message;
+  EXPECT_NE(message.find("checksum"), std::string::npos) << message;
+  EXPECT_NE(message.find("make it again"), std::string::npos) << message;
+}
+
+TEST(BinaryFile, ReaderNeverReadsPastItsSpan) {
+  const std::string bytes = "0123456789";
+  ByteReader r(std::string_view(bytes).substr(0, 6), "span", 100);
+  EXPECT_EQ(r.Get<uint32_t>("first"), 0x33323130u);
+  const std::string message = InputErrorOf([&] { r.Get<uint32_t>("second"); });
+  EXPECT_NE(message.find("span: file is truncated while reading second at byte 104"), std::string::npos) << message;
+  EXPECT_EQ(r.remaining(), 2u) << "a failed read takes nothing";
+  // A count that the bytes left cannot hold fails before anything is allocated.
+  EXPECT_NE(InputErrorOf([&] { r.GetArray<double>(uint64_t{1} << 61, "huge"); }).find("huge"), std::string::npos);
+  EXPECT_EQ(r.Take(2, "rest"), "45");
+  EXPECT_EQ(r.remaining(), 0u);
+  EXPECT_NE(InputErrorOf([&] { r.Take(1, "more"); }).find("more"), std::string::npos);
+}
+
+TEST(BinaryFile, WriteBinaryFileIsAtomicAndReadsBack) {
+  TempDir dir;
+  BinaryFileWriter w(kTestFormat, 3);
+  w.Put(double{2.5});
+  WriteBinaryFile(dir.File("x.bin"), std::move(w));
+  const std::string bytes = ReadFileBytes(dir.File("x.bin"));
+  BinaryFile file = OpenBinaryFile(bytes, dir.File("x.bin"), kTestFormat);
+  EXPECT_EQ(file.fields.Get<double>("value"), 2.5);
+  EXPECT_EQ(std::distance(std::filesystem::directory_iterator(dir.path()), {}), 1) << "no temporary file left";
 }
 
 }  // namespace

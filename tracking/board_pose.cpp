@@ -118,35 +118,16 @@ double SubsetRms(const std::vector<MatchedTag>& tags, const std::vector<int>& su
   return std::sqrt(sum / (4.0 * subset.size()));
 }
 
-}  // namespace
-
-std::vector<std::string> BoardPoseOptions::Validate() const {
-  std::vector<std::string> problems;
-  if (!(outlier_rms_px > 0 && outlier_rms_px <= 100))
-    problems.push_back("outlier_rms_px: " + std::to_string(outlier_rms_px) + " (expected 0 < value <= 100 pixels)");
-  if (!(ambiguity_ratio >= 1 && ambiguity_ratio <= 100))
-    problems.push_back("ambiguity_ratio: " + std::to_string(ambiguity_ratio) + " (expected 1 to 100)");
-  if (refine_iterations < 0 || refine_iterations > 1000)
-    problems.push_back("refine_iterations: " + std::to_string(refine_iterations) + " (expected 0 to 1000)");
-  if (!(corner_noise_px >= 0 && corner_noise_px <= 10))
-    problems.push_back("corner_noise_px: " + std::to_string(corner_noise_px) + " (expected 0 to 10 pixels)");
-  if (min_tags < 1 || min_tags > 1000) problems.push_back("min_tags: " + std::to_string(min_tags) + " (expected >= 1)");
-  return problems;
-}
-
-BoardPose EstimateBoardPose(const std::vector<TagDetection>& detections, const Board& board,
-                            const CameraIntrinsics& camera, const BoardPoseOptions& options) {
-  BoardPose result;
-  const Vec2 pp = ToOpenCvPrincipalPoint(camera);
-  const PinholeCv k{camera.fx, camera.fy, pp.x, pp.y};
-  const cv::Matx33d K(k.fx, 0, k.cx, 0, k.fy, k.cy, 0, 0, 1);
+// The detections of tags on the board, their corners undistorted into OpenCV pixels; the ids of
+// tags not on the board go to unknown_ids. A tag with a non-finite corner is dropped.
+std::vector<MatchedTag> MatchTags(const std::vector<TagDetection>& detections, const Board& board,
+                                  const CameraIntrinsics& camera, const PinholeCv& k, std::vector<int>& unknown_ids) {
   const bool distorted = camera.HasDistortion();
-
   std::vector<MatchedTag> tags;
   for (const TagDetection& d : detections) {
     const BoardTag* tag = board.FindTag(d.id);
     if (tag == nullptr) {
-      result.unknown_ids.push_back(d.id);
+      unknown_ids.push_back(d.id);
       continue;
     }
     MatchedTag m{d.id, tag, {}};
@@ -159,21 +140,21 @@ BoardPose EstimateBoardPose(const std::vector<TagDetection>& detections, const B
     }
     if (finite) tags.push_back(m);
   }
-  if (tags.empty()) {
-    result.why = detections.empty() ? "no tag seen" : "no tag of the board seen";
-    return result;
-  }
+  return tags;
+}
 
-  // Hypotheses: both IPPE solutions of every tag, as T_camera_world.
-  struct Hypothesis {
-    Pose T_camera_world;
-    int loose_count = 0;
-    double cost = 0;
-  };
+// An unrefined pose and how well it explains every tag at the loose gate.
+struct Hypothesis {
+  Pose T_camera_world;
+  int loose_count = 0;  // tags within the gate
+  double cost = 0;      // sum over tags of the RMS, capped at the gate
+};
+
+// Both IPPE solutions of every tag (a degenerate quad gives none), best first: most tags within
+// loose_px, then the lowest cost.
+std::vector<Hypothesis> IppeHypotheses(const std::vector<MatchedTag>& tags, const cv::Matx33d& K, const PinholeCv& k,
+                                       double loose_px) {
   std::vector<Hypothesis> hypotheses;
-  // Loose gate for unrefined hypotheses: a pose from one small tag is off by
-  // degrees, which moves far tags by tens of pixels.
-  const double loose_px = std::max(25.0, 10.0 * options.outlier_rms_px);
   for (const MatchedTag& m : tags) {
     const Pose T_world_tag = TagFrame(*m.tag);
     const Pose T_tag_world = T_world_tag.Inverse();
@@ -202,72 +183,76 @@ BoardPose EstimateBoardPose(const std::vector<TagDetection>& detections, const B
       hypotheses.push_back(h);
     }
   }
-  if (hypotheses.empty()) {
-    result.why = "every seen tag is degenerate";
-    return result;
-  }
   std::stable_sort(hypotheses.begin(), hypotheses.end(), [](const Hypothesis& a, const Hypothesis& b) {
     return a.loose_count != b.loose_count ? a.loose_count > b.loose_count : a.cost < b.cost;
   });
+  return hypotheses;
+}
 
-  // Refine the best few distinct hypotheses: inliers at the loose gate, LM,
-  // inliers at the outlier threshold, LM again until the set settles.
+// One hypothesis refined: inliers at the loose gate, LM, inliers at the outlier threshold, LM
+// again until the set settles (at most 4 rounds). Nothing where OpenCV fails.
+std::optional<Refined> Refine(const std::vector<MatchedTag>& tags, const Hypothesis& h, const cv::Matx33d& K,
+                              const PinholeCv& k, double loose_px, const BoardPoseOptions& options) {
+  Refined r;
+  r.T_camera_world = h.T_camera_world;
+  std::vector<int> subset = Inliers(tags, k, r.T_camera_world, loose_px);
+  for (int round = 0; round < 4 && !subset.empty(); ++round) {
+    if (!RefineLm(tags, subset, K, options.refine_iterations, r.T_camera_world)) return std::nullopt;
+    std::vector<int> next = Inliers(tags, k, r.T_camera_world, options.outlier_rms_px);
+    if (next == subset) break;
+    subset = std::move(next);
+  }
+  r.inliers = subset;
+  r.rms_px = SubsetRms(tags, subset, k, r.T_camera_world);
+  return r;
+}
+
+constexpr double kDistinctRad = 1.0 * kPi / 180.0;  // solutions closer in rotation are one
+
+bool RotationNear(const std::vector<Refined>& kept, const Pose& T_camera_world) {
+  for (const Refined& r : kept)
+    if (RotationAngleBetween(r.T_camera_world.rotation, T_camera_world.rotation) < kDistinctRad) return true;
+  return false;
+}
+
+// The distinct solutions of the best few distinct hypotheses, best first: most inliers, then
+// the lowest RMS. `collapsed`: the first hypothesis whose refinement slid into a kept solution.
+struct Solutions {
   std::vector<Refined> refined;
   std::optional<Refined> collapsed;
-  constexpr int kMaxRefined = 4;
-  constexpr double kDistinctRad = 1.0 * kPi / 180.0;
+};
+
+Solutions RefineHypotheses(const std::vector<MatchedTag>& tags, const std::vector<Hypothesis>& hypotheses,
+                           const cv::Matx33d& K, const PinholeCv& k, double loose_px, const BoardPoseOptions& options) {
+  constexpr size_t kMaxRefined = 4;
+  Solutions out;
   for (const Hypothesis& h : hypotheses) {
-    if (static_cast<int>(refined.size()) >= kMaxRefined) break;
-    bool duplicate = false;
-    for (const Refined& r : refined)
-      duplicate =
-          duplicate || RotationAngleBetween(r.T_camera_world.rotation, h.T_camera_world.rotation) < kDistinctRad;
-    if (duplicate) continue;
-    Refined r;
-    r.T_camera_world = h.T_camera_world;
-    std::vector<int> subset = Inliers(tags, k, r.T_camera_world, loose_px);
-    bool failed = false;
-    for (int round = 0; round < 4 && !subset.empty(); ++round) {
-      if (!RefineLm(tags, subset, K, options.refine_iterations, r.T_camera_world)) {
-        failed = true;
-        break;
-      }
-      std::vector<int> next = Inliers(tags, k, r.T_camera_world, options.outlier_rms_px);
-      if (next == subset) break;
-      subset = std::move(next);
-    }
-    if (failed) continue;
-    r.inliers = subset;
-    r.rms_px = SubsetRms(tags, subset, k, r.T_camera_world);
+    if (out.refined.size() >= kMaxRefined) break;
+    if (RotationNear(out.refined, h.T_camera_world)) continue;
+    std::optional<Refined> r = Refine(tags, h, K, k, loose_px, options);
+    if (!r) continue;
     // A refinement that lands on an already kept solution adds nothing.
-    bool same = false;
-    for (const Refined& o : refined)
-      same = same || RotationAngleBetween(o.T_camera_world.rotation, r.T_camera_world.rotation) < kDistinctRad;
-    if (!same) {
-      refined.push_back(std::move(r));
-    } else if (!collapsed) {
+    if (!RotationNear(out.refined, r->T_camera_world)) {
+      out.refined.push_back(std::move(*r));
+    } else if (!out.collapsed) {
       // LM slid from this hypothesis into a kept solution (a shallow valley:
       // one tag nearly face-on); the unrefined IPPE pose stays a candidate.
-      collapsed = Refined{h.T_camera_world, {}, 0};
+      out.collapsed = Refined{h.T_camera_world, {}, 0};
     }
   }
-  std::stable_sort(refined.begin(), refined.end(), [](const Refined& a, const Refined& b) {
+  std::stable_sort(out.refined.begin(), out.refined.end(), [](const Refined& a, const Refined& b) {
     return a.inliers.size() != b.inliers.size() ? a.inliers.size() > b.inliers.size() : a.rms_px < b.rms_px;
   });
-  if (refined.empty() || static_cast<int>(refined.front().inliers.size()) < options.min_tags) {
-    result.why = "no pose explains " + std::to_string(options.min_tags) + " tag(s) within " +
-                 std::to_string(options.outlier_rms_px) + " px";
-    for (const MatchedTag& m : tags) result.outlier_ids.push_back(m.id);
-    return result;
-  }
-  const Refined& best = refined.front();
-  result.ok = true;
-  result.T_world_camera = best.T_camera_world.Inverse();
-  result.rms_px = best.rms_px;
-  for (size_t i = 0; i < tags.size(); ++i) {
-    const bool in = std::find(best.inliers.begin(), best.inliers.end(), static_cast<int>(i)) != best.inliers.end();
-    (in ? result.inlier_ids : result.outlier_ids).push_back(tags[i].id);
-  }
+  return out;
+}
+
+// The best solution's rival on the same inlier tags, if its RMS is within ambiguity_ratio of the
+// best one's (or of the corner noise, below which RMS values are not told apart).
+void SetAlternative(const std::vector<MatchedTag>& tags, Solutions& solutions, const PinholeCv& k,
+                    const BoardPoseOptions& options, BoardPose& result) {
+  std::vector<Refined>& refined = solutions.refined;
+  const Refined best = refined.front();
+  std::optional<Refined>& collapsed = solutions.collapsed;
   if (collapsed &&
       RotationAngleBetween(collapsed->T_camera_world.rotation, best.T_camera_world.rotation) >= kDistinctRad) {
     collapsed->inliers = best.inliers;
@@ -277,14 +262,65 @@ BoardPose EstimateBoardPose(const std::vector<TagDetection>& detections, const B
   for (size_t j = 1; j < refined.size(); ++j) {
     const Refined& other = refined[j];
     if (other.inliers != best.inliers) continue;
-    // Noise floor: below the detector's corner noise both RMS values are
-    // equally good and their ratio meaningless.
     if (other.rms_px <= options.ambiguity_ratio * std::max(best.rms_px, options.corner_noise_px)) {
       result.alternative = other.T_camera_world.Inverse();
       result.alternative_rms_px = other.rms_px;
     }
     break;
   }
+}
+
+}  // namespace
+
+std::vector<std::string> BoardPoseOptions::Validate() const {
+  std::vector<std::string> problems;
+  if (!(outlier_rms_px > 0 && outlier_rms_px <= 100))
+    problems.push_back("outlier_rms_px: " + std::to_string(outlier_rms_px) + " (expected 0 < value <= 100 pixels)");
+  if (!(ambiguity_ratio >= 1 && ambiguity_ratio <= 100))
+    problems.push_back("ambiguity_ratio: " + std::to_string(ambiguity_ratio) + " (expected 1 to 100)");
+  if (refine_iterations < 0 || refine_iterations > 1000)
+    problems.push_back("refine_iterations: " + std::to_string(refine_iterations) + " (expected 0 to 1000)");
+  if (!(corner_noise_px >= 0 && corner_noise_px <= 10))
+    problems.push_back("corner_noise_px: " + std::to_string(corner_noise_px) + " (expected 0 to 10 pixels)");
+  if (min_tags < 1 || min_tags > 1000) problems.push_back("min_tags: " + std::to_string(min_tags) + " (expected >= 1)");
+  return problems;
+}
+
+BoardPose EstimateBoardPose(const std::vector<TagDetection>& detections, const Board& board,
+                            const CameraIntrinsics& camera, const BoardPoseOptions& options) {
+  BoardPose result;
+  const Vec2 pp = ToOpenCvPrincipalPoint(camera);
+  const PinholeCv k{camera.fx, camera.fy, pp.x, pp.y};
+  const cv::Matx33d K(k.fx, 0, k.cx, 0, k.fy, k.cy, 0, 0, 1);
+  const std::vector<MatchedTag> tags = MatchTags(detections, board, camera, k, result.unknown_ids);
+  if (tags.empty()) {
+    result.why = detections.empty() ? "no tag seen" : "no tag of the board seen";
+    return result;
+  }
+  // Loose gate for unrefined hypotheses: a pose from one small tag is off by
+  // degrees, which moves far tags by tens of pixels.
+  const double loose_px = std::max(25.0, 10.0 * options.outlier_rms_px);
+  const std::vector<Hypothesis> hypotheses = IppeHypotheses(tags, K, k, loose_px);
+  if (hypotheses.empty()) {
+    result.why = "every seen tag is degenerate";
+    return result;
+  }
+  Solutions solutions = RefineHypotheses(tags, hypotheses, K, k, loose_px, options);
+  if (solutions.refined.empty() || static_cast<int>(solutions.refined.front().inliers.size()) < options.min_tags) {
+    result.why = "no pose explains " + std::to_string(options.min_tags) + " tag(s) within " +
+                 std::to_string(options.outlier_rms_px) + " px";
+    for (const MatchedTag& m : tags) result.outlier_ids.push_back(m.id);
+    return result;
+  }
+  const Refined& best = solutions.refined.front();
+  result.ok = true;
+  result.T_world_camera = best.T_camera_world.Inverse();
+  result.rms_px = best.rms_px;
+  for (size_t i = 0; i < tags.size(); ++i) {
+    const bool in = std::find(best.inliers.begin(), best.inliers.end(), static_cast<int>(i)) != best.inliers.end();
+    (in ? result.inlier_ids : result.outlier_ids).push_back(tags[i].id);
+  }
+  SetAlternative(tags, solutions, k, options, result);
   return result;
 }
 

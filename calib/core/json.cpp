@@ -128,6 +128,21 @@ long long JsonObjectReader::Integer(const char* key, long long min, long long ma
   return number;
 }
 
+long long JsonObjectReader::WholeNumber(const char* key, long long min, long long max) {
+  const Json* value = Lookup(key, true);
+  if (value == nullptr) return min;
+  if (value->is_number_float()) {
+    const double number = value->get<double>();
+    if (!(std::isfinite(number) && number == std::floor(number) && number >= double(min) && number <= double(max))) {
+      problems_.Add(PointerTo(key), "is " + std::to_string(number) + " (expected an integer from " +
+                                        std::to_string(min) + " to " + std::to_string(max) + ")");
+      return min;
+    }
+    return static_cast<long long>(number);
+  }
+  return Integer(key, min, max);
+}
+
 std::string JsonObjectReader::String(const char* key) {
   const Json* value = Lookup(key, true);
   if (value == nullptr) return {};

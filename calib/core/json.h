@@ -47,6 +47,9 @@ class JsonObjectReader {
   double Number(const char* key);
   double Number(const char* key, double min, double max);
   long long Integer(const char* key, long long min, long long max);
+  // The same, also accepting a number with no fractional part (1080.0, as
+  // instant-ngp writes image sizes).
+  long long WholeNumber(const char* key, long long min, long long max);
   std::string String(const char* key);
   bool Bool(const char* key);
   std::vector<double> Numbers(const char* key, size_t expected_size = 0);  // 0: any size

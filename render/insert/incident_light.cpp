@@ -48,6 +48,9 @@ std::vector<std::string> IncidentLightOptions::Validate() const {
     problems.push_back("light_refine_rays: " + std::to_string(refine_rays) + " is out of range (expected 0 to 1024)");
   if (!(refine_contrast > 1.0) || !std::isfinite(refine_contrast))
     problems.push_back("light_refine_contrast: must be a finite number > 1");
+  if (lobe_bundle_rays < 1 || lobe_bundle_rays > 1024)
+    problems.push_back("lobe_bundle_rays: " + std::to_string(lobe_bundle_rays) +
+                       " is out of range (expected 1 to 1024)");
   if (!(parallax_min_sharpness > 0.0) || !std::isfinite(parallax_min_sharpness))
     problems.push_back("parallax_min_sharpness: must be a finite number > 0");
   for (const std::string& p : fit.Validate()) problems.push_back("fit." + p);
@@ -117,7 +120,7 @@ RadianceSamples SampleIncidentLight(const SceneField& scene, const SgMixture& en
                                     const std::vector<Vec3>& directions, LightSource source,
                                     std::vector<float>* opacity, std::vector<float>* depth,
                                     const std::vector<float>* start, int refine_rays, double refine_contrast,
-                                    size_t* refined) {
+                                    size_t* refined, const SgMixture* beside) {
   const size_t n = directions.size();
   RadianceSamples samples;
   samples.directions = directions;
@@ -143,6 +146,7 @@ RadianceSamples SampleIncidentLight(const SceneField& scene, const SgMixture& en
     std::vector<double> y(n);
     double mean = 0.0;
     for (size_t i = 0; i < n; ++i) mean += (y[i] = LuminanceOf(samples.radiance[i])) / static_cast<double>(n);
+    if (beside) mean += LuminanceOf(Integral(*beside)) / (4.0 * kPi);
     // Neighbours: within 1.8 spacings of an even set (spacing √(4π/N)),
     // found in the z band of that width (directions sorted by z).
     const double spacing = std::sqrt(4.0 * kPi / static_cast<double>(n));
@@ -203,6 +207,47 @@ RadianceSamples SampleIncidentLight(const SceneField& scene, const SgMixture& en
   }
   if (opacity) *opacity = o;
   return samples;
+}
+
+void SplitCompactLobes(const SgMixture& environment, int directions, int max_compact, SgMixture* broad,
+                       SgMixture* compact) {
+  broad->clear();
+  compact->clear();
+  const double sharp = CompactSharpness(directions);
+  // The compact candidates by energy, most first (ties: original order).
+  std::vector<size_t> candidates;
+  for (size_t k = 0; k < environment.size(); ++k)
+    if (environment[k].sharpness > sharp) candidates.push_back(k);
+  const auto energy = [&](size_t k) { return LuminanceOf(Integral(environment[k])); };
+  std::stable_sort(candidates.begin(), candidates.end(), [&](size_t a, size_t b) { return energy(a) > energy(b); });
+  std::vector<char> is_compact(environment.size(), 0);
+  for (size_t i = 0; i < candidates.size() && i < static_cast<size_t>(std::max(max_compact, 0)); ++i)
+    is_compact[candidates[i]] = 1;
+  for (size_t k = 0; k < environment.size(); ++k) (is_compact[k] ? compact : broad)->push_back(environment[k]);
+}
+
+std::vector<double> LobeTransmittance(const SceneField& scene, const Vec3& center, const SgMixture& lobes, int rays,
+                                      const LightObjectVolume* volume) {
+  const size_t per = static_cast<size_t>(std::max(rays, 1));
+  std::vector<Vec3> directions;
+  directions.reserve(lobes.size() * per);
+  for (const Sg& lobe : lobes) {
+    const std::vector<Vec3> bundle = SgQuadrature(lobe.axis, lobe.sharpness, static_cast<int>(per));
+    directions.insert(directions.end(), bundle.begin(), bundle.end());
+  }
+  std::vector<float> starts;
+  if (volume != nullptr) starts = ObjectExitDistances(*volume, center, directions);
+  const SceneSamples field = RenderFromCenter(scene, center, directions, starts);
+  std::vector<double> transmittance(lobes.size(), 1.0);
+  for (size_t k = 0; k < lobes.size(); ++k) {
+    double sum = 0.0;
+    for (size_t j = k * per; j < (k + 1) * per && j < field.opacity.size(); ++j) {
+      const float o = field.opacity[j];
+      sum += 1.0 - (std::isfinite(o) ? std::clamp(o, 0.0f, 1.0f) : 0.0f);
+    }
+    transmittance[k] = sum / static_cast<double>(per);
+  }
+  return transmittance;
 }
 
 namespace {
@@ -385,6 +430,8 @@ SgMixture ReaimLight(const SgMixture& light, const LightParallax& parallax, cons
 void IncidentLight::Reset() {
   valid_ = false;
   light_.clear();
+  fitted_.clear();
+  compact_.clear();
 }
 
 const std::vector<float>* IncidentLight::Starts(const Vec3& center, const IncidentLightOptions& options,
@@ -417,28 +464,47 @@ IncidentLight::Update IncidentLight::Refresh(const SceneField& scene, const SgMi
   // into a different shape along some ray).
   const std::vector<float>* starts = Starts(center, options, volume);
   const bool same_starts = SameStarts(starts, fitted_starts_, options.start_tolerance_m);
+  const bool analytic = options.analytic_compact_lobes && options.source != LightSource::kNearFieldOnly;
   const bool same_setup = valid_ && directions_ == options.directions && source_ == options.source &&
                           lobes_ == options.fit.lobes && same_starts && refine_rays_ == options.refine_rays &&
-                          refine_contrast_ == options.refine_contrast;
+                          refine_contrast_ == options.refine_contrast && analytic_ == analytic &&
+                          bundle_rays_ == options.lobe_bundle_rays;
   const bool same_parallax = options.parallax == !distances_.empty() || light_.empty();
   if (same_setup && same_parallax && Length(center - center_) <= options.move_threshold_m) return update;
   update.recomputed = true;
   if (static_cast<int>(dirs_.size()) != options.directions) dirs_ = FibonacciSphere(options.directions);
+  // The compact lobes pass analytically; the directions carry the rest, and
+  // the fit gets the lobes they leave of the budget (at least half of it).
+  SgMixture broad = environment;
+  compact_.clear();
+  if (analytic) SplitCompactLobes(environment, options.directions, options.fit.lobes / 2, &broad, &compact_);
   auto t0 = std::chrono::steady_clock::now();
-  samples_ = SampleIncidentLight(scene, environment, center, dirs_, options.source, &opacity_, &depth_, starts,
-                                 options.refine_rays, options.refine_contrast, &refined_);
+  if (!compact_.empty() && options.source == LightSource::kFull) {
+    const std::vector<double> seen =
+        LobeTransmittance(scene, center, compact_, options.lobe_bundle_rays, starts != nullptr ? volume : nullptr);
+    for (size_t k = 0; k < compact_.size(); ++k) compact_[k].amplitude = compact_[k].amplitude * seen[k];
+  }
+  samples_ = SampleIncidentLight(scene, broad, center, dirs_, options.source, &opacity_, &depth_, starts,
+                                 options.refine_rays, options.refine_contrast, &refined_, &compact_);
   update.sample_ms = MillisecondsSince(t0);
   double total = 0.0;
   for (const Vec3& l : samples_.radiance) total += LuminanceOf(l);
   if (options.source == LightSource::kEnvironmentOnly) {
     light_ = environment;  // already SGs: nothing to fit
+    fitted_.clear();
   } else if (!(total > 0.0)) {
-    light_.clear();  // darkness (e.g. the centre inside opaque geometry): no lobe to fit
+    fitted_.clear();  // darkness (e.g. the centre inside opaque geometry): no lobe to fit
   } else {
     t0 = std::chrono::steady_clock::now();
-    const bool warm = same_setup && static_cast<int>(light_.size()) == options.fit.lobes;
-    light_ = FitSg(samples_, options.fit, warm ? &light_ : nullptr, &update.report);
+    SgFitOptions fit = options.fit;
+    fit.lobes = options.fit.lobes - static_cast<int>(compact_.size());
+    const bool warm = same_setup && static_cast<int>(fitted_.size()) == fit.lobes;
+    fitted_ = FitSg(samples_, fit, warm ? &fitted_ : nullptr, &update.report);
     update.fit_ms = MillisecondsSince(t0);
+  }
+  if (options.source != LightSource::kEnvironmentOnly) {
+    light_ = fitted_;
+    light_.insert(light_.end(), compact_.begin(), compact_.end());
   }
   distances_.clear();
   if (options.parallax && !light_.empty()) {
@@ -446,10 +512,14 @@ IncidentLight::Update IncidentLight::Refresh(const SceneField& scene, const SgMi
     std::vector<Vec3> near(samples_.radiance.size());
     if (options.source != LightSource::kEnvironmentOnly)
       for (size_t i = 0; i < near.size(); ++i)
-        near[i] = samples_.radiance[i] - (environment.empty() || options.source == LightSource::kNearFieldOnly
+        near[i] = samples_.radiance[i] - (broad.empty() || options.source == LightSource::kNearFieldOnly
                                               ? Vec3{}
-                                              : Evaluate(environment, dirs_[i]) * (1.0 - opacity_[i]));
-    distances_ = LobeDistances(light_, dirs_, opacity_, depth_, near);
+                                              : Evaluate(broad, dirs_[i]) * (1.0 - opacity_[i]));
+    // The fitted lobes' distances from the scene; the environment's own
+    // lobes (the environment-only light, the compact ones) stay distant.
+    const SgMixture& fitted = options.source == LightSource::kEnvironmentOnly ? light_ : fitted_;
+    distances_ = LobeDistances(fitted, dirs_, opacity_, depth_, near);
+    distances_.resize(light_.size(), std::numeric_limits<double>::infinity());
   }
   valid_ = true;
   fitted_starts_ = starts != nullptr ? *starts : std::vector<float>{};
@@ -459,6 +529,8 @@ IncidentLight::Update IncidentLight::Refresh(const SceneField& scene, const SgMi
   lobes_ = options.fit.lobes;
   refine_rays_ = options.refine_rays;
   refine_contrast_ = options.refine_contrast;
+  analytic_ = analytic;
+  bundle_rays_ = options.lobe_bundle_rays;
   return update;
 }
 

@@ -4,6 +4,9 @@
 // opacity-weighted colour (so this is the paper's (1 − Ô)L_env + Ô·L_nerf).
 // The samples are fitted with SGs (render/sg FitSg), warm-started from the
 // previous fit, and the result is kept while the centre does not move.
+// Environment lobes sharper than the N directions resolve (a sun) skip the
+// sampling and the fit: they join the fitted lobes as they are, times the
+// scene's transmittance towards them (CompactSharpness, LobeTransmittance).
 // World frame, metres, linear RGB radiance.
 #pragma once
 
@@ -13,6 +16,7 @@
 #include "calib/core/image.h"
 #include "render/insert/scene_field.h"
 #include "render/mesh/mesh.h"
+#include "render/sg/compact_sources.h"
 #include "render/sg/fit.h"
 #include "render/sg/sg.h"
 #include "render/sg/sphere.h"
@@ -65,6 +69,17 @@ struct IncidentLightOptions {
   // than a point value that hits or misses a small source. 0: no refinement.
   int refine_rays = 16;  // fast preset: 0
   double refine_contrast = 2.0;
+  // Environment lobes sharper than the N directions resolve (a sun, a lamp
+  // a few degrees wide: CompactSharpness) pass to the light analytically:
+  // each keeps its axis, sharpness and radiance, times the scene's
+  // transmittance towards it (LobeTransmittance over `lobe_bundle_rays`
+  // rays spread as the lobe); the directions and the SG fit carry the near
+  // field and the broad environment, with the lobes left of the budget.
+  // false: every lobe through the directions and the fit, as before.
+  bool analytic_compact_lobes = true;
+  // Rays of one compact lobe's transmittance bundle: its visible share is
+  // resolved in steps of 1/rays (16: 6 %, below the SG fit's own error).
+  int lobe_bundle_rays = 16;
   // Every problem as "field: what is wrong (what was expected)".
   std::vector<std::string> Validate() const;
 };
@@ -79,12 +94,15 @@ struct IncidentLightOptions {
 // directions must then be an even set such as FibonacciSphere's); `refined`
 // (optional) receives how many did. A refined direction's opacity is its
 // cell's mean, its depth the centre ray's, and its sub-rays start at the
-// centre ray's start.
+// centre ray's start. `beside` (optional): lobes that reach the centre
+// apart from the directions (the compact ones passed analytically); their
+// mean radiance counts in the refinement's "above the mean" as if sampled.
 RadianceSamples SampleIncidentLight(const SceneField& scene, const SgMixture& environment, const Vec3& center,
                                     const std::vector<Vec3>& directions, LightSource source,
                                     std::vector<float>* opacity = nullptr, std::vector<float>* depth = nullptr,
                                     const std::vector<float>* start = nullptr, int refine_rays = 0,
-                                    double refine_contrast = 2.0, size_t* refined = nullptr);
+                                    double refine_contrast = 2.0, size_t* refined = nullptr,
+                                    const SgMixture* beside = nullptr);
 
 // The object whose light is taken: its mesh as posed in the world (a loan).
 struct LightObjectVolume {
@@ -92,6 +110,20 @@ struct LightObjectVolume {
   Pose T_world_object;
   double scale = 1.0;
 };
+
+// The environment split into the lobes the directions carry (`broad`) and
+// the compact ones (sharper than CompactSharpness(directions)) passed on
+// analytically; at most `max_compact` of those, the most energetic (by
+// luminance integral): the rest stay broad. Order kept within each part.
+void SplitCompactLobes(const SgMixture& environment, int directions, int max_compact, SgMixture* broad,
+                       SgMixture* compact);
+
+// The scene's transmittance (1 − Ô, mean over `rays` directions spread as
+// the lobe, SgQuadrature) from
+// `center` towards each lobe, the rays starting where they leave `volume`
+// (optional, ObjectExitDistances) as the light's other rays do. In [0, 1].
+std::vector<double> LobeTransmittance(const SceneField& scene, const Vec3& center, const SgMixture& lobes, int rays,
+                                      const LightObjectVolume* volume = nullptr);
 
 // Per direction d, the distance t at which the ray center + t·d leaves the
 // object's mesh for the last time (its farthest crossing of a triangle);
@@ -165,7 +197,12 @@ class IncidentLight {
 
   bool valid() const { return valid_; }
   const SgMixture& light() const { return light_; }
+  // The directions' radiance: without the compact lobes (compact()) when
+  // those pass analytically.
   const RadianceSamples& samples() const { return samples_; }
+  // The environment's compact lobes as they reach the centre (attenuated by
+  // the scene's transmittance; part of light()); empty without any.
+  const SgMixture& compact() const { return compact_; }
   const Vec3& center() const { return center_; }
   // The fitted lobes' distances (LobeDistances; empty without parallax).
   const std::vector<double>& lobe_distances() const { return distances_; }
@@ -209,6 +246,10 @@ class IncidentLight {
   RadianceSamples samples_;
   std::vector<float> opacity_, depth_;
   SgMixture light_;
+  SgMixture fitted_;   // the fitted part of light_ (the warm start)
+  SgMixture compact_;  // the analytic part of light_ (compact environment lobes)
+  bool analytic_ = false;
+  int bundle_rays_ = 0;
   std::vector<double> distances_;
   // DistancesFor's cache: the light and centre it was computed for.
   SgMixture given_light_;

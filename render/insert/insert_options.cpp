@@ -87,6 +87,7 @@ std::vector<std::string> InsertOptions::Validate() const {
         "kappa_reuse_tolerance_radii: out of range (expected 0 to 1)");
   check(kappa_step >= 1 && kappa_step <= 64, "kappa_step: out of range (expected 1 to 64)");
   check(kappa_coarse_factor >= 1 && kappa_coarse_factor <= 64, "kappa_coarse_factor: out of range (expected 1 to 64)");
+  check(kappa_grid_width >= 0 && kappa_grid_width <= 65536, "kappa_grid_width: out of range (expected 0 to 65536)");
   check(std::isfinite(kappa_refine_delta) && kappa_refine_delta >= 0 && kappa_refine_delta <= 1,
         "kappa_refine_delta: out of range (expected 0 to 1)");
   check(std::isfinite(receiver_min_opacity) && receiver_min_opacity >= 0 && receiver_min_opacity <= 1,
@@ -105,6 +106,8 @@ std::string InsertOptions::ToJson() const {
   j["light_start_tolerance_m"] = light.start_tolerance_m;
   j["light_refine_rays"] = light.refine_rays;
   j["light_refine_contrast"] = light.refine_contrast;
+  j["light_analytic_compact_lobes"] = light.analytic_compact_lobes;
+  j["light_lobe_bundle_rays"] = light.lobe_bundle_rays;
   j["sg_lobes"] = light.fit.lobes;
   j["sg_cold_iterations"] = light.fit.cold_iterations;
   j["sg_warm_iterations"] = light.fit.warm_iterations;
@@ -138,6 +141,7 @@ std::string InsertOptions::ToJson() const {
   j["kappa_reuse_tolerance_radii"] = kappa_reuse_tolerance_radii;
   j["kappa_step"] = kappa_step;
   j["kappa_coarse_factor"] = kappa_coarse_factor;
+  j["kappa_grid_width"] = kappa_grid_width;
   j["kappa_refine_delta"] = kappa_refine_delta;
   j["receiver_min_opacity"] = receiver_min_opacity;
   return j.dump();

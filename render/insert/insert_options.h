@@ -103,6 +103,16 @@ struct InsertOptions {
   int kappa_sample_bins = 128;            // Fibonacci bins the samples are gathered into (per kind: near, distant)
   double kappa_sample_min_radius = 0.03;  // radians: no source narrower (the SSDF's own resolution)
   int kappa_step = 2;                     // κ at every kappa_step-th pixel, bilinear in between (1: every pixel)
+  // The frame width kappa_step and the coarse spacing (kappa_step ×
+  // kappa_coarse_factor) are given for: a frame of another width scales both
+  // spacings by its width over this one (rounded; the step at least 1 px,
+  // the coarse spacing at least the step), so that κ resolves the same share
+  // of the view, and costs about the same share of the frame, at every
+  // resolution. 1280: DESIGN.md's budgets' frame (fast's 4 px there is
+  // 1.25 px of a 400-pixel view: its sun edges were blurred over ~8 px,
+  // GT-input sunroom shadow 0.50 against 0.34 at 2 px). 0: spacings in the
+  // frame's own pixels.
+  int kappa_grid_width = 1280;
   // κ grid nodes whose surrounding grid cells hold only object pixels (no
   // background pixel is multiplied by them) are neither found nor
   // evaluated, and hold κ = 1 in the κ layer (only cells wholly under the

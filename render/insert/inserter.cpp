@@ -23,6 +23,16 @@ struct LightPrepCache {
   std::vector<ShadowSources> shadow_sources;  // per object (InsertOptions::kappa_from_samples), same key
 };
 
+namespace {
+// The lobes beside an object's light samples: the incident light's analytic
+// ones, or those given with an override (a probe's compact sources).
+const SgMixture& CompactLobes(const InsertObject& object, const IncidentLight& light) {
+  static const SgMixture kNone;
+  if (!object.light_override) return light.compact();
+  return object.light_compact ? *object.light_compact : kNone;
+}
+}  // namespace
+
 ImageF ExpandLayer(const ImageF& layer, const PixelRect& rect, int width, int height, float fill) {
   const int channels = layer.channels > 0 ? layer.channels : 1;
   ImageF full(width, height, channels, fill);
@@ -173,7 +183,9 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
     specular.assign(n_objects, PrefilteredRadiance());
     for (size_t o = 0; o < n_objects; ++o) {
       const RadianceSamples* samples = objects[o].light_override ? objects[o].light_samples : &lights_[o].samples();
-      if (samples != nullptr) specular[o] = PrefilteredRadiance(*samples, options_.specular_levels);
+      // The compact lobes given beside the samples reach the map as lobes.
+      if (samples != nullptr)
+        specular[o] = PrefilteredRadiance(*samples, options_.specular_levels, CompactLobes(objects[o], lights_[o]));
       // Parallax-corrected reflections: the distances the samples' light comes from.
       if (!options_.specular_parallax || specular[o].empty()) continue;
       if (objects[o].light_override && objects[o].light_sample_distances)
@@ -194,8 +206,9 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
     for (size_t o = 0; o < n_objects; ++o) {
       const RadianceSamples* samples = objects[o].light_override ? objects[o].light_samples : &lights_[o].samples();
       if (samples != nullptr)
-        shadow_sources[o] = BuildShadowSources(*samples, used_lights_[o], parallax[o], objects,
-                                               options_.kappa_sample_bins, options_.kappa_sample_min_radius);
+        shadow_sources[o] =
+            BuildShadowSources(*samples, used_lights_[o], parallax[o], objects, options_.kappa_sample_bins,
+                               options_.kappa_sample_min_radius, CompactLobes(objects[o], lights_[o]));
     }
   }
   // Self-shadow γ per mesh vertex, kept while the objects and the light
@@ -217,9 +230,8 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
   // 5. Shadows κ on the scene where an object can shadow.
   t0 = InsertClock::now();
   RenderShadows({scene_, options_, camera, T_world_camera, objects, spheres, used_lights_, g, receivers,
-                 options_.kappa_from_samples ? &shadow_sources : nullptr},
-                preps,
-                kappa_cache_, frame, layers, times);
+                 options_.kappa_from_samples ? &shadow_sources : nullptr, support_ ? &*support_ : nullptr},
+                preps, kappa_cache_, frame, layers, times);
   times.kappa_ms = MsSince(t0);
 
   // Pixels partly covered by an object whose centre misses it.

@@ -50,6 +50,10 @@ struct InsertObject {
   // With light_override: the radiance samples it stands for (e.g. the probe's
   // pixels), for the prefiltered specular term; nullptr: SG specular.
   const RadianceSamples* light_samples = nullptr;
+  // With light_samples: lobes given beside them (compact sources taken out
+  // of a probe, SplitCompactSources), which the prefiltered map filters as
+  // lobes; nullptr: none.
+  const SgMixture* light_compact = nullptr;
   // With light_samples: how far each direction's light comes from, seen
   // from the light centre (parallax-corrected reflections,
   // InsertOptions::specular_parallax); nullptr: none.
@@ -158,11 +162,15 @@ class Inserter {
   const InsertOptions& options() const { return options_; }
   void set_options(const InsertOptions& options) { options_ = options; }
   const SgMixture& environment() const { return environment_; }
+  // A plane the scene is known to hold (the tag board's), onto which shadow
+  // receivers that end on it are taken (ReceiversOnPlane); nullopt: none.
+  void set_support_plane(const std::optional<SupportPlane>& plane) { support_ = plane; }
 
  private:
   const SceneField& scene_;
   SgMixture environment_;
   InsertOptions options_;
+  std::optional<SupportPlane> support_;
   std::vector<IncidentLight> lights_;
   std::vector<SgMixture> used_lights_;
   std::vector<VertexGamma> vertex_gamma_;    // γ per mesh vertex and lobe for each object (vertex_gamma.h)

@@ -103,6 +103,20 @@ void NerfScene::Render(const SceneRays& rays, SceneSamples& out, bool light) con
   }
 }
 
+void NerfScene::TransmittanceDepths(const SceneRays& rays, const std::vector<float>& transmittance,
+                                    std::vector<float>& depth) const {
+  NERFAR_CHECK_EQ(transmittance.size(), rays.size());
+  depth.resize(rays.size());
+  for (size_t i = 0; i < rays.size(); ++i) {
+    NerfRenderOptions options = options_.render;
+    options.surface_transmittance = transmittance[i];
+    options.min_transmittance = std::min(options.min_transmittance, 0.5f * transmittance[i]);
+    const NerfRay ray{rays.origins[i], rays.directions[i], rays.t_near[i], std::max(rays.t_near[i], rays.t_far[i])};
+    const NerfRayResult r = field_.RenderRay(ray, options);
+    depth[i] = r.opacity >= 1.0f - transmittance[i] ? r.surface_depth : rays.t_far[i];
+  }
+}
+
 uint64_t NerfScene::LightCacheHits() const {
   const std::lock_guard<std::mutex> lock(cache_mutex_);
   return cache_.hits;

@@ -100,6 +100,10 @@ class NerfScene final : public SceneField {
   // Forget the cached views' answers (after editing the field in place).
   void ClearLightCache();
   void Normals(const std::vector<Vec3f>& points, std::vector<Vec3f>& normals) const override;
+  // Marched as RenderRays marches (the same samples from the same t_near),
+  // each ray's level its surface_transmittance.
+  void TransmittanceDepths(const SceneRays& rays, const std::vector<float>& transmittance,
+                           std::vector<float>& depth) const override;
   const NerfSceneOptions& options() const { return options_; }
 
  private:

@@ -15,40 +15,52 @@ namespace {
 
 constexpr int kLightingNormals = 64;
 
-// Luminance of the 5×5 box-blurred image (window clipped at the borders).
-std::vector<double> BlurredLuminance(const ImageF& image) {
-  const int w = image.width, h = image.height;
-  std::vector<double> lum(static_cast<size_t>(w) * h), tmp(lum.size()), out(lum.size());
-  for (size_t p = 0; p < lum.size(); ++p) lum[p] = Luminance(&image.pixels[p * image.channels], image.channels);
+// Luminance per pixel; where `mask` (may be null) holds the object, the
+// luminance of `instead` (the metric compares the scene around the object,
+// not the object: eval/metrics.py replaces those pixels before blurring).
+std::vector<double> LuminanceOutside(const ImageF& image, const ImageF* mask = nullptr,
+                                     const ImageF* instead = nullptr) {
+  std::vector<double> lum(static_cast<size_t>(image.width) * image.height);
+  for (size_t p = 0; p < lum.size(); ++p) {
+    const bool object = mask != nullptr && mask->pixels[p * mask->channels] > 0.5f;
+    const ImageF& from = object ? *instead : image;
+    lum[p] = Luminance(&from.pixels[p * from.channels], from.channels);
+  }
+  return lum;
+}
+
+// 5×5 box blur with the borders mirrored about the edge pixel (OpenCV's
+// default, BORDER_REFLECT_101, as eval/metrics.py's cv2.blur).
+std::vector<double> Blur5(const std::vector<double>& v, int w, int h) {
+  const auto mirror = [](int i, int n) { return n == 1 ? 0 : i < 0 ? -i : i >= n ? 2 * n - 2 - i : i; };
+  std::vector<double> tmp(v.size()), out(v.size());
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
       double s = 0;
-      int n = 0;
-      for (int dx = -2; dx <= 2; ++dx)
-        if (x + dx >= 0 && x + dx < w) {
-          s += lum[static_cast<size_t>(y) * w + x + dx];
-          ++n;
-        }
-      tmp[static_cast<size_t>(y) * w + x] = s / n;
+      for (int dx = -2; dx <= 2; ++dx) s += v[static_cast<size_t>(y) * w + mirror(x + dx, w)];
+      tmp[static_cast<size_t>(y) * w + x] = s / 5.0;
     }
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
       double s = 0;
-      int n = 0;
-      for (int dy = -2; dy <= 2; ++dy)
-        if (y + dy >= 0 && y + dy < h) {
-          s += tmp[static_cast<size_t>(y + dy) * w + x];
-          ++n;
-        }
-      out[static_cast<size_t>(y) * w + x] = s / n;
+      for (int dy = -2; dy <= 2; ++dy) s += tmp[static_cast<size_t>(mirror(y + dy, h)) * w + x];
+      out[static_cast<size_t>(y) * w + x] = s / 5.0;
     }
   return out;
 }
 
-std::vector<double> KappaOf(const ImageF& with, const ImageF& without) {
-  const std::vector<double> a = BlurredLuminance(with), b = BlurredLuminance(without);
+// The metric's blurred background luminance below which a pixel shows
+// nothing (κ = 1, outside the region): eval/metrics.py's eps.
+constexpr double kDarkBackground = 1e-4;
+
+// κ = blur(Y(with)) / blur(Y(without)), the object's pixels (mask, may be
+// null) taken from `without`; 1 where the blurred background is dark.
+std::vector<double> KappaOf(const ImageF& with, const ImageF& without, const ImageF* mask = nullptr) {
+  const int w = with.width, h = with.height;
+  const std::vector<double> a = Blur5(LuminanceOutside(with, mask, &without), w, h);
+  const std::vector<double> b = Blur5(LuminanceOutside(without), w, h);
   std::vector<double> k(a.size(), 1.0);
-  for (size_t i = 0; i < k.size(); ++i) k[i] = b[i] > 1e-8 ? a[i] / b[i] : 1.0;
+  for (size_t i = 0; i < k.size(); ++i) k[i] = b[i] > kDarkBackground ? a[i] / b[i] : 1.0;
   return k;
 }
 
@@ -87,15 +99,16 @@ ShadowError ComputeShadowError(const ImageF& ours_with, const ImageF& ours_witho
   CheckSameSize(truth_without, truth_with, "shadow error");
   CheckSameSize(mask, truth_with, "shadow mask");
   const int w = truth_with.width, h = truth_with.height;
-  const std::vector<double> k_ours = KappaOf(ours_with, ours_without);
-  const std::vector<double> background = BlurredLuminance(truth_without);
-  const std::vector<double> k_gt = KappaOf(truth_with, truth_without);
-  std::vector<uint8_t> in_mask(k_gt.size()), seed(k_gt.size()), region(k_gt.size(), 0);
+  const std::vector<double> k_ours = KappaOf(ours_with, ours_without, &mask);
+  const std::vector<double> background = Blur5(LuminanceOutside(truth_without), w, h);
+  const std::vector<double> k_gt = KappaOf(truth_with, truth_without, &mask);
+  std::vector<uint8_t> counts(k_gt.size()), seed(k_gt.size()), region(k_gt.size(), 0);
   for (size_t p = 0; p < k_gt.size(); ++p) {
-    in_mask[p] = mask.pixels[p * mask.channels] > 0.5f;
-    seed[p] = !in_mask[p] && k_gt[p] < 0.9;
+    counts[p] = mask.pixels[p * mask.channels] <= 0.5f && background[p] > kDarkBackground;
+    seed[p] = counts[p] && k_gt[p] < 0.9;
   }
-  // Dilate by 5 px (a square window), then drop the object's own pixels.
+  // Dilate by 5 px (a square window); then only pixels outside the mask
+  // with a background.
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
       if (!seed[static_cast<size_t>(y) * w + x]) continue;
@@ -108,8 +121,9 @@ ShadowError ComputeShadowError(const ImageF& ours_with, const ImageF& ours_witho
   ShadowError e;
   double num = 0, den = 0, sum_k = 0, sum_gt = 0, worst = -1;
   for (size_t p = 0; p < region.size(); ++p) {
-    if (!region[p] || in_mask[p]) continue;
-    const double d = std::abs(k_ours[p] - k_gt[p]);
+    if (!region[p] || !counts[p]) continue;
+    const double k = std::clamp(k_ours[p], 0.0, 2.0), k_true = std::clamp(k_gt[p], 0.0, 2.0);
+    const double d = std::abs(k - k_true);
     if (d > worst) {
       worst = d;
       e.worst_x = static_cast<int>(p % w);
@@ -119,12 +133,12 @@ ShadowError ComputeShadowError(const ImageF& ours_with, const ImageF& ours_witho
       e.worst_background = background[p];
     }
     num += d;
-    den += std::abs(1.0 - k_gt[p]);
-    sum_k += k_ours[p];
-    sum_gt += k_gt[p];
+    den += std::abs(1.0 - k_true);
+    sum_k += k;
+    sum_gt += k_true;
     ++e.region;
   }
-  if (e.region == 0 || !(den > 0)) {
+  if (e.region <= kMinShadowRegion || !(den > 0)) {
     e.error = std::numeric_limits<double>::quiet_NaN();
     return e;
   }

@@ -4,6 +4,8 @@
 // error (relative RMS of irradiance over 64 Fibonacci normals).
 #pragma once
 
+#include <cstddef>
+
 #include "calib/core/image.h"
 #include "render/sg/sg.h"
 
@@ -21,15 +23,21 @@ struct ShadowError {
   int worst_x = -1, worst_y = -1;
   double worst_kappa = 1, worst_kappa_gt = 1, worst_background = 0;  // κ, κ_gt and Y(blur(truth_without)) there
 };
-// κ = Y(blur(with)) / Y(blur(without)) for ours and for the truth, outside
-// the object mask. `ours_with` / `ours_without`: our composite and the same
-// frame without the object; `truth_with` / `truth_without` likewise. Pixels
-// whose blurred background luminance is ~0 count as κ = 1.
+// κ = blur(Y(with)) / blur(Y(without)) for ours and for the truth (5×5 box,
+// borders mirrored), the mask's pixels of `with` taken from `without` before
+// the blur, clipped to [0, 2]; over the region κ_gt < 0.9 dilated 5 px,
+// outside the mask, where the blurred background luminance exceeds 1e-4:
+// eval/metrics.py's shadow_error step for step (ours_without is the
+// truth's background there: the evaluation inserts over bg_XXX). NaN when
+// the region holds kMinShadowRegion pixels or fewer (eval/e2e.sh leaves such
+// views out). `ours_with` / `ours_without`: our composite and the same frame
+// without the object; `truth_with` / `truth_without` likewise.
+inline constexpr size_t kMinShadowRegion = 50;
 ShadowError ComputeShadowError(const ImageF& ours_with, const ImageF& ours_without, const ImageF& truth_with,
                                const ImageF& truth_without, const ImageF& mask);
 
-// The metric's κ map: Y(blur(with)) / Y(blur(without)) per pixel (1
-// channel), 1 where the blurred background luminance is ~0.
+// The metric's κ map: blur(Y(with)) / blur(Y(without)) per pixel (1
+// channel), 1 where the blurred background luminance is at most 1e-4.
 ImageF ShadowRatioImage(const ImageF& with, const ImageF& without);
 
 // Relative RMS over 64 Fibonacci normals of E(n) (RGB) from our panorama vs

@@ -60,6 +60,97 @@ void ReceiversFromDepth(const ImageF& depth_z, const CameraIntrinsics& camera, c
     }
 }
 
+void ReceiversOnPlane(const SceneField& scene, const SupportPlane& plane, const Vec3f& eye,
+                      const std::vector<Vec3f>& dirs, const std::vector<float>& t_near, std::vector<float>& t,
+                      std::vector<uint8_t>& on_plane) {
+  on_plane.assign(t.size(), 0);
+  // Where the transmittance was still 1 − q: the ray marched again up to
+  // its 1/2 point (the same samples as the march that found it).
+  SceneRays front;
+  std::vector<float> level, t_plane;
+  std::vector<size_t> candidate;
+  for (size_t i = 0; i < t.size(); ++i) {
+    const float cosine = Dot(dirs[i], plane.normal);
+    if (!(cosine < 0.0f) || !(t[i] > t_near[i])) continue;  // the plane seen from behind, or along it
+    const float t_p = Dot(plane.point - eye, plane.normal) / cosine;
+    if (!(t_p >= t_near[i])) continue;
+    front.Add(eye, dirs[i], t_near[i], t[i]);
+    level.push_back(1.0f - kSupportTerminationShare);
+    t_plane.push_back(t_p);
+    candidate.push_back(i);
+  }
+  if (candidate.empty()) return;
+  std::vector<float> t_front;
+  scene.TransmittanceDepths(front, level, t_front);
+  for (size_t k = 0; k < candidate.size(); ++k) {
+    const size_t i = candidate[k];
+    const float before = t[i] - std::min(t_front[k], t[i]);
+    if (t_plane[k] < t[i] - before || t_plane[k] > t[i] + before) continue;  // the ray ends off the plane
+    t[i] = t_plane[k];
+    on_plane[i] = 1;
+  }
+}
+
+namespace {
+
+// Whether something the last frame saw may lie between `eye` and p, a
+// point on the plane (plane_point, plane_normal) of the last-frame receivers
+// it was reused from: the last view cannot see what this eye sees past an
+// object's edge. The part of the segment eye → p at least the last frame's
+// nearest receiver distance from the last eye is projected into the last
+// view and walked at coarse grid steps from p's pixel (the coarse nodes are
+// always known; an occluder narrower than a coarse cell can slip through);
+// a receiver there off p's plane by more than `tolerance` and
+// nearer the last eye than the segment's point means the segment passes
+// inside or behind a surface the last view saw: true (march). Also true when
+// the walk is longer than kMaxWalkSteps coarse steps (an eye moved too far
+// to check cheaply).
+bool HiddenFromEye(const ReceiverFrame& r, const Vec3f& eye, const Vec3f& p, const Vec3f& plane_point,
+                   const Vec3f& plane_normal, float tolerance) {
+  constexpr int kMaxWalkSteps = 16;
+  const Vec3 last_eye = r.T_world_camera.translation;
+  const double length = Length(Vec3(p - eye));
+  // What the last frame saw lies at least nearest − m from this eye (moved
+  // by m): nothing of it can come between eye and p when p is nearer than
+  // that, and it shifts against p between the two views by at most
+  // f·m·(1/(nearest − m) − 1/|p − eye|) pixels. Under half a coarse cell
+  // the walk's one sample would fall in p's own cell, whose corners the
+  // plane test already holds to p's plane: nothing to walk (a hand-held
+  // frame's usual case).
+  const double coarse_step = double(r.step) * double(r.factor);
+  const double moved = Length(Vec3(eye) - last_eye), near = r.nearest - moved;
+  if (length <= near) return false;
+  const double shift = near > 0.0 ? std::max(r.camera.fx, r.camera.fy) * moved * (1.0 / near - 1.0 / length) : HUGE_VAL;
+  if (shift < 0.5 * coarse_step) return false;
+  const double u_min = std::clamp((r.nearest - Length(Vec3(eye) - last_eye)) / length, 0.0, 1.0);
+  const auto pixel = [&](const Vec3& w, double& u, double& v) {
+    const Vec3 c = r.T_camera_world * w;
+    if (!(c.z > 1e-6)) return false;
+    u = r.camera.fx * c.x / c.z + r.camera.cx - 0.5;
+    v = r.camera.fy * c.y / c.z + r.camera.cy - 0.5;
+    return true;
+  };
+  const Vec3 a = Vec3(eye) + Vec3(p - eye) * u_min, b(p);
+  double ua, va, ub, vb;
+  if (!pixel(a, ua, va) || !pixel(b, ub, vb)) return true;
+  const int steps = static_cast<int>(std::ceil(std::hypot(ua - ub, va - vb) / coarse_step));
+  if (steps > kMaxWalkSteps) return true;
+  for (int k = 1; k <= steps; ++k) {
+    const Vec3 s = b + (a - b) * (double(k) / steps);
+    double u, v;
+    if (!pixel(s, u, v)) return true;
+    const double fx = (u - r.xs.front()) / coarse_step, fy = (v - r.ys.front()) / coarse_step;
+    if (fx < -0.5 || fy < -0.5 || fx > r.cx.size() - 0.5 || fy > r.cy.size() - 0.5) continue;
+    const size_t node = r.cy[std::min<size_t>(std::lround(fy), r.cy.size() - 1)] * r.xs.size() +
+                        r.cx[std::min<size_t>(std::lround(fx), r.cx.size() - 1)];
+    if (r.state[node] != 1 || std::abs(Dot(r.point[node] - plane_point, plane_normal)) <= tolerance) continue;
+    if (Length(Vec3(r.point[node]) - last_eye) < Length(s - last_eye)) return true;
+  }
+  return false;
+}
+
+}  // namespace
+
 int ReuseReceiver(const ReceiverFrame& r, const Vec3f& eye, const Vec3f& d, int x, int y, float tolerance, Vec3f& point,
                   Vec3f& normal) {
   const size_t nx = r.xs.size(), ny = r.ys.size();
@@ -101,10 +192,10 @@ int ReuseReceiver(const ReceiverFrame& r, const Vec3f& eye, const Vec3f& d, int 
   if (!cell(x, y, idx)) return 0;
   int surfaces = 0;
   for (size_t c : idx) surfaces += r.state[c] == 1;
+  const Vec3f old_eye(r.T_world_camera.translation);
   if (surfaces == 0) {
     // No surface around the same pixel of the last view: kept while this
     // pixel's ray moved by less than a grid step (its eye by the tolerance).
-    const Vec3f old_eye(r.T_world_camera.translation);
     const Vec3f old_d = CameraRayDirection(r.camera, r.T_world_camera, x, y);
     const float max_angle = static_cast<float>(r.step / std::max(r.camera.fx, r.camera.fy));
     return Length(eye - old_eye) <= tolerance && Dot(d, old_d) >= std::cos(max_angle) ? 2 : 0;
@@ -134,6 +225,7 @@ int ReuseReceiver(const ReceiverFrame& r, const Vec3f& eye, const Vec3f& d, int 
     const float t = Dot(mean - eye, n) / cosine;
     if (!(t > 0.0f)) return 0;
     const Vec3f p = eye + d * t;
+    if (HiddenFromEye(r, eye, p, mean, n, tolerance)) return 0;
     const Vec3 c = r.T_camera_world * Vec3(p);
     if (!(c.z > 1e-6)) return 0;
     const double u = r.camera.fx * c.x / c.z + r.camera.cx - 0.5, v = r.camera.fy * c.y / c.z + r.camera.cy - 0.5;

@@ -10,13 +10,16 @@
 
 #include "calib/camera.h"
 #include "calib/core/math.h"
+#include "render/insert/scene_field.h"
 
 namespace nerfar {
 
 // The last frame's NeRF receivers at its κ grid nodes.
 struct ReceiverFrame {
   bool valid = false;
-  float min_opacity = 0;
+  // How they were found (receiver_min_opacity, the support plane):
+  // receivers found another way are not reused.
+  std::vector<float> rule;
   CameraIntrinsics camera;
   Pose T_world_camera, T_camera_world;
   std::vector<int> xs, ys;     // the grid's pixel columns and rows
@@ -25,6 +28,7 @@ struct ReceiverFrame {
   int step = 1;
   std::vector<uint8_t> state;  // per node: 0 unknown, 1 surface, 2 no surface
   std::vector<Vec3f> point, normal;
+  float nearest = 0;  // the nearest surface receiver's distance from the eye (m)
 };
 
 // The last frame's receiver for a new grid node's ray (eye, d) at pixel
@@ -32,6 +36,24 @@ struct ReceiverFrame {
 // surface, 0 to march (the rule: InsertOptions::kappa_receiver_reuse).
 int ReuseReceiver(const ReceiverFrame& r, const Vec3f& eye, const Vec3f& d, int x, int y, float tolerance, Vec3f& point,
                   Vec3f& normal);
+
+// Receivers onto a known plane where their ray ends on it. A trained field
+// holds a flat table as a layer of fog some millimetres to centimetres deep
+// (and uneven), so where a ray's transmittance crosses any one level is off
+// the table by up to that depth, and the shadow moves by that error times
+// the light's slope; the plane is exact. Ray i (from `eye` along dirs[i],
+// entering the scene's box at t_near[i], its transmittance 1/2 at t[i])
+// ends on the plane when the plane lies within the central part of its
+// termination: no nearer than where its transmittance was 1 − q
+// (q = kSupportTerminationShare) and no farther past t[i] than that point
+// lies before it (a layer's termination about its median). Then t[i] is the
+// plane's distance and on_plane[i] = 1. Rays that end on something else (an
+// object's face or top, which stops the ray short of the plane, hollow
+// inside or not) stay.
+inline constexpr float kSupportTerminationShare = 0.1f;
+void ReceiversOnPlane(const SceneField& scene, const SupportPlane& plane, const Vec3f& eye,
+                      const std::vector<Vec3f>& dirs, const std::vector<float>& t_near, std::vector<float>& t,
+                      std::vector<uint8_t>& on_plane);
 
 // A receiver found at κ grid node `node` with its own normal (not yet unit).
 struct CellCandidate {

@@ -27,6 +27,21 @@ std::optional<std::pair<double, double>> IntersectBox(const Aabb& box, const Vec
   return std::make_pair(t0, t1);
 }
 
+SupportPlane PlaneOfBoard(const Board& board, const Vec3& viewer) {
+  if (board.tags.empty()) ThrowInputError("board", "no tags (expected the tags whose plane the objects stand on)");
+  // The tags lie on one flat sheet: the plane through their corners' mean,
+  // its normal the sum of each tag's diagonals' cross product.
+  Vec3 centre{}, normal{};
+  for (const BoardTag& tag : board.tags) {
+    for (const Vec3& c : tag.corners) centre += c;
+    normal += Cross(tag.corners[2] - tag.corners[0], tag.corners[3] - tag.corners[1]);
+  }
+  centre = centre * (1.0 / (4.0 * static_cast<double>(board.tags.size())));
+  normal = Normalized(normal);
+  if (Dot(viewer - centre, normal) < 0.0) normal = -normal;
+  return {Vec3f(centre), Vec3f(normal)};
+}
+
 void SceneRays::Reserve(size_t n) {
   origins.reserve(n);
   directions.reserve(n);
@@ -52,6 +67,16 @@ void SceneSamples::Resize(size_t n) {
   colour.assign(n, Vec3f{});
   opacity.assign(n, 0.0f);
   depth.assign(n, 0.0f);
+}
+
+void SceneField::TransmittanceDepths(const SceneRays& rays, const std::vector<float>& transmittance,
+                                     std::vector<float>& depth) const {
+  NERFAR_CHECK_EQ(transmittance.size(), rays.size());
+  SceneSamples samples;
+  RenderRays(rays, samples);
+  depth.resize(rays.size());
+  for (size_t i = 0; i < rays.size(); ++i)
+    depth[i] = samples.opacity[i] >= 1.0f - transmittance[i] ? samples.depth[i] : rays.t_far[i];
 }
 
 namespace {
@@ -81,6 +106,47 @@ Vec3f AnalyticScene::PlaneRadiance(const Vec3& p) const {
   return params_.plane_radiance * f;
 }
 
+double AnalyticScene::FirstHit(const Vec3& o, const Vec3& d, double t0, double t1, Vec3f* radiance) const {
+  double t_hit = std::numeric_limits<double>::infinity();
+  if (d.z != 0.0) {
+    const double t = -o.z / d.z;
+    const Vec3 p = o + d * t;
+    if (t >= t0 && t <= t1 && p.x >= params_.box.min.x && p.x <= params_.box.max.x && p.y >= params_.box.min.y &&
+        p.y <= params_.box.max.y) {
+      t_hit = t;
+      *radiance = PlaneRadiance(p);
+    }
+  }
+  double a = 0, b = 0;
+  if (params_.has_sphere && SphereSpan(params_.sphere_center, params_.sphere_radius, o, d, t0, t1, a, b) && a < t_hit) {
+    t_hit = a;
+    *radiance = params_.sphere_radiance;
+  }
+  return t_hit;
+}
+
+void AnalyticScene::TransmittanceDepths(const SceneRays& rays, const std::vector<float>& transmittance,
+                                        std::vector<float>& depth) const {
+  NERFAR_CHECK_EQ(transmittance.size(), rays.size());
+  depth.resize(rays.size());
+  for (size_t i = 0; i < rays.size(); ++i) {
+    const Vec3 o(rays.origins[i]), d(rays.directions[i]);
+    const double t0 = rays.t_near[i], t1 = rays.t_far[i];
+    Vec3f unused;
+    const double t_hit = FirstHit(o, d, t0, t1, &unused);
+    // The medium before the hit: T(t) = exp(−σ(t − a)) on [a, b], reaching
+    // the level at a + ln(1/level)/σ; else the opaque hit takes T to 0.
+    double t_level = t_hit;
+    double a = 0, b = 0;
+    if (params_.has_medium &&
+        SphereSpan(params_.medium_center, params_.medium_radius, o, d, t0, std::min(t1, t_hit), a, b)) {
+      const double t = a - std::log(double(transmittance[i])) / (params_.medium_density * Length(d));
+      if (t <= b) t_level = t;
+    }
+    depth[i] = static_cast<float>(std::isfinite(t_level) && t_level <= t1 ? t_level : t1);
+  }
+}
+
 void AnalyticScene::RenderOne(const Vec3& o, const Vec3& d, double t0, double t1, Vec3& colour, double& opacity,
                               double& depth) const {
   // Accumulates the paper's unnormalised D̂ = Σ T α t; RenderRays normalises.
@@ -88,23 +154,9 @@ void AnalyticScene::RenderOne(const Vec3& o, const Vec3& d, double t0, double t1
   opacity = 0.0;
   depth = 0.0;
   if (!(t1 > t0)) return;
-  // First opaque surface in range.
-  double t_hit = std::numeric_limits<double>::infinity();
   Vec3f hit_radiance{};
-  if (d.z != 0.0) {
-    const double t = -o.z / d.z;
-    const Vec3 p = o + d * t;
-    if (t >= t0 && t <= t1 && p.x >= params_.box.min.x && p.x <= params_.box.max.x && p.y >= params_.box.min.y &&
-        p.y <= params_.box.max.y) {
-      t_hit = t;
-      hit_radiance = PlaneRadiance(p);
-    }
-  }
+  const double t_hit = FirstHit(o, d, t0, t1, &hit_radiance);
   double a = 0, b = 0;
-  if (params_.has_sphere && SphereSpan(params_.sphere_center, params_.sphere_radius, o, d, t0, t1, a, b) && a < t_hit) {
-    t_hit = a;
-    hit_radiance = params_.sphere_radiance;
-  }
   const double end = std::min(t1, t_hit);
   double transmittance = 1.0;
   if (params_.has_medium && SphereSpan(params_.medium_center, params_.medium_radius, o, d, t0, end, a, b)) {

@@ -11,6 +11,7 @@
 #include <optional>
 #include <vector>
 
+#include "calib/board.h"
 #include "calib/core/math.h"
 #include "calib/dataset.h"
 
@@ -46,6 +47,18 @@ struct SceneSamples {
   void Resize(size_t n);
 };
 
+// A plane the scene is known to hold besides what its field shows (the tag
+// board's: the surface the board and the objects lie on). World frame,
+// metres; `normal` unit, pointing to the side the cameras see.
+struct SupportPlane {
+  Vec3f point, normal;
+};
+
+// The plane of a tag board's tags (through their corners' mean), its normal
+// towards `viewer` (a camera centre: cameras see the printed side).
+// InputError for a board without tags.
+SupportPlane PlaneOfBoard(const Board& board, const Vec3& viewer);
+
 class SceneField {
  public:
   virtual ~SceneField() = default;
@@ -64,6 +77,13 @@ class SceneField {
   // Unit outward normal of the scene surface at each point (the direction of
   // −∇σ for a NeRF); the zero vector where it is undefined (empty space).
   virtual void Normals(const std::vector<Vec3f>& points, std::vector<Vec3f>& normals) const = 0;
+  // Where each ray's transmittance, counted from its own t_near, first falls
+  // to transmittance[i] (in (0, 1]): the distance along the ray, or t_far
+  // where it stays above within [t_near, t_far]. `depth` is resized. The
+  // default serves fields of opaque surfaces, where every level is crossed at
+  // the first hit: RenderRays's depth where the ray gets that opaque.
+  virtual void TransmittanceDepths(const SceneRays& rays, const std::vector<float>& transmittance,
+                                   std::vector<float>& depth) const;
 };
 
 // An exact scene for tests and benchmarks: an opaque horizontal plane z = 0
@@ -106,6 +126,8 @@ class AnalyticScene final : public SceneField {
   Aabb Box() const override { return params_.box; }
   void RenderRays(const SceneRays& rays, SceneSamples& out) const override;
   void Normals(const std::vector<Vec3f>& points, std::vector<Vec3f>& normals) const override;
+  void TransmittanceDepths(const SceneRays& rays, const std::vector<float>& transmittance,
+                           std::vector<float>& depth) const override;
   const AnalyticSceneParams& params() const { return params_; }
 
   // One ray, double precision; depth here is the unnormalised D̂ = Σ T α t.
@@ -114,6 +136,9 @@ class AnalyticScene final : public SceneField {
 
  private:
   Vec3f PlaneRadiance(const Vec3& point) const;
+  // The first opaque surface (plane or sphere) on o + t·d within [t0, t1]:
+  // its distance (infinity if none) and radiance.
+  double FirstHit(const Vec3& o, const Vec3& d, double t0, double t1, Vec3f* radiance) const;
   AnalyticSceneParams params_;
 };
 

@@ -207,7 +207,64 @@ std::vector<uint8_t> HiddenNodes(const std::vector<int>& xs, const std::vector<i
   return hidden;
 }
 
+// Object pixels within any pixel rectangle in constant time (a summed-area
+// table over the objects' box), to tell the κ cells on the objects'
+// outline: a shadow begins where its caster meets the receivers, so a
+// caster's visible shadow touches its outline, and one smaller than a cell
+// can pass between the cell's corners unseen.
+class ObjectPixels {
+ public:
+  explicit ObjectPixels(const ObjectGBuffer& g) : rect_(g.rect) {
+    if (g.covered == 0 || rect_.empty()) return;
+    const size_t w = static_cast<size_t>(rect_.width()) + 1;
+    sum_.assign(w * (static_cast<size_t>(rect_.height()) + 1), 0);
+    for (int y = rect_.y0; y < rect_.y1; ++y) {
+      uint32_t row = 0;
+      for (int x = rect_.x0; x < rect_.x1; ++x) {
+        row += g.object[g.Index(x, y)] >= 0 ? 1u : 0u;
+        const size_t at = static_cast<size_t>(y - rect_.y0 + 1) * w + static_cast<size_t>(x - rect_.x0 + 1);
+        sum_[at] = sum_[at - w] + row;
+      }
+    }
+  }
+  // Whether the closed pixel rectangle [x0, x1] × [y0, y1] holds both
+  // object and background pixels.
+  bool Outline(int x0, int y0, int x1, int y1) const {
+    if (sum_.empty()) return false;
+    const int a0 = std::max(x0, rect_.x0), a1 = std::min(x1 + 1, rect_.x1);
+    const int b0 = std::max(y0, rect_.y0), b1 = std::min(y1 + 1, rect_.y1);
+    if (a0 >= a1 || b0 >= b1) return false;
+    const size_t w = static_cast<size_t>(rect_.width()) + 1;
+    const auto at = [&](int x, int y) { return sum_[static_cast<size_t>(y - rect_.y0) * w + size_t(x - rect_.x0)]; };
+    const uint32_t objects = at(a1, b1) - at(a0, b1) - at(a1, b0) + at(a0, b0);
+    return objects > 0 && objects < uint32_t(x1 - x0 + 1) * uint32_t(y1 - y0 + 1);
+  }
+
+ private:
+  PixelRect rect_;
+  std::vector<uint32_t> sum_;  // (width + 1) × (height + 1), object pixels above and left
+};
+
+// What decides where a marched receiver lies (ReceiverFrame::rule).
+std::vector<float> ReceiverRule(const ShadowPassInputs& in) {
+  std::vector<float> rule = {static_cast<float>(in.options.receiver_min_opacity)};
+  if (in.support != nullptr)
+    for (const Vec3f& v : {in.support->point, in.support->normal}) rule.insert(rule.end(), {v.x, v.y, v.z});
+  return rule;
+}
+
 }  // namespace
+
+KappaSpacing KappaSpacingFor(const InsertOptions& options, int width) {
+  const int factor = std::max(1, options.kappa_coarse_factor);
+  if (options.kappa_grid_width <= 0) return {options.kappa_step, size_t(factor)};
+  const double scale = double(width) / double(options.kappa_grid_width);
+  KappaSpacing s;
+  s.step = std::max(1, static_cast<int>(std::lround(options.kappa_step * scale)));
+  const int coarse = std::max(s.step, static_cast<int>(std::lround(options.kappa_step * factor * scale)));
+  s.factor = static_cast<size_t>(std::max(1, static_cast<int>(std::lround(double(coarse) / s.step))));
+  return s;
+}
 
 void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, std::unique_ptr<KappaCache>& cache_owner,
                    ImageF& frame, InsertLayers& layers, InsertTimings& times) {
@@ -233,6 +290,7 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
                                      options.shadow_reach_radii * spheres[j].radius));
     rect = ClipToImage(rect, camera.width, camera.height);
     // The world lattice of κ, dropped when a caster or a light changed.
+    const KappaSpacing spacing_px = KappaSpacingFor(options, camera.width);
     KappaCache* cache = nullptr;
     double spacing = 0.0;
     float smallest = std::numeric_limits<float>::infinity();
@@ -243,13 +301,14 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
       std::vector<double> key = {spacing,
                                  options.shadow_reach_radii,
                                  options.shadow_epsilon,
-                                 double(options.kappa_step),
-                                 double(options.kappa_coarse_factor),
+                                 double(spacing_px.step),
+                                 double(spacing_px.factor),
                                  options.kappa_refine_delta,
                                  options.kappa_plane_upsampling ? 1.0 : 0.0,
-                                 options.receiver_min_opacity,
                                  options.shadow_epsilon_snap ? 1.0 : 0.0,
                                  options.kappa_skip_covered ? 1.0 : 0.0};
+      const std::vector<float> rule = ReceiverRule(in);
+      key.insert(key.end(), rule.begin(), rule.end());
       for (size_t j : casters) AppendObjectKey(objects[j], key);
       for (const SgMixture& light : lights) AppendLightKey(light, key);
       // Near lobes re-aimed at each receiver change κ as much as the light does.
@@ -296,7 +355,7 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
         if (shadow.empty()) {
           rect = {};
         } else {
-          const int unit = options.kappa_step * std::max(1, options.kappa_coarse_factor);
+          const int unit = spacing_px.step * static_cast<int>(spacing_px.factor);
           const auto down = [&](int v, int origin) { return origin + (std::max(v, origin) - origin) / unit * unit; };
           PixelRect r{down(shadow.x0 - unit, rect.x0), down(shadow.y0 - unit, rect.y0),
                       down(shadow.x1 + 2 * unit, rect.x0) + 1, down(shadow.y1 + 2 * unit, rect.y0) + 1};
@@ -327,7 +386,7 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
       // Light owners: each receiver takes the light of its nearest object
       // (relative to size); queries of every caster at each owner's lobe axes.
       for (size_t o = 0; o < n_objects; ++o) PrepareLight(lights[o], objects, preps[o]);
-      const int step = options.kappa_step;
+      const int step = spacing_px.step;
       const auto grid_axis = [step](int lo, int hi) {
         std::vector<int> s;
         for (int v = lo; v < hi; v += step) s.push_back(v);
@@ -346,8 +405,7 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
       double find_ms = 0, kappa_ms = 0;
       // The last frame's receivers, when they can stand for marching.
       const bool reuse_receivers = cache != nullptr && receivers.distance == nullptr && options.kappa_receiver_reuse &&
-                                   cache->receivers.valid &&
-                                   cache->receivers.min_opacity == static_cast<float>(options.receiver_min_opacity);
+                                   cache->receivers.valid && cache->receivers.rule == ReceiverRule(in);
       const bool cell_normals = cache != nullptr && receivers.distance == nullptr && options.receiver_normal_per_cell;
       const float reuse_tolerance = static_cast<float>(options.kappa_reuse_tolerance_radii * smallest);
       const KappaContext context{&casters, &spheres, &preps, &lights, reach, one_minus_eps, in.sources};
@@ -421,6 +479,33 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
       // Receivers of one pass's nodes found, per row: the surface nodes
       // (opacity above the threshold, finite point) and their own normals.
       std::vector<std::vector<CellCandidate>> found(ny);
+      // Marched receivers with a surface (opacity ≥ receiver_min_opacity and
+      // 1/2: `out.depth` is where the transmittance crossed 1/2) taken onto
+      // the support plane, with its normal, where they end on it
+      // (ReceiversOnPlane).
+      const auto place_on_support = [&](const std::vector<size_t>& march, const SceneSamples& out,
+                                        const SceneRays& rays, const std::vector<Vec3f>& dirs,
+                                        const std::vector<float>& opacity, std::vector<Vec3f>& normals,
+                                        std::vector<Vec3f>& points) {
+        std::vector<size_t> surface;
+        std::vector<Vec3f> surface_dirs;
+        std::vector<float> t, t_near;
+        for (size_t m = 0; m < march.size(); ++m) {
+          const size_t ix = march[m];
+          if (opacity[ix] < std::max(min_opacity, 0.5f) || !std::isfinite(out.depth[m])) continue;
+          surface.push_back(ix);
+          surface_dirs.push_back(dirs[ix]);
+          t.push_back(out.depth[m]);
+          t_near.push_back(rays.t_near[m]);
+        }
+        std::vector<uint8_t> on_plane;
+        ReceiversOnPlane(scene, *in.support, eye, surface_dirs, t_near, t, on_plane);
+        for (size_t k = 0; k < surface.size(); ++k)
+          if (on_plane[k]) {
+            points[surface[k]] = eye + dirs[surface[k]] * t[k];
+            normals[surface[k]] = in.support->normal;
+          }
+      };
       // The receivers at the grid nodes (row, cols[j]) of one row:
       // node_state 2 (no surface) or 1 with node_point and the receiver's own
       // normal in node_normal (not yet unit; replaced by its cell's normal
@@ -474,6 +559,7 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
             }
             scene.Normals(marched_points, marched_normals);
             for (size_t m = 0; m < march.size(); ++m) normals[march[m]] = marched_normals[m];
+            if (in.support != nullptr) place_on_support(march, out, rays, dirs, opacity, normals, points);
           }
         }
         if (receivers.normal) {
@@ -525,7 +611,7 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
       // Coarse to fine: κ at every coarse_factor-th node; cells whose corners
       // differ by more than kappa_refine_delta get all their nodes, the
       // others are interpolated (κ varies slowly away from edges).
-      size_t factor = static_cast<size_t>(std::max(1, options.kappa_coarse_factor));
+      size_t factor = spacing_px.factor;
       if (nx < 2 * factor || ny < 2 * factor) factor = 1;  // too small a grid to coarsen
       const auto coarse_axis = [factor](size_t n) {
         std::vector<size_t> c;
@@ -612,14 +698,34 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
         };
         std::vector<Cell> refine;
         std::vector<std::vector<Cell>> smooth(1);
+        // Cells on the objects' outline are refined whatever their corners,
+        // at every level (ObjectPixels).
+        const ObjectPixels object_pixels(g);
+        const auto refined = [&](const Cell& c) {
+          return differ(c) || object_pixels.Outline(xs[c.x0], ys[c.y0], xs[c.x1], ys[c.y1]);
+        };
         for (size_t j = 0; j + 1 < cy.size(); ++j)
           for (size_t i = 0; i + 1 < cx.size(); ++i) {
             const Cell c{uint32_t(cx[i]), uint32_t(cy[j]), uint32_t(cx[i + 1]), uint32_t(cy[j + 1])};
-            (differ(c) ? refine : smooth[0]).push_back(c);
+            (refined(c) ? refine : smooth[0]).push_back(c);
           }
         std::vector<uint8_t> known(nx * ny, 0);  // κ set (or scheduled) at the node
         for (size_t r : cy)
           for (size_t q : cx) known[r * nx + q] = 1;
+        // A coarse cell left smooth whose border holds nodes its refined
+        // neighbours found differing from its corners by more than the delta
+        // (an edge that entered it between its corners) is refined in turn.
+        const auto border_differs = [&](const Cell& c) {
+          float lo = kappa_grid[c.y0 * nx + c.x0], hi = lo;
+          const auto take = [&](size_t node) {
+            if (!known[node]) return;
+            lo = std::min(lo, kappa_grid[node]);
+            hi = std::max(hi, kappa_grid[node]);
+          };
+          for (uint32_t q = c.x0; q <= c.x1; ++q) take(c.y0 * nx + q), take(c.y1 * nx + q);
+          for (uint32_t r = c.y0; r <= c.y1; ++r) take(r * nx + c.x0), take(r * nx + c.x1);
+          return hi - lo > delta;
+        };
         std::vector<std::vector<size_t>> new_cols(ny), refine_cols(ny);
         // Nodes inside a planar coarse cell take their receiver on the plane.
         struct PlaneNode {
@@ -628,99 +734,105 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
           const CellPlane* plane;
         };
         std::vector<std::vector<PlaneNode>> plane_nodes(ny);
-        while (!refine.empty()) {
-          // This level's nodes per row: each cell's halving nodes; hidden ones
-          // only where no finer cell compares them (the cell's halves hold no
-          // node inside).
-          std::vector<size_t> rows;
-          const auto schedule = [&](uint32_t q, uint32_t r, bool skip_hidden) {
-            const size_t node = size_t(r) * nx + q;
-            if (known[node] || (skip_hidden && hidden[node])) return;
-            known[node] = 1;
-            if (new_cols[r].empty()) rows.push_back(r);
-            new_cols[r].push_back(q);
-          };
-          for (const Cell& c : refine) {
-            const bool last = c.x1 - c.x0 <= 2 && c.y1 - c.y0 <= 2;
-            const uint32_t px[3] = {c.x0, (c.x0 + c.x1) / 2, c.x1}, py[3] = {c.y0, (c.y0 + c.y1) / 2, c.y1};
-            for (uint32_t r : py)
-              for (uint32_t q : px) schedule(q, r, last);
-          }
-          std::sort(rows.begin(), rows.end());
-          for (std::vector<CellCandidate>& f : found) f.clear();
-          // Per row: plane nodes placed, the others found, ...
-          t_stage = InsertClock::now();
-          ParallelFor(
-              rows.size(),
-              [&](size_t k) {
-                const size_t r = rows[k];
-                std::vector<size_t>& cols = refine_cols[r];
-                cols.clear();
-                plane_nodes[r].clear();
-                std::sort(new_cols[r].begin(), new_cols[r].end());
-                const size_t j = std::min<size_t>(r / factor, cy.size() - 2);
-                for (size_t q : new_cols[r]) {
-                  // Depth-aware upsampling: inside a planar coarse cell the
-                  // receiver is where this node's ray meets the plane.
-                  const CellPlane& plane = planes[j * (cx.size() - 1) + std::min<size_t>(q / factor, cx.size() - 2)];
-                  if (plane.valid) {
-                    const Vec3f d = CameraRayDirection(camera, T_world_camera, xs[q], ys[r]);
-                    const float cosine = Dot(d, plane.normal);
-                    const float t = cosine < -0.05f ? Dot(plane.point - eye, plane.normal) / cosine : -1.0f;
-                    if (t >= 0.9f * plane.t_min && t <= 1.1f * plane.t_max) {
-                      plane_nodes[r].push_back({q, eye + d * t, &plane});
-                      continue;
+        for (;;) {
+          while (!refine.empty()) {
+            // This level's nodes per row: each cell's halving nodes; hidden ones
+            // only where no finer cell compares them (the cell's halves hold no
+            // node inside).
+            std::vector<size_t> rows;
+            const auto schedule = [&](uint32_t q, uint32_t r, bool skip_hidden) {
+              const size_t node = size_t(r) * nx + q;
+              if (known[node] || (skip_hidden && hidden[node])) return;
+              known[node] = 1;
+              if (new_cols[r].empty()) rows.push_back(r);
+              new_cols[r].push_back(q);
+            };
+            for (const Cell& c : refine) {
+              const bool last = c.x1 - c.x0 <= 2 && c.y1 - c.y0 <= 2;
+              const uint32_t px[3] = {c.x0, (c.x0 + c.x1) / 2, c.x1}, py[3] = {c.y0, (c.y0 + c.y1) / 2, c.y1};
+              for (uint32_t r : py)
+                for (uint32_t q : px) schedule(q, r, last);
+            }
+            std::sort(rows.begin(), rows.end());
+            for (std::vector<CellCandidate>& f : found) f.clear();
+            // Per row: plane nodes placed, the others found, ...
+            t_stage = InsertClock::now();
+            ParallelFor(
+                rows.size(),
+                [&](size_t k) {
+                  const size_t r = rows[k];
+                  std::vector<size_t>& cols = refine_cols[r];
+                  cols.clear();
+                  plane_nodes[r].clear();
+                  std::sort(new_cols[r].begin(), new_cols[r].end());
+                  const size_t j = std::min<size_t>(r / factor, cy.size() - 2);
+                  for (size_t q : new_cols[r]) {
+                    // Depth-aware upsampling: inside a planar coarse cell the
+                    // receiver is where this node's ray meets the plane.
+                    const CellPlane& plane = planes[j * (cx.size() - 1) + std::min<size_t>(q / factor, cx.size() - 2)];
+                    if (plane.valid) {
+                      const Vec3f d = CameraRayDirection(camera, T_world_camera, xs[q], ys[r]);
+                      const float cosine = Dot(d, plane.normal);
+                      const float t = cosine < -0.05f ? Dot(plane.point - eye, plane.normal) / cosine : -1.0f;
+                      if (t >= 0.9f * plane.t_min && t <= 1.1f * plane.t_max) {
+                        plane_nodes[r].push_back({q, eye + d * t, &plane});
+                        continue;
+                      }
                     }
+                    cols.push_back(q);
                   }
-                  cols.push_back(q);
+                  new_cols[r].clear();
+                  find_row(r, cols);
+                },
+                1);
+            resolve_cell_normals();
+            // Plane-placed nodes take their world cell's normal too (a new
+            // cell's from their planes' normals), so that their lattice nodes,
+            // like every receiver's, do not change with the view: the mean
+            // normal of a coarse cell's corners changes as the grid slides over
+            // the scene, and each new normal cell costs eight new lattice nodes.
+            if (cell_normals) {
+              std::vector<CellCandidate> placed;
+              for (size_t r : rows)
+                for (const PlaneNode& p : plane_nodes[r]) placed.push_back({r * nx + p.q, p.point, p.plane->normal});
+              cache->cell_normals.Resolve(spacing, placed);
+              for (const CellCandidate& c : placed) node_normal[c.node] = c.normal;
+            }
+            find_ms += MsSince(t_stage);
+            // ... then their κ.
+            t_stage = InsertClock::now();
+            ParallelFor(
+                rows.size(),
+                [&](size_t k) {
+                  const size_t r = rows[k];
+                  ThreadScratch& scratch = ScratchFor(pass);
+                  for (const PlaneNode& p : plane_nodes[r])
+                    kappa_grid[r * nx + p.q] =
+                        receiver_kappa(p.point, cell_normals ? node_normal[r * nx + p.q] : p.plane->normal, scratch, r);
+                  kappa_row(r, refine_cols[r]);
+                },
+                1);
+            kappa_ms += MsSince(t_stage);
+            // The halves of this level's cells (those with nodes inside).
+            std::vector<Cell> next;
+            smooth.emplace_back();
+            for (const Cell& c : refine) {
+              const uint32_t xm = (c.x0 + c.x1) / 2, ym = (c.y0 + c.y1) / 2;
+              const bool split_x = c.x1 - c.x0 >= 2, split_y = c.y1 - c.y0 >= 2;
+              for (int b = 0; b < (split_y ? 2 : 1); ++b)
+                for (int a = 0; a < (split_x ? 2 : 1); ++a) {
+                  const Cell h{split_x ? (a ? xm : c.x0) : c.x0, split_y ? (b ? ym : c.y0) : c.y0,
+                               split_x ? (a ? c.x1 : xm) : c.x1, split_y ? (b ? c.y1 : ym) : c.y1};
+                  if (h.x1 - h.x0 <= 1 && h.y1 - h.y0 <= 1) continue;  // every node a corner
+                  (refined(h) ? next : smooth.back()).push_back(h);
                 }
-                new_cols[r].clear();
-                find_row(r, cols);
-              },
-              1);
-          resolve_cell_normals();
-          // Plane-placed nodes take their world cell's normal too (a new
-          // cell's from their planes' normals), so that their lattice nodes,
-          // like every receiver's, do not change with the view: the mean
-          // normal of a coarse cell's corners changes as the grid slides over
-          // the scene, and each new normal cell costs eight new lattice nodes.
-          if (cell_normals) {
-            std::vector<CellCandidate> placed;
-            for (size_t r : rows)
-              for (const PlaneNode& p : plane_nodes[r]) placed.push_back({r * nx + p.q, p.point, p.plane->normal});
-            cache->cell_normals.Resolve(spacing, placed);
-            for (const CellCandidate& c : placed) node_normal[c.node] = c.normal;
+            }
+            refine = std::move(next);
           }
-          find_ms += MsSince(t_stage);
-          // ... then their κ.
-          t_stage = InsertClock::now();
-          ParallelFor(
-              rows.size(),
-              [&](size_t k) {
-                const size_t r = rows[k];
-                ThreadScratch& scratch = ScratchFor(pass);
-                for (const PlaneNode& p : plane_nodes[r])
-                  kappa_grid[r * nx + p.q] =
-                      receiver_kappa(p.point, cell_normals ? node_normal[r * nx + p.q] : p.plane->normal, scratch, r);
-                kappa_row(r, refine_cols[r]);
-              },
-              1);
-          kappa_ms += MsSince(t_stage);
-          // The halves of this level's cells (those with nodes inside).
-          std::vector<Cell> next;
-          smooth.emplace_back();
-          for (const Cell& c : refine) {
-            const uint32_t xm = (c.x0 + c.x1) / 2, ym = (c.y0 + c.y1) / 2;
-            const bool split_x = c.x1 - c.x0 >= 2, split_y = c.y1 - c.y0 >= 2;
-            for (int b = 0; b < (split_y ? 2 : 1); ++b)
-              for (int a = 0; a < (split_x ? 2 : 1); ++a) {
-                const Cell h{split_x ? (a ? xm : c.x0) : c.x0, split_y ? (b ? ym : c.y0) : c.y0,
-                             split_x ? (a ? c.x1 : xm) : c.x1, split_y ? (b ? c.y1 : ym) : c.y1};
-                if (h.x1 - h.x0 <= 1 && h.y1 - h.y0 <= 1) continue;  // every node a corner
-                (differ(h) ? next : smooth.back()).push_back(h);
-              }
-          }
-          refine = std::move(next);
+          std::vector<Cell> still;
+          for (const Cell& c : smooth[0]) (border_differs(c) ? refine : still).push_back(c);
+          if (refine.empty()) break;
+          smooth[0] = std::move(still);
         }
         // The rest bilinear in its cell, level by level (each row by one thread).
         t_stage = InsertClock::now();
@@ -764,7 +876,7 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
         // stay unknown).
         ReceiverFrame& kept = cache->receivers;
         kept.valid = true;
-        kept.min_opacity = static_cast<float>(options.receiver_min_opacity);
+        kept.rule = ReceiverRule(in);
         kept.camera = camera;
         kept.T_world_camera = T_world_camera;
         kept.T_camera_world = T_world_camera.Inverse();
@@ -774,6 +886,9 @@ void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, st
         kept.cy = cy;
         kept.factor = factor;
         kept.step = step;
+        kept.nearest = std::numeric_limits<float>::infinity();
+        for (size_t i = 0; i < node_state.size(); ++i)
+          if (node_state[i] == 1) kept.nearest = std::min(kept.nearest, Length(node_point[i] - eye));
         kept.state = std::move(node_state);
         kept.point = std::move(node_point);
         kept.normal = std::move(node_normal);

@@ -45,6 +45,14 @@ struct KappaCache {
   }
 };
 
+// κ's grid in a frame `width` pixels wide: the step and the coarse factor
+// (InsertOptions::kappa_step, kappa_coarse_factor, kappa_grid_width).
+struct KappaSpacing {
+  int step = 1;
+  size_t factor = 1;
+};
+KappaSpacing KappaSpacingFor(const InsertOptions& options, int width);
+
 // The frame's inputs to the shadow pass (loans for the call).
 struct ShadowSources;
 
@@ -59,6 +67,7 @@ struct ShadowPassInputs {
   const ObjectGBuffer& gbuffer;          // object pixels keep their composite
   const ReceiverOverride& receivers;
   const std::vector<ShadowSources>* sources = nullptr;  // per object, κ from samples (KappaContext::sources)
+  const SupportPlane* support = nullptr;                // receivers ending on it are taken onto it
 };
 
 // κ over the casters' reach rectangle into layers.kappa / kappa_rect /

@@ -71,7 +71,7 @@ double DiscVisibleFraction(double s, double r) {
 
 ShadowSources BuildShadowSources(const RadianceSamples& samples, const SgMixture& light, const LightParallax& parallax,
                                  const std::vector<InsertObject>& objects, int bins, double min_radius,
-                                 double energy_cut) {
+                                 const SgMixture& compact, double energy_cut) {
   ShadowSources out;
   out.center = Vec3f(parallax.center);
   out.min_radius = static_cast<float>(std::max(0.0, min_radius));
@@ -121,7 +121,20 @@ ShadowSources BuildShadowSources(const RadianceSamples& samples, const SgMixture
     energy[i] = y;
     total += y;
   }
+  for (const Sg& lobe : compact) total += std::max(0.0, LuminanceOf(Integral(lobe)));
   if (!(total > 0.0)) return out;
+  std::vector<Vec3f> distant_axes;
+  for (const Sg& lobe : compact) {
+    const double e = LuminanceOf(Integral(lobe));
+    if (!(e > energy_cut * total) || !std::isfinite(e)) continue;
+    ShadowSource src;
+    src.direction = Vec3f(Normalized(lobe.axis));
+    src.energy = static_cast<float>(e);
+    src.radius = static_cast<float>(std::max(min_radius, 2.0 / std::sqrt(std::max(lobe.sharpness, 1e-12))));
+    src.distance = std::numeric_limits<float>::infinity();
+    out.distant.push_back(src);
+    distant_axes.push_back(src.direction);
+  }
   std::vector<Vec3> mean(acc.size());
   for (size_t s = 0; s < acc.size(); ++s) mean[s] = acc[s].e > 0.0 ? Normalized(acc[s].d) : Vec3{0, 0, 1};
   for (size_t i = 0; i < samples.size(); ++i) {
@@ -129,7 +142,6 @@ ShadowSources BuildShadowSources(const RadianceSamples& samples, const SgMixture
     const double angle = std::acos(std::clamp(Dot(Normalized(samples.directions[i]), mean[slot[i]]), -1.0, 1.0));
     acc[slot[i]].m2 += energy[i] * (angle * angle + 0.5 * samples.solid_angles[i] / kPi);
   }
-  std::vector<Vec3f> distant_axes;
   for (size_t s = 0; s < acc.size(); ++s) {
     const Acc& a = acc[s];
     if (!(a.e > energy_cut * total)) continue;

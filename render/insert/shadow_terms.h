@@ -61,11 +61,14 @@ struct ShadowSources {
 // Sources of `samples` (directions from `parallax.center`) with the
 // distances of `light`'s lobes (`parallax`, empty: all distant): each
 // sample takes the distance of the lobe brightest in its direction when
-// that lobe is sharp enough to be re-aimed (ReaimLight's rule). Sources
-// with less than `energy_cut` of the total energy are dropped. `bins` >= 4.
+// that lobe is sharp enough to be re-aimed (ReaimLight's rule). `compact`:
+// lobes beside the samples (IncidentLight::compact()), each a distant
+// source of its integral's energy and radius 2/√λ (√2 × its RMS angle
+// √(2/λ)). Sources with less than `energy_cut` of the total energy are
+// dropped. `bins` >= 4.
 ShadowSources BuildShadowSources(const RadianceSamples& samples, const SgMixture& light, const LightParallax& parallax,
                                  const std::vector<InsertObject>& objects, int bins, double min_radius,
-                                 double energy_cut = 1e-4);
+                                 const SgMixture& compact = {}, double energy_cut = 1e-4);
 // The visible fraction of a disc of angular radius r whose nearest blocked
 // direction lies at signed angular distance s from its centre (the
 // half-space model of the SSD): 1 for s ≥ r, 0 for s ≤ −r, the circular

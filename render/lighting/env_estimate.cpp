@@ -36,10 +36,15 @@ EnvLight EstimateEnvironment(const NerfField& field, const EnvEstimateOptions& o
   local.seconds_near_field = elapsed() - t0;
   t0 = elapsed();
   EnvLight env;
-  env.lobes = FitEnvironment(samples, field.aabb, options, &local.fit, progress);
+  // Shadow rays through the NeRF; the baseline that ignores the NeRF's
+  // visibility (ignore_near_field) fits the dictionary alone, as before.
+  const EnvShadowRays shadow =
+      options.ignore_near_field ? nullptr : NerfShadowRays(field, options.shadow_render, samples.fog_density);
+  env.lobes = FitEnvironment(samples, field.aabb, options, &local.fit, progress, shadow);
   local.seconds_fit = elapsed() - t0;
 
-  const std::vector<Vec3> e_env = EnvironmentIrradiance(samples, env.lobes);
+  const std::vector<Vec3> e_env =
+      EnvironmentIrradiance(samples, env.lobes, shadow, options.source_bundle_rays, options.seed);
   double sum_env = 0, sum_nerf = 0;
   for (size_t i = 0; i < samples.size(); ++i) {
     sum_env += Y(e_env[i]);
@@ -53,6 +58,12 @@ EnvLight EstimateEnvironment(const NerfField& field, const EnvEstimateOptions& o
   env.threshold = options.negligible_ratio;
   env.evidence = local.fit.evidence;
   env.evidence_needed = local.fit.evidence_needed;
+  env.fit = {.samples = static_cast<long long>(samples.size()),
+             .relative_rms = local.fit.relative_rms,
+             .loss = local.fit.final_loss,
+             .near_only_fitted = local.fit.near_only_loss > 0,  // 0: the fit without environment did not run
+             .near_only_relative_rms = local.fit.near_only_relative_rms,
+             .near_only_loss = local.fit.near_only_loss};
   env.negligible = (env.env_to_near_surface < env.threshold && env.env_to_near_center < env.threshold) ||
                    !local.fit.environment_supported;
   env.options_json = options.ToJson();

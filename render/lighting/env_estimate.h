@@ -17,11 +17,15 @@
 // piecewise-constant albedo on a coarse grid (a smooth albedo, as the paper's
 // MLP, solved in closed form per cell) and the lobes chosen from a
 // multi-scale dictionary of SGs by non-negative least squares, alternating,
-// under a robust relative (HDR) loss; the best 32 lobes are then re-solved.
-// World frame, metres, linear RGB radiance.
+// under a robust relative (HDR) loss; small bright sources beyond the
+// dictionary (a sun: sharpness up to 1e4) are found from the shadows they
+// cast through NeRF shadow rays and placed continuously; the sources and the
+// best other lobes, 32 in all, are then re-solved, grey unless the data
+// supports a lobe's colour. World frame, metres, linear RGB radiance.
 // The pieces, one job each: env_options.h (options), env_samples.h (views,
 // surface samples), env_near_field.h (E_nerf, visibility cache, the NeRF seen
-// from a point), env_fit.h (SG + albedo fit); env_light.h (env.json, preview).
+// from a point), env_shadow.h (shadow rays, sharp lobes' irradiance), env_fit.h
+// (SG + albedo fit, sources, chroma); env_light.h (env.json, preview).
 #pragma once
 
 #include <cstddef>

@@ -14,9 +14,12 @@
 
 namespace nerfar {
 
+using env_internal::AddSources;
 using env_internal::Channel;
-using env_internal::Dictionary;
 using env_internal::FitState;
+using env_internal::FreeChroma;
+using env_internal::Iterate;
+using env_internal::KeepSupportedSources;
 using env_internal::LobeIrradianceMatrix;
 using env_internal::Loss;
 using env_internal::MakeDictionary;
@@ -27,6 +30,18 @@ using env_internal::SolveLight;
 using env_internal::SolveScale;
 using env_internal::ToD;
 using env_internal::Y;
+
+std::vector<bool> EmitterLikeSamples(const std::vector<Vec3f>& radiance) {
+  std::vector<bool> emitter(radiance.size(), false);
+  if (radiance.empty()) return emitter;
+  std::vector<double> y;
+  for (const Vec3f& l : radiance) y.push_back(LuminanceOf(ToD(l)));
+  std::vector<double> sorted = y;
+  std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+  const double limit = kEmitterLikeFactor * sorted[sorted.size() / 2];
+  for (size_t i = 0; i < y.size(); ++i) emitter[i] = y[i] > limit;
+  return emitter;
+}
 
 std::vector<double> NormalBalanceWeights(const std::vector<Vec3f>& normals, double power,
                                          const std::vector<Vec3f>* radiance) {
@@ -49,16 +64,12 @@ std::vector<double> NormalBalanceWeights(const std::vector<Vec3f>& normals, doub
   for (size_t i = 0; i < normals.size(); ++i) sum += w[i] = std::pow(1.0 / count[bin[i]], power);
   for (double& x : w) x *= static_cast<double>(normals.size()) / sum;  // mean 1
   if (radiance != nullptr && radiance->size() == normals.size()) {
-    // Emitter-like samples (luminance above kEmitterLikeFactor x the median)
-    // are not weighted up: a lamp's own surface, seen from its sides, fills
-    // sparse normal bins, and the fit would explain its glow with light.
-    std::vector<double> y;
-    for (const Vec3f& l : *radiance) y.push_back(LuminanceOf(ToD(l)));
-    std::vector<double> sorted = y;
-    std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
-    const double limit = kEmitterLikeFactor * sorted[sorted.size() / 2];
+    // Emitter-like samples are not weighted up: a lamp's own surface, seen
+    // from its sides, fills sparse normal bins, and the fit would explain its
+    // glow with light.
+    const std::vector<bool> emitter = EmitterLikeSamples(*radiance);
     for (size_t i = 0; i < w.size(); ++i)
-      if (y[i] > limit) w[i] = std::min(w[i], 1.0);
+      if (emitter[i]) w[i] = std::min(w[i], 1.0);
   }
   return w;
 }
@@ -94,6 +105,7 @@ FitState PrepareFit(const EnvSurfaceSamples& samples, const Aabb& aabb, const En
   st.cell = AlbedoCells(samples, aabb, options.albedo_cell_m, &cells);
   st.albedo.assign(cells, Vec3{1, 1, 1} * options.albedo_prior);
   st.balance = NormalBalanceWeights(samples.normals, options.normal_balance, &samples.radiance);
+  st.emitter = EmitterLikeSamples(samples.radiance);
   st.robust = st.balance;
   double mean_y = 0;
   for (const Vec3f& l : samples.radiance) mean_y += Y(ToD(l));
@@ -109,10 +121,31 @@ FitState PrepareFit(const EnvSurfaceSamples& samples, const Aabb& aabb, const En
   return st;
 }
 
+// The model's radiance L = a/π · S per sample (what it predicts for L_o).
+std::vector<Vec3f> ModelledRadiance(const FitState& st, const Eigen::MatrixXd& S) {
+  std::vector<Vec3f> model(st.s->size());
+  for (size_t i = 0; i < model.size(); ++i) {
+    const Vec3& a = st.albedo[st.cell[i]];
+    model[i] = Vec3f(Vec3{a.x / kPi * S(i, 0), a.y / kPi * S(i, 1), a.z / kPi * S(i, 2)});
+  }
+  return model;
+}
+
+// RMS of (model − L_o) over RMS of L_o, in luminance.
+double RelativeRms(const std::vector<Vec3f>& model, const std::vector<Vec3f>& observed) {
+  double err2 = 0, ref2 = 0;
+  for (size_t i = 0; i < observed.size(); ++i) {
+    const double obs = Y(ToD(observed[i]));
+    err2 += std::pow(Y(ToD(model[i])) - obs, 2);
+    ref2 += obs * obs;
+  }
+  return ref2 > 0 ? std::sqrt(err2 / ref2) : 0;
+}
+
 // The same model without environment (L_o = a/π · g·E_nerf), fitted by the
-// same alternation; its robust loss per sample.
+// same alternation; its robust loss per sample and its relative RMS.
 double NearFieldOnlyLoss(const EnvSurfaceSamples& samples, const Aabb& aabb, const EnvEstimateOptions& options,
-                         int steps) {
+                         int steps, double* relative_rms) {
   FitState st = PrepareFit(samples, aabb, options);
   st.A = Eigen::MatrixXd::Zero(static_cast<Eigen::Index>(samples.size()), 0);
   st.mu = Eigen::MatrixXd::Zero(0, 3);
@@ -123,13 +156,55 @@ double NearFieldOnlyLoss(const EnvSurfaceSamples& samples, const Aabb& aabb, con
     SolveScale(st);
     Loss(st, Shading(st), true, &st);
   }
-  return Loss(st, Shading(st), false, nullptr);
+  const Eigen::MatrixXd S = Shading(st);
+  *relative_rms = RelativeRms(ModelledRadiance(st, S), samples.radiance);
+  return Loss(st, S, false, nullptr);
+}
+
+// Appends dictionary lobes [begin, end) (amplitude 0) with their columns.
+void AppendColumns(FitState& st, const env_internal::Dictionary& dict, const Eigen::MatrixXd& A_dict, size_t begin,
+                   size_t end) {
+  const Eigen::Index have = st.A.cols(), add = static_cast<Eigen::Index>(end - begin);
+  st.A.conservativeResize(Eigen::NoChange, have + add);
+  st.A.rightCols(add) = A_dict.middleCols(static_cast<Eigen::Index>(begin), add);
+  st.mu.conservativeResize(have + add, Eigen::NoChange);
+  st.mu.bottomRows(add).setZero();
+  for (size_t k = begin; k < end; ++k) {
+    st.lobe_integral.push_back(SgUnitIntegral(dict.sharpness[k]));
+    st.lobes.Add(dict.axes[k], dict.sharpness[k], false);
+  }
+}
+
+// Keeps the sources and the most energetic other lobes, `count` in all.
+void KeepStrongest(FitState& st, int count) {
+  const Eigen::Index d = st.A.cols();
+  std::vector<Eigen::Index> order(d);
+  std::iota(order.begin(), order.end(), 0);
+  std::vector<double> energy(d);
+  for (Eigen::Index k = 0; k < d; ++k)
+    energy[k] = st.lobes.source[k] ? 1e300 : Y(Vec3{st.mu(k, 0), st.mu(k, 1), st.mu(k, 2)}) * st.lobe_integral[k];
+  std::stable_sort(order.begin(), order.end(), [&](Eigen::Index a, Eigen::Index b) { return energy[a] > energy[b]; });
+  order.resize(std::min<size_t>(order.size(), static_cast<size_t>(count)));
+  std::sort(order.begin(), order.end());
+  FitState kept = st;
+  kept.A.resize(st.A.rows(), static_cast<Eigen::Index>(order.size()));
+  kept.mu.resize(static_cast<Eigen::Index>(order.size()), 3);
+  kept.lobe_integral.clear();
+  kept.lobes = {};
+  for (size_t k = 0; k < order.size(); ++k) {
+    kept.A.col(k) = st.A.col(order[k]);
+    kept.mu.row(k) = st.mu.row(order[k]);
+    kept.lobe_integral.push_back(st.lobe_integral[order[k]]);
+    kept.lobes.Add(st.lobes.axes[order[k]], st.lobes.sharpness[order[k]], st.lobes.source[order[k]],
+                   st.lobes.coloured[order[k]]);
+  }
+  st = std::move(kept);
 }
 
 }  // namespace
 
 SgMixture FitEnvironment(const EnvSurfaceSamples& samples, const Aabb& aabb, const EnvEstimateOptions& options,
-                         EnvFitReport* report, const EnvProgress& progress) {
+                         EnvFitReport* report, const EnvProgress& progress, const EnvShadowRays& shadow) {
   const std::vector<std::string> problems = options.Validate();
   if (!problems.empty()) ThrowInputError("env options", problems.front());
   NERFAR_CHECK_EQ(samples.e_nerf.size(), samples.size());
@@ -139,89 +214,60 @@ SgMixture FitEnvironment(const EnvSurfaceSamples& samples, const Aabb& aabb, con
     if (report) *report = local;
     return {};
   }
-  const Dictionary dict = MakeDictionary(options);
-  local.dictionary_size = static_cast<int>(dict.size());
   FitState st = PrepareFit(samples, aabb, options);
-  st.A = LobeIrradianceMatrix(samples, dict.axes, dict.sharpness);
-  for (size_t k = 0; k < dict.size(); ++k) st.lobe_integral.push_back(SgUnitIntegral(dict.sharpness[k]));
-  st.mu = Eigen::MatrixXd::Zero(st.A.cols(), 3);
-  const int total_steps = options.iterations + std::max(3, options.iterations / 2);
+  const int broad_steps = std::max(1, options.iterations / 2), final_steps = std::max(3, options.iterations / 2);
+  const int total_steps = broad_steps + options.iterations + final_steps;
   // Start: albedo at the prior, robust weights from the near field alone.
+  st.A = Eigen::MatrixXd::Zero(static_cast<Eigen::Index>(samples.size()), 0);
+  st.mu = Eigen::MatrixXd::Zero(0, 3);
   local.initial_loss = Loss(st, Shading(st), true, &st);
   int step = 0;
-  auto iterate = [&](int count) {
-    for (int it = 0; it < count; ++it, ++step) {
-      // The gain first: at the start (no light yet) it takes all that the
-      // near field's pattern explains before any lobe can.
-      SolveGain(st);
-      SolveLight(st);
-      SolveAlbedo(st, Shading(st));
-      SolveScale(st);
-      const double loss = Loss(st, Shading(st), true, &st);
-      double albedo = 0, light = 0;
-      for (size_t i = 0; i < samples.size(); ++i) albedo += Y(st.albedo[st.cell[i]]) / samples.size();
-      for (Eigen::Index k = 0; k < st.mu.rows(); ++k) light += st.mu(k, 1) * st.lobe_integral[k];
-      LogVerbose("env fit: step " + std::to_string(step) + " loss " + std::to_string(loss) + " mean albedo " +
-                 std::to_string(albedo) + " light green integral " + std::to_string(light));
-      if (progress) progress("fit", static_cast<size_t>(step + 1), static_cast<size_t>(total_steps));
-    }
-  };
-  iterate(options.iterations);
-
-  // Keep the M lobes carrying the most energy and re-solve with them only.
-  std::vector<Eigen::Index> order(st.A.cols());
-  std::iota(order.begin(), order.end(), 0);
-  std::vector<double> energy(st.A.cols());
-  for (Eigen::Index k = 0; k < st.A.cols(); ++k)
-    energy[k] = Y(Vec3{st.mu(k, 0), st.mu(k, 1), st.mu(k, 2)}) * SgUnitIntegral(dict.sharpness[k]);
-  std::stable_sort(order.begin(), order.end(), [&](Eigen::Index a, Eigen::Index b) { return energy[a] > energy[b]; });
-  order.resize(std::min<size_t>(order.size(), static_cast<size_t>(options.lobes)));
-  std::sort(order.begin(), order.end());
-  Eigen::MatrixXd A_kept(st.A.rows(), static_cast<Eigen::Index>(order.size()));
-  Eigen::MatrixXd mu_kept(static_cast<Eigen::Index>(order.size()), 3);
-  std::vector<double> kept_integral;
-  for (size_t k = 0; k < order.size(); ++k) {
-    kept_integral.push_back(st.lobe_integral[order[k]]);
-    A_kept.col(k) = st.A.col(order[k]);
-    mu_kept.row(k) = st.mu.row(order[k]);
-  }
-  st.A = std::move(A_kept);
-  st.mu = std::move(mu_kept);
-  st.lobe_integral = kept_integral;
-  iterate(total_steps - options.iterations);
+  const env_internal::Dictionary dict = MakeDictionary(options);
+  local.dictionary_size = static_cast<int>(dict.size());
+  const Eigen::MatrixXd A_dict = LobeIrradianceMatrix(samples, dict.axes, dict.sharpness);
+  // Sharp sources are searched for against the fit of the dictionary's first
+  // level (broad lobes) alone: the finer levels, hundreds of lobes of
+  // sharpness up to 48, bend to imitate a source's light without its
+  // shadows, and leave a residual that points nowhere.
+  const size_t broad = std::min(dict.size(), static_cast<size_t>(options.dictionary_base));
+  AppendColumns(st, dict, A_dict, 0, broad);
+  Iterate(st, broad_steps, &step, total_steps, progress);
+  if (shadow != nullptr) local.sources = AddSources(st, shadow, options, progress);
+  AppendColumns(st, dict, A_dict, broad, dict.size());
+  Iterate(st, options.iterations, &step, total_steps, progress);
+  if (local.sources > 0) local.sources = KeepSupportedSources(st, options);
+  KeepStrongest(st, options.lobes);
+  Iterate(st, final_steps, &step, total_steps, progress);
+  local.coloured_lobes = FreeChroma(st, options);
 
   SgMixture result;
-  for (size_t k = 0; k < order.size(); ++k) {
+  int parameters = 0;
+  for (Eigen::Index k = 0; k < st.mu.rows(); ++k) {
     const Vec3 mu{st.mu(k, 0), st.mu(k, 1), st.mu(k, 2)};
     if (!(mu.x > 0 || mu.y > 0 || mu.z > 0)) continue;
-    result.push_back({dict.axes[order[k]], dict.sharpness[order[k]], mu});
+    result.push_back({st.lobes.axes[k], st.lobes.sharpness[k], mu});
+    parameters += kSgLobeParameters + (st.lobes.coloured[k] ? kChromaParameters : 0);
   }
   const Eigen::MatrixXd S = Shading(st);
   local.final_loss = Loss(st, S, false, nullptr);
   local.active_lobes = static_cast<int>(result.size());
-  double albedo_sum = 0, err2 = 0, ref2 = 0;
-  for (size_t i = 0; i < samples.size(); ++i) {
-    const Vec3& a = st.albedo[st.cell[i]];
-    albedo_sum += Y(a);
-    const Vec3 model{a.x / kPi * S(i, 0), a.y / kPi * S(i, 1), a.z / kPi * S(i, 2)};
-    const double obs = Y(ToD(samples.radiance[i]));
-    err2 += std::pow(Y(model) - obs, 2);
-    ref2 += obs * obs;
-  }
+  double albedo_sum = 0;
+  for (size_t i = 0; i < samples.size(); ++i) albedo_sum += Y(st.albedo[st.cell[i]]);
   local.mean_albedo = albedo_sum / samples.size();
-  local.relative_rms = ref2 > 0 ? std::sqrt(err2 / ref2) : 0;
+  local.modelled = ModelledRadiance(st, S);
+  local.relative_rms = RelativeRms(local.modelled, samples.radiance);
   local.near_field_gain = st.gain;
   // Model selection: the environment must explain what the near field
   // cannot by more than its own parameters would explain of noise. The loss
   // is a Cauchy negative log-likelihood at scale s (up to constants):
   // n·loss/s². The environment's log-likelihood gain over the near field
-  // alone must exceed BIC's (k/2)·ln n, k = 6 parameters per active lobe
-  // (axis 2, sharpness 1, RGB amplitude 3).
+  // alone must exceed BIC's (k/2)·ln n, k the active lobes' parameters
+  // (axis 2, sharpness 1, amplitude 1; a coloured lobe's chroma 2 more).
   if (!options.ignore_near_field && options.evidence_bic_factor > 0) {
-    local.near_only_loss = NearFieldOnlyLoss(samples, aabb, options, total_steps);
+    local.near_only_loss = NearFieldOnlyLoss(samples, aabb, options, total_steps, &local.near_only_relative_rms);
     const double n = static_cast<double>(samples.size()), s2 = options.robust_scale * options.robust_scale;
     local.evidence = n * (local.near_only_loss - local.final_loss) / s2;
-    local.evidence_needed = options.evidence_bic_factor * 0.5 * kSgLobeParameters * local.active_lobes * std::log(n);
+    local.evidence_needed = options.evidence_bic_factor * 0.5 * parameters * std::log(n);
     local.environment_supported = local.active_lobes > 0 && local.evidence > local.evidence_needed;
   }
   if (report) *report = local;

@@ -1,5 +1,5 @@
-// Pieces of the environment fit shared by env_fit.cpp, env_fit_steps.cpp and
-// env_lobes.cpp; not part of the module's interface.
+// Pieces of the environment fit shared by env_fit.cpp, env_fit_steps.cpp,
+// env_lobes.cpp and env_sources.cpp; not part of the module's interface.
 #pragma once
 
 #include <Eigen/Dense>
@@ -8,21 +8,36 @@
 #include "calib/core/math.h"
 #include "render/lighting/env_options.h"
 #include "render/lighting/env_samples.h"
+#include "render/lighting/env_shadow.h"
 
 namespace nerfar::env_internal {
 
+// The lobes of the model: axis and sharpness per column of the fit's matrix;
+// `source` marks the sharp sources found by the search (env_sources.cpp);
+// `coloured` the lobes with an RGB amplitude (the others are grey: one
+// amplitude for the three channels, see SolveLight).
 struct Dictionary {
   std::vector<Vec3> axes;
   std::vector<double> sharpness;
+  std::vector<bool> source, coloured;
   size_t size() const { return axes.size(); }
+  void Add(const Vec3& axis, double lambda, bool is_source, bool is_coloured = false) {
+    axes.push_back(axis);
+    sharpness.push_back(lambda);
+    source.push_back(is_source);
+    coloured.push_back(is_coloured);
+  }
 };
 // Level l: dictionary_base·4^l lobes on a Fibonacci sphere, sharpness dictionary_sharpness·4^l.
 Dictionary MakeDictionary(const EnvEstimateOptions& o);
 
-// A(i, k): irradiance at sample i from unit-amplitude lobe k through the
-// NeRF's visibility cache (see env_lobes.cpp).
+// A(i, k): irradiance at sample i from unit-amplitude lobe k: through the
+// NeRF's visibility cache for lobes it resolves (CacheSharpnessLimit), through
+// bundles of `bundle` shadow rays for sharper ones (when `shadow` is given;
+// see env_lobes.cpp).
 Eigen::MatrixXd LobeIrradianceMatrix(const EnvSurfaceSamples& s, const std::vector<Vec3>& axes,
-                                     const std::vector<double>& sharpness);
+                                     const std::vector<double>& sharpness, const EnvShadowRays& shadow = nullptr,
+                                     int bundle = 1, uint64_t seed = 0);
 
 // min ‖Bx − y‖² s.t. x ≥ 0 from the normal equations G = BᵀB, h = Bᵀy
 // (Lawson-Hanson active set).
@@ -31,12 +46,14 @@ Eigen::VectorXd Nnls(const Eigen::MatrixXd& G, const Eigen::VectorXd& h);
 // The alternation's unknowns and fixed data.
 struct FitState {
   const EnvSurfaceSamples* s = nullptr;
+  Dictionary lobes;             // the columns of A
   Eigen::MatrixXd A;            // n × D
   Eigen::MatrixXd mu;           // D × 3
   std::vector<int> cell;        // per sample
   std::vector<Vec3> albedo;     // per cell
   std::vector<double> robust;   // per sample IRLS weight (times balance)
   std::vector<double> balance;  // per sample weight of its normal's direction (NormalBalanceWeights)
+  std::vector<bool> emitter;    // per sample: emitter-like (EmitterLikeSamples)
   std::vector<Vec3> inv_scale;  // per sample and channel 1/(L + ε)
   double prior = 0.5, prior_weight = 0, robust_scale = 0.3;
   double energy_weight = 0, typical_irradiance = 1;
@@ -50,15 +67,79 @@ struct FitState {
 // Model shading S_ic = g·E_nerf + A μ (without albedo).
 Eigen::MatrixXd Shading(const FitState& st);
 // Robust (Cauchy on the log residual) loss per sample; with update_robust the
-// IRLS weights of `mutable_st` are refreshed.
-double Loss(const FitState& st, const Eigen::MatrixXd& S, bool update_robust, FitState* mutable_st);
-// The lobes' amplitudes for fixed albedo and gain (NNLS per channel, minimum-energy prior).
+// IRLS weights of `mutable_st` are refreshed. With `skip`, the samples it
+// marks add nothing (still counted in the per-sample mean).
+double Loss(const FitState& st, const Eigen::MatrixXd& S, bool update_robust, FitState* mutable_st,
+            const std::vector<bool>* skip = nullptr);
+// The log-likelihood gain of `with` over `without` (the robust loss as a
+// Cauchy likelihood) on the reflecting samples: emitter-like ones glow with
+// light no reflection explains, and a lobe that lights them is no evidence of
+// a light outside.
+double ReflectingGain(const FitState& without, const FitState& with);
+// The lobes' amplitudes for fixed albedo and gain (NNLS over the three
+// channels at once: a grey lobe's one amplitude serves all three, a coloured
+// lobe has one per channel; minimum-energy prior).
 void SolveLight(FitState& st);
 // The albedo per cell for fixed shading (closed form, grey-world prior).
 void SolveAlbedo(FitState& st, const Eigen::MatrixXd& S);
+// One alternation step (gain, light, albedo, scale, robust weights); its robust loss.
+double AlternationStep(FitState& st);
+// `count` steps; progress ("fit", *step + 1, total_steps) after each when given.
+void Iterate(FitState& st, int count, int* step, int total_steps, const EnvProgress& progress);
 // The global scale a → a·t, μ → μ/t that the data leaves free when the near field is weak.
 void SolveScale(FitState& st);
 // The near-field gain g for fixed albedo and light, clamped to [1, gain_max].
 void SolveGain(FitState& st);
+
+// What one more neutral lobe of irradiance b_i per unit amplitude, re-solved
+// jointly with the lobes already lit (the active set, A), would take from the
+// data term Σ_ic w_ic (L_ic − a_ic/π S_ic)²: with p_i = Σ_c w_ic f_ic r_ic,
+// q_i = Σ_c w_ic f_ic² (f_ic = a_ic/π, r the residual) and ⟨x, y⟩ = Σ x_i y_i q_i,
+// the term drops by ⟨b⊥, r⟩² / ⟨b⊥, b⊥⟩, b⊥ = b minus its projection on the
+// active columns (orthogonal least squares): a sharp column that the broad
+// lobes already explain but for its shadows scores by those shadows alone.
+// The weights are the likelihood's own, w_ic = 1/(L_ic + ε)², every sample
+// alike: neither the normal balance (it would hand a few objects' sides the
+// choice over the thousands of table samples that show the shadows) nor the
+// robust weights of the current fit (they discount exactly the shadowed
+// samples a model without the source cannot explain). The source is then
+// kept or not on the robust likelihood itself (env_fit.cpp AddSources).
+// On a subset of the samples.
+class ResidualPull {
+ public:
+  ResidualPull(const FitState& st, std::vector<uint32_t> subset);
+  const std::vector<uint32_t>& subset() const { return subset_; }
+  // b per subset entry; 0 when the drop is nil or the amplitude would be negative.
+  double Score(const std::vector<double>& b) const;
+
+ private:
+  std::vector<uint32_t> subset_;
+  Eigen::VectorXd p_, q_;
+  Eigen::MatrixXd active_;  // subset × active lobes
+  Eigen::LDLT<Eigen::MatrixXd> gram_;
+  Eigen::VectorXd active_pull_;  // Aᵀ p
+};
+
+// A sharp source: where the search placed it and how much it lowers the data term.
+struct SourceCandidate {
+  Vec3 axis;
+  double sharpness = 0;
+  double score = 0;
+};
+// The light that the current fit's residual asks for most (env_sources.cpp):
+// a coarse search over directions (a point source's shadows and shading on a
+// subset of samples), a continuous refinement of the best directions, then
+// the size (sharpness) that fits the penumbrae best. score 0: none helps.
+SourceCandidate FindSource(const FitState& st, const EnvShadowRays& shadow, const EnvEstimateOptions& o);
+
+// Model selection (env_fit_select.cpp). Sharp sources, one at a time: the
+// search's best light is added as a lobe and the model re-solved for
+// source_steps; kept when its log-likelihood gain beats BIC's penalty for one
+// lobe, else the search ends. Returns the sources added.
+int AddSources(FitState& st, const EnvShadowRays& shadow, const EnvEstimateOptions& o, const EnvProgress& progress);
+// Each source re-tested by removal; returns the sources left.
+int KeepSupportedSources(FitState& st, const EnvEstimateOptions& o);
+// Per-lobe chroma (grey unless the data supports a colour); returns the lobes made coloured.
+int FreeChroma(FitState& st, const EnvEstimateOptions& o);
 
 }  // namespace nerfar::env_internal

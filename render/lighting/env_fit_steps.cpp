@@ -1,9 +1,13 @@
 // The solves of the environment fit's alternation (env_fit_internal.h):
-// light (NNLS), albedo, scale, near-field gain, and the robust loss.
+// light (NNLS), albedo, scale, near-field gain, the robust loss, and the
+// alternation itself.
 #include <algorithm>
 #include <cmath>
+#include <string>
+#include <utility>
 #include <vector>
 
+#include "calib/core/log.h"
 #include "render/lighting/env_fit_internal.h"
 #include "render/lighting/env_internal.h"
 
@@ -12,6 +16,7 @@ namespace nerfar::env_internal {
 Eigen::VectorXd Nnls(const Eigen::MatrixXd& G, const Eigen::VectorXd& h) {
   const Eigen::Index d = G.rows();
   Eigen::VectorXd x = Eigen::VectorXd::Zero(d);
+  if (d == 0) return x;
   std::vector<bool> passive(d, false);
   const double tol = 1e-12 * std::max(1.0, G.diagonal().maxCoeff());
   for (int outer = 0; outer < 3 * d + 10; ++outer) {
@@ -65,7 +70,8 @@ Eigen::MatrixXd Shading(const FitState& st) {
   return S;
 }
 
-double Loss(const FitState& st, const Eigen::MatrixXd& S, bool update_robust, FitState* mutable_st) {
+double Loss(const FitState& st, const Eigen::MatrixXd& S, bool update_robust, FitState* mutable_st,
+            const std::vector<bool>* skip) {
   double total = 0;
   const size_t n = st.s->size();
   for (size_t i = 0; i < n; ++i) {
@@ -79,15 +85,30 @@ double Loss(const FitState& st, const Eigen::MatrixXd& S, bool update_robust, Fi
       r2 += r * r / 3;
     }
     const double q = r2 / (st.robust_scale * st.robust_scale);
-    total += std::log1p(q);  // Cauchy
+    if (skip == nullptr || !(*skip)[i]) total += std::log1p(q);  // Cauchy
     if (update_robust) mutable_st->robust[i] = st.balance[i] / (1.0 + q);
   }
   return total * st.robust_scale * st.robust_scale / std::max<size_t>(n, 1);
 }
 
+double ReflectingGain(const FitState& without, const FitState& with) {
+  const double n = static_cast<double>(with.s->size()), s2 = with.robust_scale * with.robust_scale;
+  return n *
+         (Loss(without, Shading(without), false, nullptr, &without.emitter) -
+          Loss(with, Shading(with), false, nullptr, &with.emitter)) /
+         s2;
+}
+
 void SolveLight(FitState& st) {
   const size_t n = st.s->size();
   const Eigen::Index d = st.A.cols();
+  // Unknowns: one per grey lobe, three per coloured lobe.
+  std::vector<Eigen::Index> first(d);
+  Eigen::Index m = 0;
+  for (Eigen::Index k = 0; k < d; ++k) first[k] = std::exchange(m, m + (st.lobes.coloured[k] ? 3 : 1));
+  const auto slot = [&](Eigen::Index k, int c) { return first[k] + (st.lobes.coloured[k] ? c : 0); };
+  Eigen::MatrixXd G_all = Eigen::MatrixXd::Zero(m, m);
+  Eigen::VectorXd h_all = Eigen::VectorXd::Zero(m);
   for (int c = 0; c < 3; ++c) {
     Eigen::MatrixXd B(n, d);
     Eigen::VectorXd y(n);
@@ -103,9 +124,14 @@ void SolveLight(FitState& st) {
     // (below the floor, behind walls) stays dark instead of growing freely.
     // β relative to the data: w_e · |y|² per unit of typical irradiance.
     const double beta = st.energy_weight * y.squaredNorm() / std::max(1e-30, st.typical_irradiance);
-    for (Eigen::Index k = 0; k < d; ++k) h[k] -= beta * st.lobe_integral[k];
-    st.mu.col(c) = Nnls(G, h);
+    for (Eigen::Index k = 0; k < d; ++k) {
+      h_all[slot(k, c)] += h[k] - beta * st.lobe_integral[k];
+      for (Eigen::Index l = 0; l < d; ++l) G_all(slot(k, c), slot(l, c)) += G(k, l);
+    }
   }
+  const Eigen::VectorXd x = Nnls(G_all, h_all);
+  for (Eigen::Index k = 0; k < d; ++k)
+    for (int c = 0; c < 3; ++c) st.mu(k, c) = x[slot(k, c)];
 }
 
 void SolveAlbedo(FitState& st, const Eigen::MatrixXd& S) {
@@ -185,6 +211,29 @@ void SolveGain(FitState& st) {
       qb += w * e * rest;
     }
   if (qa > 0 && std::isfinite(qb / qa)) st.gain = std::clamp(qb / qa, 1.0, st.gain_max);
+}
+
+// One alternation step: gain, light, albedo, scale, robust weights. The gain
+// first: at the start (no light yet) it takes all that the near field's
+// pattern explains before any lobe can. Returns the robust loss.
+double AlternationStep(FitState& st) {
+  SolveGain(st);
+  SolveLight(st);
+  SolveAlbedo(st, Shading(st));
+  SolveScale(st);
+  return Loss(st, Shading(st), true, &st);
+}
+
+void Iterate(FitState& st, int count, int* step, int total_steps, const EnvProgress& progress) {
+  for (int it = 0; it < count; ++it, ++*step) {
+    const double loss = AlternationStep(st);
+    double albedo = 0, light = 0;
+    for (size_t i = 0; i < st.s->size(); ++i) albedo += Y(st.albedo[st.cell[i]]) / st.s->size();
+    for (Eigen::Index k = 0; k < st.mu.rows(); ++k) light += st.mu(k, 1) * st.lobe_integral[k];
+    LogVerbose("env fit: step " + std::to_string(*step) + " loss " + std::to_string(loss) + " mean albedo " +
+               std::to_string(albedo) + " light green integral " + std::to_string(light));
+    if (progress) progress("fit", static_cast<size_t>(*step + 1), static_cast<size_t>(total_steps));
+  }
 }
 
 }  // namespace nerfar::env_internal

@@ -49,6 +49,40 @@ void Check(const EnvLight& env, Problems& problems) {
                  "is " + std::to_string(env.evidence_needed) + " (expected a finite number >= 0)");
   if (!(env.threshold >= 0 && env.threshold <= 1))
     problems.Add("/energy/threshold", "is " + std::to_string(env.threshold) + " (expected 0 to 1)");
+  const EnvFitResidual& fit = env.fit;
+  if (fit.samples < 0) problems.Add("/fit/samples", "is " + std::to_string(fit.samples) + " (expected >= 0)");
+  const std::pair<const char*, double> residuals[] = {{"/fit/relative_rms", fit.relative_rms},
+                                                      {"/fit/loss", fit.loss},
+                                                      {"/fit/near_field_only/relative_rms", fit.near_only_relative_rms},
+                                                      {"/fit/near_field_only/loss", fit.near_only_loss}};
+  for (const auto& [pointer, value] : residuals)
+    if (!(value >= 0 && std::isfinite(value)))
+      problems.Add(pointer, "is " + std::to_string(value) + " (expected a finite number >= 0)");
+}
+
+Json FitToJson(const EnvFitResidual& fit) {
+  Json out = {{"samples", fit.samples}, {"relative_rms", fit.relative_rms}, {"loss", fit.loss}};
+  if (fit.near_only_fitted)
+    out["near_field_only"] = {{"relative_rms", fit.near_only_relative_rms}, {"loss", fit.near_only_loss}};
+  return out;
+}
+
+EnvFitResidual FitFromJson(const Json& value, Problems& problems) {
+  EnvFitResidual fit;
+  JsonObjectReader reader(value, "/fit", problems);
+  if (!reader.valid()) return fit;
+  fit.samples = reader.Integer("samples", 0, 1LL << 40);
+  fit.relative_rms = reader.Number("relative_rms", 0, 1e30);
+  fit.loss = reader.Number("loss", 0, 1e30);
+  if (const Json* near = reader.Object("near_field_only", false)) {
+    JsonObjectReader n(*near, "/fit/near_field_only", problems);
+    fit.near_only_fitted = true;
+    fit.near_only_relative_rms = n.Number("relative_rms", 0, 1e30);
+    fit.near_only_loss = n.Number("loss", 0, 1e30);
+    n.Finish();
+  }
+  reader.Finish();
+  return fit;
 }
 
 }  // namespace
@@ -81,6 +115,7 @@ std::string SerializeEnvLight(const EnvLight& env) {
                    {"threshold", env.threshold},
                    {"evidence", env.evidence},
                    {"evidence_needed", env.evidence_needed}};
+  if (env.fit.samples > 0) doc["fit"] = FitToJson(env.fit);
   if (!env.source.empty()) doc["source"] = env.source;
   if (!env.options_json.empty()) doc["options"] = ParseJson(env.options_json, "env options");
   return DumpJson(doc) + "\n";
@@ -127,6 +162,7 @@ EnvLight ParseEnvLight(const std::string& text, const std::string& source) {
       env.evidence_needed = e.OptionalNumber("evidence_needed", 0, 1e300).value_or(0);
       e.Finish();
     }
+    if (const Json* fit = root.Object("fit", false)) env.fit = FitFromJson(*fit, problems);
     if (root.Has("source")) env.source = root.OptionalString("source").value_or("");
     if (root.Has("options")) {
       const Json* options = root.Object("options");

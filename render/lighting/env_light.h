@@ -11,7 +11,9 @@
 //     "negligible": false,
 //     "energy": { "env_to_near_surface": r1, "env_to_near_center": r2, "threshold": t,
 //                 "evidence": e, "evidence_needed": b },   (the last two optional, default 0)
-//     "source": "...", "options": {...} }        (the last two: documentation only)
+//     "fit": { "samples": n, "relative_rms": r, "loss": l,
+//              "near_field_only": {"relative_rms": r0, "loss": l0} },   (optional; its last member too)
+//     "source": "...", "options": {...} }        (the last three: documentation only)
 #pragma once
 
 #include <string>
@@ -22,6 +24,17 @@
 namespace nerfar {
 
 inline constexpr int kEnvFileVersion = 1;
+
+// How well the fit explains what the views saw (render/lighting/env_fit.h):
+// relative RMS of the model's luminance against the observed, over the
+// surface samples, and the fit's robust loss per sample; the same for the
+// best fit without environment (near field and albedo only).
+struct EnvFitResidual {
+  long long samples = 0;  // surface samples fitted; 0: not recorded (files written before it was)
+  double relative_rms = 0, loss = 0;
+  bool near_only_fitted = false;  // the fit without environment ran (model selection on)
+  double near_only_relative_rms = 0, near_only_loss = 0;
+};
 
 struct EnvLight {
   SgMixture lobes;          // L_env(d) = Σ_k G(d; p_k, λ_k, μ_k); at most kMaxSgLobes
@@ -40,6 +53,7 @@ struct EnvLight {
   // (render/lighting/env_fit.h; both 0 when the test was off).
   double evidence = 0;
   double evidence_needed = 0;
+  EnvFitResidual fit;        // documentation
   std::string source;        // the .nerf it came from (documentation)
   std::string options_json;  // the estimator's options as compact JSON ("" or an object; documentation)
 };

@@ -23,10 +23,7 @@ Dictionary MakeDictionary(const EnvEstimateOptions& o) {
   int count = o.dictionary_base;
   double lambda = o.dictionary_sharpness;
   for (int l = 0; l < o.dictionary_levels; ++l, count *= 4, lambda *= 4) {
-    for (const Vec3& p : FibonacciSphere(count)) {
-      d.axes.push_back(p);
-      d.sharpness.push_back(lambda);
-    }
+    for (const Vec3& p : FibonacciSphere(count)) d.Add(p, lambda, false);
   }
   return d;
 }
@@ -41,12 +38,30 @@ Dictionary MakeDictionary(const EnvEstimateOptions& o) {
 // lobe is sharper than the spacing of the cached directions (weights are
 // normalised by their largest term, so nothing underflows).
 Eigen::MatrixXd LobeIrradianceMatrix(const EnvSurfaceSamples& s, const std::vector<Vec3>& axes,
-                                     const std::vector<double>& sharpness) {
+                                     const std::vector<double>& sharpness, const EnvShadowRays& shadow, int bundle,
+                                     uint64_t seed) {
   const size_t n = s.size(), d = axes.size();
   const int R = s.rays_per_point;
+  // Lobes sharper than the cache resolves: through shadow-ray bundles.
+  std::vector<bool> by_rays(d, false);
+  std::vector<Vec3> sharp_axes;
+  std::vector<double> sharp_lambda;
+  for (size_t k = 0; k < d; ++k) {
+    by_rays[k] = shadow != nullptr && sharpness[k] > CacheSharpnessLimit(R);
+    if (!by_rays[k]) continue;
+    sharp_axes.push_back(axes[k]);
+    sharp_lambda.push_back(sharpness[k]);
+  }
+  Eigen::MatrixXd A(n, d);
+  if (!sharp_axes.empty()) {
+    const std::vector<std::vector<double>> columns =
+        BundleIrradiance(s, shadow, AllSamples(s), sharp_axes, sharp_lambda, bundle, seed);
+    for (size_t k = 0, next = 0; k < d; ++k)
+      if (by_rays[k])
+        A.col(static_cast<Eigen::Index>(k)) = Eigen::Map<const Eigen::VectorXd>(columns[next++].data(), n);
+  }
   std::vector<SgTableRow> rows(d);
   for (size_t k = 0; k < d; ++k) rows[k] = PrepareIrradiance(sharpness[k]);
-  Eigen::MatrixXd A(n, d);
   ParallelFor(
       n,
       [&](size_t i) {
@@ -55,6 +70,7 @@ Eigen::MatrixXd LobeIrradianceMatrix(const EnvSurfaceSamples& s, const std::vect
         for (int j = 0; j < R && !any_occluded; ++j) any_occluded = s.opacity[i * R + j] > kOccludedMin;
         std::vector<double> exponent(R);
         for (size_t k = 0; k < d; ++k) {
+          if (by_rays[k]) continue;
           const double open = UnitIrradiancePrepared(rows[k], static_cast<float>(Dot(axes[k], normal)));
           double visible = 1;
           if (any_occluded) {
@@ -83,14 +99,15 @@ Eigen::MatrixXd LobeIrradianceMatrix(const EnvSurfaceSamples& s, const std::vect
 
 using env_internal::LobeIrradianceMatrix;
 
-std::vector<Vec3> EnvironmentIrradiance(const EnvSurfaceSamples& samples, const SgMixture& light) {
+std::vector<Vec3> EnvironmentIrradiance(const EnvSurfaceSamples& samples, const SgMixture& light,
+                                        const EnvShadowRays& shadow, int bundle, uint64_t seed) {
   std::vector<Vec3> axes;
   std::vector<double> sharpness;
   for (const Sg& g : light) {
     axes.push_back(g.axis);
     sharpness.push_back(g.sharpness);
   }
-  const Eigen::MatrixXd A = LobeIrradianceMatrix(samples, axes, sharpness);
+  const Eigen::MatrixXd A = LobeIrradianceMatrix(samples, axes, sharpness, shadow, bundle, seed);
   std::vector<Vec3> e(samples.size());
   for (size_t i = 0; i < samples.size(); ++i)
     for (size_t k = 0; k < light.size(); ++k) e[i] += light[k].amplitude * A(i, k);

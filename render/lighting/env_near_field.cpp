@@ -6,22 +6,18 @@
 
 #include "calib/core/parallel.h"
 #include "render/lighting/env_internal.h"
+#include "render/lighting/env_shadow.h"
 #include "render/sg/sphere.h"
 
 namespace nerfar {
 
 using env_internal::kRayTurn;
+using env_internal::OrthonormalBasis;
 using env_internal::ToD;
 using env_internal::Uniform;
 using env_internal::Y;
 
 namespace {
-
-void OrthonormalBasis(const Vec3& n, Vec3& t, Vec3& b) {
-  const Vec3 helper = std::fabs(n.z) < 0.9 ? Vec3{0, 0, 1} : Vec3{1, 0, 0};
-  t = Normalized(Cross(helper, n));
-  b = Cross(n, t);
-}
 
 // R cosine-distributed directions about +z: a Fibonacci spiral on the unit
 // disk lifted to the hemisphere (Malley), each standing for π/R of ∫cos dω.
@@ -33,6 +29,17 @@ std::vector<Vec3> CosineHemisphere(int count) {
     dirs[j] = {r * std::cos(phi), r * std::sin(phi), std::sqrt(std::max(0.0, 1.0 - r * r))};
   }
   return dirs;
+}
+
+// The median density at the rays' start points (EnvSurfaceSamples::fog_density).
+float SurfaceFogDensity(const NerfField& field, const EnvSurfaceSamples& samples, float offset) {
+  if (samples.size() == 0) return 0.0f;
+  std::vector<Vec3f> starts(samples.size());
+  for (size_t i = 0; i < samples.size(); ++i) starts[i] = samples.positions[i] + samples.normals[i] * offset;
+  std::vector<float> sigma(samples.size());
+  field.QueryDensity(starts.data(), starts.size(), sigma.data());
+  std::nth_element(sigma.begin(), sigma.begin() + sigma.size() / 2, sigma.end());
+  return sigma[sigma.size() / 2];
 }
 
 }  // namespace
@@ -47,6 +54,9 @@ void ComputeNearField(const NerfField& field, const EnvEstimateOptions& options,
   samples.opacity.assign(n * R, 0.0f);
   samples.e_nerf.assign(n, Vec3f{});
   const float offset = static_cast<float>(options.ray_offset_voxels) * field.voxel_m;
+  samples.ray_offset_m = offset;
+  samples.fog_density = options.ignore_near_field ? 0.0f : SurfaceFogDensity(field, samples, offset);
+  const NerfRenderOptions through_layer = PassingFog(options.render, samples.fog_density, field.voxel_m);
   // Chunks of samples: their rays are rendered together so that the
   // seen-radiance look-ups (one per voxel) are shared within a chunk.
   const size_t chunk = 512;
@@ -64,8 +74,8 @@ void ComputeNearField(const NerfField& field, const EnvEstimateOptions& options,
           Vec3 t, b;
           OrthonormalBasis(normal, t, b);
           const double turn = 2 * kPi * Uniform(options.seed, kRayTurn, i, 0);
-          const double ct = std::cos(turn), st = std::sin(turn);
           const Vec3f origin = samples.positions[i] + samples.normals[i] * offset;
+          const double ct = std::cos(turn), st = std::sin(turn);
           for (int j = 0; j < R; ++j) {
             const Vec3& l = local[j];
             const double lx = ct * l.x - st * l.y, ly = st * l.x + ct * l.y;
@@ -75,7 +85,7 @@ void ComputeNearField(const NerfField& field, const EnvEstimateOptions& options,
             NerfRay& ray = rays[k * R + j];
             ray = NerfRay{origin, dir, 0, 0};
             if (!IntersectAabb(field.aabb, origin, dir, ray.t_near, ray.t_far)) continue;
-            results[k * R + j] = field.RenderRay(ray, options.render);
+            results[k * R + j] = RenderSurfaceRay(field, SurfaceRay(samples, i, dir), options.render, through_layer);
           }
         },
         1);

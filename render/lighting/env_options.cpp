@@ -63,6 +63,17 @@ std::vector<OptionField> Fields(EnvEstimateOptions& o) {
           {"near_field_gain_max", F::kDouble, &o.near_field_gain_max},
           {"negligible_ratio", F::kDouble, &o.negligible_ratio},
           {"evidence_bic_factor", F::kDouble, &o.evidence_bic_factor},
+          {"sources_max", F::kInt, &o.sources_max},
+          {"source_candidates", F::kInt, &o.source_candidates},
+          {"source_search_samples", F::kInt, &o.source_search_samples},
+          {"source_refine_samples", F::kInt, &o.source_refine_samples},
+          {"source_bundle_rays", F::kInt, &o.source_bundle_rays},
+          {"source_sharpness_min", F::kDouble, &o.source_sharpness_min},
+          {"source_sharpness_max", F::kDouble, &o.source_sharpness_max},
+          {"source_steps", F::kInt, &o.source_steps},
+          {"chroma_steps", F::kInt, &o.chroma_steps},
+          {"shadow_step_voxels", F::kFloat, &o.shadow_render.step_voxels},
+          {"shadow_min_transmittance", F::kFloat, &o.shadow_render.min_transmittance},
           {"seed", F::kU64, &o.seed}};
 }
 
@@ -148,6 +159,18 @@ std::vector<std::string> EnvEstimateOptions::Validate() const {
   range("near_field_gain_max", near_field_gain_max, 1, 1e3);
   range("negligible_ratio", negligible_ratio, 0, 1);
   range("evidence_bic_factor", evidence_bic_factor, 0, 1e6);
+  range("sources_max", sources_max, 0, kMaxSgLobes);
+  range("source_candidates", source_candidates, 12, 1e6);
+  range("source_search_samples", source_search_samples, 16, 1e7);
+  range("source_refine_samples", source_refine_samples, 16, 1e7);
+  range("source_bundle_rays", source_bundle_rays, 1, 4096);
+  range("source_sharpness_min", source_sharpness_min, 1, 1e5);
+  range("source_sharpness_max", source_sharpness_max, source_sharpness_min, 1e4);
+  range("source_steps", source_steps, 1, 1000);
+  range("chroma_steps", chroma_steps, 1, 1000);
+  range("shadow_step_voxels", shadow_render.step_voxels, 0.01, 10);
+  range("shadow_min_transmittance", shadow_render.min_transmittance, 0, 0.999);
+  if (sources_max > lobes) p.push_back("sources_max: exceeds lobes (expected at most the lobes kept)");
   return p;
 }
 

@@ -123,7 +123,19 @@ struct EnvEstimateOptions {
   // information criterion's penalty (k/2)·ln n (EnvFitReport). 1 is the
   // criterion itself; 0 turns the test off.
   double evidence_bic_factor = 1;
-  uint64_t seed = 1;  // views, pixels and ray rotations
+  // --- sharp sources (env_sources.cpp): small bright lights found from the
+  // shadows and shading they cast, placed continuously (direction, then size),
+  // each kept only when the model selection (evidence_bic_factor) supports it.
+  int sources_max = 4;               // sources searched for at most (0: the dictionary alone)
+  int source_candidates = 1500;      // directions of the coarse search (a Fibonacci sphere)
+  int source_search_samples = 1024;  // samples the coarse search scores each direction on
+  int source_refine_samples = 3072;  // samples the direction's refinement and the size's choice use
+  int source_bundle_rays = 16;       // shadow rays per sample spread over a lobe (its mean visibility)
+  double source_sharpness_min = 30, source_sharpness_max = 1e4;  // the sizes tried (a geometric ladder)
+  int source_steps = 4;  // alternation steps of the joint fit after a source is added
+  NerfRenderOptions shadow_render = NerfRenderOptions::Preset("live");  // shadow rays (transmittance only)
+  int chroma_steps = 2;  // alternation steps per lobe when testing its chroma (env_fit.cpp FreeChroma)
+  uint64_t seed = 1;     // views, pixels and ray rotations
 
   // "fast", "balanced" (the defaults), "accurate"; InputError otherwise.
   static EnvEstimateOptions Preset(const std::string& name);

@@ -37,6 +37,10 @@ bool SmoothedNormal(const NerfField& field, const Vec3f& x, float scale, Vec3f* 
   return true;
 }
 
+// The top of a surface's own layer of density (EnvSurfaceSamples::layer_m):
+// where the camera ray's opacity reaches this fraction of its total.
+constexpr float kLayerTop = 0.05f;
+
 // Where a camera ray's opacity builds up: the distances at which the
 // accumulated opacity 1 − T(t) reaches 1/4, 1/2 and 3/4 of the ray's total.
 // The median t50 is the surface: in fog in front of a surface the expected
@@ -48,6 +52,7 @@ bool SmoothedNormal(const NerfField& field, const Vec3f& x, float scale, Vec3f* 
 // layer of fog (centimetres).
 struct RaySurface {
   float opacity = 0;  // 1 − T at the end of the march
+  float t_top = 0;    // where the opacity reaches kLayerTop of the total: the top of the surface's layer
   float t25 = 0, t50 = 0, t75 = 0;
   bool valid = false;  // opacity > 0 and the quartiles found
 };
@@ -67,9 +72,9 @@ RaySurface MarchSurface(const NerfField& field, const NerfRay& ray, float step_v
   }
   if (acc.empty() || !(acc.back() > 0)) return out;
   out.opacity = acc.back();
-  const float quantiles[3] = {0.25f, 0.5f, 0.75f};
-  float* dest[3] = {&out.t25, &out.t50, &out.t75};
-  for (int q = 0; q < 3; ++q) {
+  const float quantiles[4] = {kLayerTop, 0.25f, 0.5f, 0.75f};
+  float* dest[4] = {&out.t_top, &out.t25, &out.t50, &out.t75};
+  for (int q = 0; q < 4; ++q) {
     const float level = quantiles[q] * out.opacity;
     const size_t k = static_cast<size_t>(std::lower_bound(acc.begin(), acc.end(), level) - acc.begin());
     const float a0 = k == 0 ? 0.0f : acc[k - 1], t0 = k == 0 ? ray.t_near : t_end[k - 1];
@@ -113,6 +118,7 @@ struct ViewPick {
   double score = -1;
   int tried = 0, not_surface = 0, no_normal = 0, grazing = 0;
   std::vector<Vec3f> positions, normals, radiance;
+  std::vector<float> layer;
 };
 
 }  // namespace
@@ -171,6 +177,7 @@ EnvSurfaceSamples SampleSurfaces(const NerfField& field, const EnvEstimateOption
     struct Candidate {
       Outcome outcome = kNotFinite;
       Vec3f x, n, radiance;
+      float layer = 0;
     };
     const auto evaluate = [&](size_t k, Candidate& c) {
       const NerfRay& ray = rays[eligible[k]];
@@ -207,6 +214,7 @@ EnvSurfaceSamples SampleSurfaces(const NerfField& field, const EnvEstimateOption
       // scenes' background is black, so a translucent trained surface's pixel
       // is its radiance), or divided by the opacity (partial coverage).
       c.radiance = options.radiance_over_opacity ? res.color * (1.0f / res.opacity) : res.color;
+      c.layer = (surf.t50 - surf.t_top) * std::fabs(Dot(c.n, ray.dir));
       c.outcome = std::isfinite(c.radiance.x + c.radiance.y + c.radiance.z) ? kAccepted : kNotFinite;
     };
     // Candidates are evaluated in parallel, a batch at a time, and taken in
@@ -224,6 +232,7 @@ EnvSurfaceSamples SampleSurfaces(const NerfField& field, const EnvEstimateOption
             pick.positions.push_back(c.x);
             pick.normals.push_back(c.n);
             pick.radiance.push_back(c.radiance);
+            pick.layer.push_back(c.layer);
             break;
           case kNotSurface:
             ++pick.not_surface;
@@ -243,11 +252,13 @@ EnvSurfaceSamples SampleSurfaces(const NerfField& field, const EnvEstimateOption
     const bool ok = !use_brisque || pick.score <= options.brisque_max;
     local.scores.push_back(pick.score);
     local.kept.push_back(ok);
+    local.poses.push_back(pose);
     if (ok) ++accepted;
     views.push_back(std::move(pick));
     if (progress) progress("views", static_cast<size_t>(accepted), static_cast<size_t>(options.views));
   }
   local.rendered = static_cast<int>(views.size());
+  local.camera = camera;
   if (accepted < options.views) {
     const int passed = accepted;
     // Too few views passed: take the best-scoring of the rest (the paper repeats
@@ -271,6 +282,7 @@ EnvSurfaceSamples SampleSurfaces(const NerfField& field, const EnvEstimateOption
     samples.positions.insert(samples.positions.end(), views[v].positions.begin(), views[v].positions.end());
     samples.normals.insert(samples.normals.end(), views[v].normals.begin(), views[v].normals.end());
     samples.radiance.insert(samples.radiance.end(), views[v].radiance.begin(), views[v].radiance.end());
+    samples.layer_m.insert(samples.layer_m.end(), views[v].layer.begin(), views[v].layer.end());
   }
   if (report) *report = std::move(local);
   return samples;

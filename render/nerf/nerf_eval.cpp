@@ -11,6 +11,7 @@
 #include "calib/core/image_io.h"
 #include "calib/core/metrics.h"
 #include "calib/dataset.h"
+#include "calib/linear_image.h"
 
 namespace nerfar {
 namespace {
@@ -34,6 +35,7 @@ double Median(std::vector<float>& values) {
 NerfEvaluation EvaluateNerf(const NerfField& field, const std::string& dataset_dir, const NerfEvalOptions& options) {
   namespace fs = std::filesystem;
   const Dataset set = ReadDataset(DatasetSplitPath(dataset_dir, options.split));
+  const Linearisation linearisation = DatasetLinearisation(dataset_dir);
   NerfEvaluation eval;
   std::error_code error;
   const fs::path insert = fs::path(dataset_dir) / "insert";
@@ -56,9 +58,9 @@ NerfEvaluation EvaluateNerf(const NerfField& field, const std::string& dataset_d
     NerfViewScore score;
     score.name = fs::path(frame.file_path).stem().string();
     const auto t0 = std::chrono::steady_clock::now();
-    const NerfImages images = RenderView(field, set.camera, frame.T_world_camera, options.render);
+    const NerfImages images = RenderView(field, set.CameraOf(frame), frame.T_world_camera, options.render);
     score.render_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-    const ImageF truth = ReadExrRgb(frame.image_path);
+    const ImageF truth = ReadLinearImage(frame.image_path, linearisation).rgb;
     if (truth.width != images.color.width || truth.height != images.color.height)
       ThrowInputError(frame.image_path, "image size differs from the transforms file's w, h");
     score.psnr_dataset = PsnrTm(images.color, truth);

@@ -45,7 +45,8 @@ struct NerfRay {
 // along the ray, 0 when O = 0; the paper's unnormalised D is O·depth).
 // surface_depth is where the transmittance falls to 0.5 (the median of the
 // termination distribution: a fog or a thick surface in front moves it far
-// less than the mean); where the ray's opacity stays below 0.5 it is the
+// less than the mean; NerfRenderOptions::surface_transmittance picks another
+// level); where the ray's transmittance stays above that level it is the
 // expected depth (0 when O = 0).
 struct NerfRayResult {
   Vec3f color;
@@ -63,6 +64,8 @@ struct NerfRenderOptions {
   float min_transmittance = 1e-3f;
   // Samples with α below this skip the colour evaluation (their colour weight is negligible).
   float min_alpha = 1e-5f;
+  // The transmittance at which NerfRayResult::surface_depth is taken (0.5: the termination's median).
+  float surface_transmittance = 0.5f;
   // Prefetch the next sample's cell while evaluating this one (same result; speed only).
   bool prefetch = true;
   // Read the field's compact render copy where one is current (NerfField::UpdateRenderCopy): values

@@ -8,12 +8,13 @@
 #include <limits>
 
 #include "calib/core/atomic_file.h"
+#include "calib/core/binary_file.h"
 #include "calib/core/error.h"
 
 namespace nerfar {
 namespace {
 
-constexpr char kMagic[8] = {'N', 'E', 'R', 'F', 'A', 'R', 'F', '1'};
+constexpr BinaryFormat kFormat{"nerfar NeRF file", "NERFARF1", true, 1, kNerfFileVersion, ""};
 constexpr uint32_t kColorModelLogLinear = 1;            // log L = a + b·d per channel
 constexpr int kValuesPerVertex = 1 + kNerfColorCoeffs;  // channels: density, colour 0..11
 constexpr uint8_t kCompressionNone = 0, kCompressionZlib = 1;
@@ -29,15 +30,6 @@ constexpr uint64_t kDeflateMaxRatio = 1032;
 // and occupancy (28), then per channel a quantiser (i8 exponent, i32 base).
 constexpr uint64_t kBrickBytes = 28 + kValuesPerVertex * 5;
 
-uint64_t Fnv1a(const char* data, size_t size) {
-  uint64_t h = 1469598103934665603ull;
-  for (size_t n = 0; n < size; ++n) {
-    h ^= static_cast<unsigned char>(data[n]);
-    h *= 1099511628211ull;
-  }
-  return h;
-}
-
 // IEEE 754 binary16 to float, exactly (in plain arithmetic: not every
 // compiler has a half type on every target).
 float FromHalfBits(uint16_t bits) {
@@ -52,50 +44,6 @@ float FromHalfBits(uint16_t bits) {
     magnitude = std::ldexp(static_cast<float>(mantissa | 0x400), exponent - 25);  // (1 + m/1024) · 2^(e-15)
   return (bits & 0x8000) != 0 ? -magnitude : magnitude;
 }
-
-class Writer {
- public:
-  template <typename T>
-  void Put(const T& v) {
-    const size_t at = bytes.size();
-    bytes.resize(at + sizeof(T));
-    std::memcpy(bytes.data() + at, &v, sizeof(T));
-  }
-  std::string bytes;
-};
-
-class Reader {
- public:
-  Reader(const std::string& bytes, const std::string& source) : bytes_(bytes), source_(source) {}
-  template <typename T>
-  T Get(const char* what) {
-    if (bytes_.size() - pos_ < sizeof(T))
-      ThrowInputError(source_, std::string("file is truncated while reading ") + what + " at byte " +
-                                   std::to_string(pos_) + " (expected " + std::to_string(sizeof(T)) +
-                                   " more bytes, file has " + std::to_string(bytes_.size()) + ")");
-    T v;
-    std::memcpy(&v, bytes_.data() + pos_, sizeof(T));
-    pos_ += sizeof(T);
-    return v;
-  }
-  // The next n bytes (throws when fewer remain).
-  const char* Take(size_t n, const char* what) {
-    if (bytes_.size() - pos_ < n)
-      ThrowInputError(source_, std::string("file is truncated while reading ") + what + " at byte " +
-                                   std::to_string(pos_) + " (expected " + std::to_string(n) + " more bytes, " +
-                                   std::to_string(bytes_.size() - pos_) + " left)");
-    const char* p = bytes_.data() + pos_;
-    pos_ += n;
-    return p;
-  }
-  size_t pos() const { return pos_; }
-  size_t remaining() const { return bytes_.size() - pos_; }
-
- private:
-  const std::string& bytes_;
-  const std::string& source_;
-  size_t pos_ = 0;
-};
 
 // Which vertices of each brick some occupied cell needs (bit per local vertex).
 std::vector<uint64_t> NeededMasks(const NerfField& f) {
@@ -179,16 +127,13 @@ float ChannelValue(const NerfField& f, size_t slot, int channel) {
   return channel == 0 ? f.density[slot] : f.color[slot * kNerfColorCoeffs + size_t(channel - 1)];
 }
 
-// The common header (up to the stored vertex count), as both versions have it.
+// The common header after the version (up to the stored vertex count), as both versions have it.
 struct Header {
-  uint32_t version = 0;
   uint32_t brick_count = 0;
   uint64_t vertex_count = 0;
 };
 
-void PutHeader(Writer& w, const NerfField& f, uint32_t brick_count, uint64_t stored) {
-  w.bytes.append(kMagic, 8);
-  w.Put(kNerfFileVersion);
+void PutHeader(ByteWriter& w, const NerfField& f, uint32_t brick_count, uint64_t stored) {
   w.Put(kColorModelLogLinear);
   for (int a = 0; a < 3; ++a) w.Put(float(f.aabb.min[a]));
   for (int a = 0; a < 3; ++a) w.Put(float(f.aabb.max[a]));
@@ -200,13 +145,8 @@ void PutHeader(Writer& w, const NerfField& f, uint32_t brick_count, uint64_t sto
   w.Put(stored);
 }
 
-Header ReadHeader(Reader& r, const std::string& source, NerfField& f) {
+Header ReadHeader(ByteReader& r, const std::string& source, NerfField& f) {
   Header h;
-  r.Get<uint64_t>("magic");
-  h.version = r.Get<uint32_t>("version");
-  if (h.version != 1 && h.version != kNerfFileVersion)
-    ThrowInputError(source, "file version " + std::to_string(h.version) + " (expected 1 or " +
-                                std::to_string(kNerfFileVersion) + "; written by a newer nerfar?)");
   const uint32_t model = r.Get<uint32_t>("colour model");
   if (model != kColorModelLogLinear)
     ThrowInputError(
@@ -253,7 +193,7 @@ Header ReadHeader(Reader& r, const std::string& source, NerfField& f) {
 }
 
 // Reads the brick list (coordinates, stored-vertex mask, occupancy) and allocates the bricks.
-std::vector<uint64_t> ReadBricks(Reader& r, const std::string& source, const Header& h, NerfField& f) {
+std::vector<uint64_t> ReadBricks(ByteReader& r, const std::string& source, const Header& h, NerfField& f) {
   f.brick_table.assign(size_t(f.bricks[0]) * f.bricks[1] * f.bricks[2], -1);
   std::vector<uint64_t> masks(h.brick_count);
   uint64_t mask_total = 0;
@@ -289,7 +229,7 @@ void CheckValue(const std::string& source, uint32_t brick, int channel, float v)
   }
 }
 
-void ReadValuesV1(Reader& r, const std::string& source, const std::vector<uint64_t>& masks, NerfField& f) {
+void ReadValuesV1(ByteReader& r, const std::string& source, const std::vector<uint64_t>& masks, NerfField& f) {
   for (uint32_t b = 0; b < masks.size(); ++b)
     for (int v = 0; v < kNerfBrickSlots; ++v) {
       if (!((masks[b] >> v) & 1u)) continue;
@@ -302,7 +242,7 @@ void ReadValuesV1(Reader& r, const std::string& source, const std::vector<uint64
     }
 }
 
-void ReadValuesV2(Reader& r, const std::string& source, const std::vector<uint64_t>& masks, const uint8_t bits[],
+void ReadValuesV2(ByteReader& r, const std::string& source, const std::vector<uint64_t>& masks, const uint8_t bits[],
                   NerfField& f) {
   for (uint32_t b = 0; b < masks.size(); ++b) {
     const int count = __builtin_popcountll(masks[b]);
@@ -314,7 +254,8 @@ void ReadValuesV2(Reader& r, const std::string& source, const std::vector<uint64
       if (q.exponent < -60 || q.exponent > 40 || std::abs(int64_t(q.base)) > (int64_t{1} << 24))
         ThrowInputError(source, "brick " + std::to_string(b) + " has a quantiser out of range (exponent " +
                                     std::to_string(q.exponent) + ", base " + std::to_string(q.base) + ")");
-      const uint8_t* p = reinterpret_cast<const uint8_t*>(r.Take((size_t(count) * nbits + 7) / 8, "quantised values"));
+      const uint8_t* p =
+          reinterpret_cast<const uint8_t*>(r.Take((size_t(count) * nbits + 7) / 8, "quantised values").data());
       uint64_t acc = 0;
       int fill = 0;
       int v = -1;
@@ -363,7 +304,7 @@ std::string SerializeNerf(const NerfField& f, const NerfFileOptions& options) {
       order.push_back(b);
       stored += uint64_t(__builtin_popcountll(masks[b]));
     }
-  Writer payload;
+  ByteWriter payload;
   for (int32_t b : order) {
     for (int a = 0; a < 3; ++a) payload.Put(int32_t(f.brick_coords[3 * size_t(b) + a]));
     payload.Put(masks[b]);
@@ -381,13 +322,13 @@ std::string SerializeNerf(const NerfField& f, const NerfFileOptions& options) {
       const Quantiser q = ChooseQuantiser(lo, hi, bits);
       payload.Put(int8_t(q.exponent));
       payload.Put(q.base);
-      BitPacker packer(payload.bytes);
+      BitPacker packer(payload.bytes());
       for (int v = 0; v < kNerfBrickSlots; ++v)
         if ((masks[b] >> v) & 1u)
           packer.Put(Quantise(ChannelValue(f, size_t(b) * kNerfBrickSlots + v, ch), q, bits), bits);
       packer.Flush();
     }
-  std::string body = std::move(payload.bytes);
+  std::string body = std::move(payload.bytes());
   const uint64_t payload_size = body.size();
   if (options.compress) {
     uLongf size = compressBound(uLong(body.size()));
@@ -397,39 +338,30 @@ std::string SerializeNerf(const NerfField& f, const NerfFileOptions& options) {
     packed.resize(size);
     body = std::move(packed);
   }
-  Writer w;
-  w.bytes.reserve(body.size() + 160);
+  BinaryFileWriter w(kFormat, kNerfFileVersion);
+  w.bytes().reserve(body.size() + 160);
   PutHeader(w, f, uint32_t(order.size()), stored);
   for (int ch = 0; ch < kValuesPerVertex; ++ch) w.Put(uint8_t(ChannelBits(options, ch)));
   w.Put(options.compress ? kCompressionZlib : kCompressionNone);
   w.Put(uint16_t{0});
   w.Put(payload_size);
   w.Put(uint64_t(body.size()));
-  w.bytes += body;
-  w.Put(Fnv1a(w.bytes.data(), w.bytes.size()));
-  return std::move(w.bytes);
+  w.PutBytes(body);
+  return std::move(w).Seal();
 }
 
 NerfField ParseNerf(const std::string& bytes, const std::string& source) {
-  if (bytes.size() < 8 || std::memcmp(bytes.data(), kMagic, 8) != 0)
-    ThrowInputError(source, "not a nerfar NeRF file (expected the magic 'NERFARF1' at byte 0)");
-  if (bytes.size() < 16)
-    ThrowInputError(source, "file is truncated in its header (" + std::to_string(bytes.size()) + " bytes)");
-  Reader r(bytes, source);
+  BinaryFile file = OpenBinaryFile(bytes, source, kFormat);
+  ByteReader& r = file.fields;
   NerfField f;
   const Header h = ReadHeader(r, source, f);
-  // The checksum covers everything: checked before the body, so any flipped byte is named as corruption.
-  uint64_t stored_sum;
-  std::memcpy(&stored_sum, bytes.data() + bytes.size() - 8, 8);
   std::vector<uint64_t> masks;
-  if (h.version == 1) {
-    const uint64_t expected_size = r.pos() + uint64_t(h.brick_count) * 28 + h.vertex_count * kValuesPerVertex * 2 + 8;
-    if (bytes.size() != expected_size)
+  if (file.version == 1) {
+    const uint64_t body = uint64_t(h.brick_count) * 28 + h.vertex_count * kValuesPerVertex * 2;
+    if (r.remaining() != body)
       ThrowInputError(source, "file has " + std::to_string(bytes.size()) + " bytes (expected " +
-                                  std::to_string(expected_size) + " for " + std::to_string(h.brick_count) +
-                                  " bricks; truncated or trailing data)");
-    if (Fnv1a(bytes.data(), bytes.size() - 8) != stored_sum)
-      ThrowInputError(source, "checksum mismatch (the file is corrupt)");
+                                  std::to_string(bytes.size() - r.remaining() + body) + " for " +
+                                  std::to_string(h.brick_count) + " bricks; truncated or trailing data)");
     masks = ReadBricks(r, source, h, f);
     ReadValuesV1(r, source, masks, f);
   } else {
@@ -439,11 +371,10 @@ NerfField ParseNerf(const std::string& bytes, const std::string& source) {
     r.Get<uint16_t>("padding");
     const uint64_t payload_size = r.Get<uint64_t>("payload size");
     const uint64_t stored_size = r.Get<uint64_t>("stored payload size");
-    if (bytes.size() < r.pos() + 8 || bytes.size() - r.pos() - 8 != stored_size)
+    if (r.remaining() != stored_size)
       ThrowInputError(source, "file has " + std::to_string(bytes.size()) + " bytes (expected " +
-                                  std::to_string(r.pos() + stored_size + 8) + "; truncated or trailing data)");
-    if (Fnv1a(bytes.data(), bytes.size() - 8) != stored_sum)
-      ThrowInputError(source, "checksum mismatch (the file is corrupt)");
+                                  std::to_string(bytes.size() - r.remaining() + stored_size) +
+                                  "; truncated or trailing data)");
     for (int ch = 0; ch < kValuesPerVertex; ++ch)
       if (bits[ch] < 4 || bits[ch] > 16)
         ThrowInputError(source, "channel " + std::to_string(ch) + " has " + std::to_string(bits[ch]) +
@@ -463,19 +394,20 @@ NerfField ParseNerf(const std::string& bytes, const std::string& source) {
                                   std::to_string(h.brick_count) + " bricks of " + std::to_string(h.vertex_count) +
                                   " stored vertices in " + std::to_string(stored_size) +
                                   " stored bytes (the file is corrupt)");
+    const std::string_view stored = r.Take(stored_size, "payload");
     std::string inflated;
     if (compression == kCompressionZlib) {
       inflated.resize(payload_size);
       uLongf size = uLongf(payload_size);
       const int status = uncompress(reinterpret_cast<Bytef*>(inflated.data()), &size,
-                                    reinterpret_cast<const Bytef*>(bytes.data() + r.pos()), uLong(stored_size));
+                                    reinterpret_cast<const Bytef*>(stored.data()), uLong(stored_size));
       if (status != Z_OK || size != payload_size)
         ThrowInputError(source, "compressed payload does not inflate to its stated " + std::to_string(payload_size) +
                                     " bytes (the file is corrupt)");
     } else {
-      inflated = bytes.substr(r.pos(), stored_size);
+      inflated = std::string(stored);
     }
-    Reader p(inflated, source + " (payload)");
+    ByteReader p(inflated, source + " (payload)");
     masks = ReadBricks(p, source, h, f);
     ReadValuesV2(p, source, masks, bits, f);
     if (p.remaining() != 0)

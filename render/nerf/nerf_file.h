@@ -7,8 +7,8 @@
 // brick_count, u64 stored_vertex_count, u8 bits[13] (bits per stored value:
 // density, then the 12 colour coefficients), u8 compression (0 none, 1 zlib),
 // u16 0, u64 payload bytes, u64 stored payload bytes, the payload (zlib
-// deflated when compression is 1), u64 FNV-1a checksum of everything before
-// it. Payload: per brick i32 coords[3] + u64 mask of stored vertices + u64
+// deflated when compression is 1), u64 checksum of everything before it
+// (the magic, version and checksum are calib/core/binary_file.h's). Payload: per brick i32 coords[3] + u64 mask of stored vertices + u64
 // cell occupancy; then per brick and per channel (density, colour 0..11) an
 // i8 exponent e, an i32 base b and the brick's stored vertices' codes q
 // (bits[channel] bits each, little-endian bit order, padded to a byte): the

@@ -8,9 +8,11 @@
 #include <ctime>
 #include <filesystem>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <sstream>
 
 #include "calib/core/atomic_file.h"
+#include "calib/core/binary_file.h"
 #include "calib/core/error.h"
 #include "calib/core/exr.h"
 #include "calib/core/image_io.h"
@@ -19,6 +21,8 @@
 #include "calib/core/metrics.h"
 #include "calib/core/parallel.h"
 #include "calib/core/random.h"
+#include "calib/linear_image.h"
+#include "calib/scene_box.h"
 #include "render/nerf/nerf_internal.h"
 
 namespace nerfar {
@@ -27,39 +31,75 @@ using nerf_detail::Corners;
 
 // ------------------------------------------------------------------ data
 
+namespace {
+
+// The views of one split, loaded in parallel.
+std::vector<NerfView> LoadViews(const Dataset& set, const Linearisation& linearisation) {
+  std::vector<NerfView> views(set.frames.size());
+  ParallelFor(
+      set.frames.size(),
+      [&](size_t n) {
+        const DatasetFrame& frame = set.frames[n];
+        NerfView& v = views[n];
+        v.name = std::filesystem::path(frame.file_path).stem().string();
+        v.image_path = frame.image_path;
+        v.camera = set.CameraOf(frame);
+        v.T_world_camera = frame.T_world_camera;
+        LinearImage image = ReadLinearImage(frame.image_path, linearisation);
+        v.rgb = std::move(image.rgb);
+        v.clipped = std::move(image.clipped);
+        if (v.rgb.width != v.camera.width || v.rgb.height != v.camera.height)
+          ThrowInputError(frame.image_path, "image is " + std::to_string(v.rgb.width) + "x" +
+                                                std::to_string(v.rgb.height) + " (expected " +
+                                                std::to_string(v.camera.width) + "x" + std::to_string(v.camera.height) +
+                                                " from the transforms file)");
+        for (float& x : v.rgb.pixels) x = std::max(x, 0.0f);  // radiance is non-negative
+        if (!frame.mask_path.empty()) v.mask = ReadMask(frame.mask_path, v.camera.width, v.camera.height);
+      },
+      1);
+  return views;
+}
+
+// One log line on how display-referred frames were read, and how much clipped.
+void LogLinearisation(const std::vector<NerfView>& views, const Linearisation& linearisation) {
+  size_t display = 0, pixels = 0, clipped = 0;
+  for (const NerfView& v : views) {
+    if (v.clipped.empty()) continue;
+    ++display;
+    pixels += v.clipped.PixelCount();
+    for (std::uint8_t flags : v.clipped.pixels) clipped += flags != 0;
+  }
+  if (display == 0) return;
+  char share[32];
+  std::snprintf(share, sizeof share, "%.2f%%", 100.0 * double(clipped) / double(std::max<size_t>(pixels, 1)));
+  LogInfo("train: " + std::to_string(display) + " PNG/JPEG images linearised through " + linearisation.Describe() +
+          "; " + share + " of their pixels clipped (a lower bound in training)");
+}
+
+}  // namespace
+
 NerfTrainData ReadNerfTrainData(const std::string& dataset_dir) {
   NerfTrainData data;
   const Dataset train = ReadDataset(DatasetSplitPath(dataset_dir, "train"));
-  if (!train.aabb) ThrowInputError(train.path, "no aabb (expected the NeRF box, [[min], [max]] in metres)");
-  data.aabb = *train.aabb;
+  if (train.aabb) {
+    data.aabb = *train.aabb;
+  } else {
+    const std::string board_path = (std::filesystem::path(dataset_dir) / "board.json").string();
+    std::error_code board_error;
+    std::optional<Board> board;
+    if (std::filesystem::is_regular_file(board_path, board_error)) board = ReadBoard(board_path);
+    const SceneBox box = DeriveSceneBox(train, board ? &*board : nullptr);
+    data.aabb = box.box;
+    LogInfo("train: " + train.path + " gives no aabb: " + box.how);
+  }
   data.source = train.path;
-  std::optional<Dataset> test;
+  const Linearisation linearisation = DatasetLinearisation(dataset_dir);
+  data.train = LoadViews(train, linearisation);
   const std::string test_path = DatasetSplitPath(dataset_dir, "test");
   std::error_code error;
-  if (std::filesystem::is_regular_file(test_path, error)) test = ReadDataset(test_path);
-  auto load = [](const Dataset& set, std::vector<NerfView>& views) {
-    views.resize(set.frames.size());
-    ParallelFor(
-        set.frames.size(),
-        [&](size_t n) {
-          const DatasetFrame& frame = set.frames[n];
-          NerfView& v = views[n];
-          v.name = std::filesystem::path(frame.file_path).stem().string();
-          v.image_path = frame.image_path;
-          v.camera = set.camera;
-          v.T_world_camera = frame.T_world_camera;
-          v.rgb = ReadExrRgb(frame.image_path);
-          if (v.rgb.width != set.camera.width || v.rgb.height != set.camera.height)
-            ThrowInputError(frame.image_path, "image is " + std::to_string(v.rgb.width) + "x" +
-                                                  std::to_string(v.rgb.height) + " (expected " +
-                                                  std::to_string(set.camera.width) + "x" +
-                                                  std::to_string(set.camera.height) + " from the transforms file)");
-          for (float& x : v.rgb.pixels) x = std::max(x, 0.0f);  // radiance is non-negative
-        },
-        1);
-  };
-  load(train, data.train);
-  if (test) load(*test, data.held_out);
+  if (std::filesystem::is_regular_file(test_path, error))
+    data.held_out = LoadViews(ReadDataset(test_path), linearisation);
+  LogLinearisation(data.train, linearisation);
   if (data.train.empty()) ThrowInputError(train.path, "no training frames (expected at least one)");
   return data;
 }
@@ -283,7 +323,9 @@ double RayLossAndGradient(const RaySample* s, size_t n, const float target[3], c
   float g_c[3];
   for (int ch = 0; ch < 3; ++ch) {
     const float pred = color[ch], denom = pred + eps;
-    const float diff = pred - target[ch];
+    // A clipped channel says only that the radiance is at least the target.
+    const bool bound_met = (terms.clipped_channels >> ch & 1u) != 0 && pred >= target[ch];
+    const float diff = bound_met ? 0.0f : pred - target[ch];
     loss += double(diff) * diff / (double(denom) * denom) / 3.0;
     g_c[ch] = 2.0f * diff / (denom * denom) / 3.0f * scale;
   }
@@ -415,7 +457,26 @@ struct NerfTrainer::State {
   }
   void PruneByWeight();
   void Upsample();
+  // One step of training; returns the batch's mean loss.
   double DoStep();
+  struct StepSettings;
+  struct PixelRay;
+  struct RayScratch;
+  class PhaseClock;
+  // DoStep's phases, in order.
+  void AdvanceLevel(double progress);  // upsample to the level the schedule has reached
+  StepSettings MakeStepSettings() const;
+  double MarchRays(const StepSettings& settings);  // the batch's records and summed loss
+  std::optional<PixelRay> PickPixelRay(const StepSettings& settings, size_t r) const;
+  void TrainRay(PixelRay p, const StepSettings& settings, RayScratch& scratch, double& loss_sum,
+                std::vector<Record>& out) const;
+  void ScatterGradients();
+  void UpdateTouchedVertices(float lr_density, float lr_color);
+  void CollectTouched();
+  void AddTvGradient();
+  void AdamUpdate(float lr_density, float lr_color);
+  void UpdateOccupancyOnSchedule();
+  void LogPhaseTimes();
 };
 
 void NerfTrainer::State::Upsample() {
@@ -474,151 +535,232 @@ void NerfTrainer::State::Upsample() {
   ResetOptimiser();
 }
 
-double NerfTrainer::State::DoStep() {
-  // Level schedule.
-  const double p = Progress();
-  while (level + 1 < options.levels && p >= LevelStart(level + 1)) {
-    Upsample();
-    ++level;
+// The settings one step shares across its rays.
+struct NerfTrainer::State::StepSettings {
+  size_t batch = 0;                       // rays this step
+  float step_m = 0;                       // sample spacing along a ray
+  float background_weight = 0;            // opacity → 0 on black (background) pixels
+  float foreground_weight = 0;            // opacity → 1 inside the object, away from silhouettes
+  float prune_relative = 0;               // see NerfTrainOptions::prune_relative (finest level only)
+  uint64_t step_key = 0;                  // seeds this step's random pixels, jitter and offsets
+  nerf_train_detail::RayLossTerms terms;  // the loss terms every ray shares
+};
+
+// One training ray: its pixel, the pixel's target radiance and what the pixel says about opacity.
+struct NerfTrainer::State::PixelRay {
+  NerfRay ray;
+  const float* target = nullptr;  // linear RGB
+  uint8_t clipped_channels = 0;   // bit c: channel c clipped, its target a lower bound
+  uint64_t offset_hash = 0;       // the first sample's offset along the ray
+  bool background = false;        // a black pixel: nothing there
+  bool foreground = false;        // inside the object, not beside a silhouette
+};
+
+// Per-thread buffers of one ray's samples, reused from ray to ray.
+struct NerfTrainer::State::RayScratch {
+  std::vector<Sample> samples;
+  std::vector<nerf_train_detail::RaySample> ray_samples;
+  std::vector<float> g_log_sigma, weights;
+  std::vector<Vec3f> g_log_color;
+};
+
+// Process CPU seconds (all threads: comparable under load) and wall-clock seconds
+// of the phases of a step, added to the State's totals for the verbose log.
+class NerfTrainer::State::PhaseClock {
+ public:
+  PhaseClock() : cpu_(CpuNow()), wall_(WallNow()) {}
+  // Adds the time since the last lap to the phase's totals and starts the next phase.
+  void Lap(double& cpu_total, double& wall_total) {
+    const double cpu = CpuNow(), wall = WallNow();
+    cpu_total += cpu - cpu_;
+    wall_total += wall - wall_;
+    cpu_ = cpu, wall_ = wall;
   }
-  const double lr_scale = std::pow(options.lr_final_factor, p);
-  const float lr_d = float(options.lr_density * lr_scale), lr_c = float(options.lr_color * lr_scale);
-  const float step_m = float(options.step_voxels) * field.voxel_m;
-  const size_t batch = size_t(options.rays_per_step);
-  const size_t chunks = (batch + kRaysPerChunk - 1) / kRaysPerChunk;
-  records.resize(chunks);
-  std::vector<double> chunk_loss(chunks, 0.0);
-  const uint64_t total_pixels = pixel_offsets.back();
-  const float inv_batch = 1.0f / float(batch);
-  const float eps = float(epsilon);
-  const float bg_w = float(options.background_weight);
-  const float fg_w = float(options.foreground_weight);
-  nerf_train_detail::RayLossTerms base_terms;
-  base_terms.epsilon = eps;
-  base_terms.gradient_scale = inv_batch;
-  base_terms.distortion_weight = float(options.distortion_weight);
-  base_terms.sparsity_weight = float(options.sparsity_weight);
-  const float relative = level == options.levels - 1 ? float(options.prune_relative) : 0.0f;
-  const uint64_t step_key = Mix64(options.seed * 0x9e37ull + uint64_t(step));
-  // Phase timers in process CPU seconds (all threads): comparable under load.
-  const auto cpu_now = [] {
+
+ private:
+  static double CpuNow() {
     timespec ts{};
     clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
     return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
-  };
-  const auto wall_now = [] {
+  }
+  static double WallNow() {
     return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
-  };
-  double phase_start = cpu_now(), phase_wall = wall_now();
-  const auto seconds_since = [&](double t) { return cpu_now() - t; };
-  const auto wall_since = [&](double t) { return wall_now() - t; };
+  }
+  double cpu_, wall_;
+};
 
+double NerfTrainer::State::DoStep() {
+  const double progress = Progress();
+  AdvanceLevel(progress);
+  const StepSettings settings = MakeStepSettings();
+  PhaseClock clock;
+  const double loss = MarchRays(settings);
+  clock.Lap(time_march, wall_march);
+  ScatterGradients();
+  clock.Lap(time_scatter, wall_scatter);
+  // The learning rates fall geometrically to lr_final_factor over the schedule.
+  const double lr_scale = std::pow(options.lr_final_factor, progress);
+  UpdateTouchedVertices(float(options.lr_density * lr_scale), float(options.lr_color * lr_scale));
+  clock.Lap(time_adam, wall_adam);
+  ++step;
+  UpdateOccupancyOnSchedule();
+  clock.Lap(time_occupancy, wall_occupancy);
+  if (step % 50 == 0) LogPhaseTimes();
+  return loss / double(settings.batch);
+}
+
+void NerfTrainer::State::AdvanceLevel(double progress) {
+  while (level + 1 < options.levels && progress >= LevelStart(level + 1)) {
+    Upsample();
+    ++level;
+  }
+}
+
+NerfTrainer::State::StepSettings NerfTrainer::State::MakeStepSettings() const {
+  StepSettings s;
+  s.batch = size_t(options.rays_per_step);
+  s.step_m = float(options.step_voxels) * field.voxel_m;
+  s.background_weight = float(options.background_weight);
+  s.foreground_weight = float(options.foreground_weight);
+  s.prune_relative = level == options.levels - 1 ? float(options.prune_relative) : 0.0f;
+  s.step_key = Mix64(options.seed * 0x9e37ull + uint64_t(step));
+  s.terms.epsilon = float(epsilon);
+  s.terms.gradient_scale = 1.0f / float(s.batch);  // the loss is the batch's mean
+  s.terms.distortion_weight = float(options.distortion_weight);
+  s.terms.sparsity_weight = float(options.sparsity_weight);
+  return s;
+}
+
+// Marches the batch in fixed chunks of rays (so the records, and every sum over
+// them, do not depend on the thread count); returns the batch's summed loss.
+double NerfTrainer::State::MarchRays(const StepSettings& settings) {
+  const size_t chunks = (settings.batch + kRaysPerChunk - 1) / kRaysPerChunk;
+  records.resize(chunks);
+  std::vector<double> chunk_loss(chunks, 0.0);
   ParallelForChunks(chunks, 1, [&](size_t chunk_begin, size_t chunk_end) {
-    thread_local std::vector<Sample> samples;
-    thread_local std::vector<nerf_train_detail::RaySample> ray_samples;
-    thread_local std::vector<float> g_log_sigma, weights;
-    thread_local std::vector<Vec3f> g_log_color;
+    thread_local RayScratch scratch;
     for (size_t chunk = chunk_begin; chunk < chunk_end; ++chunk) {
       std::vector<Record>& out = records[chunk];
       out.clear();
       double loss_sum = 0.0;
-      const size_t r_end = std::min(batch, (chunk + 1) * kRaysPerChunk);
-      for (size_t r = chunk * kRaysPerChunk; r < r_end; ++r) {
-        const uint64_t h0 = Mix64(step_key ^ Mix64(r));
-        const uint64_t h1 = Mix64(h0), h2 = Mix64(h1), h3 = Mix64(h2);
-        const uint64_t pixel = h0 % total_pixels;
-        const size_t view_index =
-            size_t(std::upper_bound(pixel_offsets.begin(), pixel_offsets.end(), pixel) - pixel_offsets.begin()) - 1;
-        const NerfView& view = data.train[view_index];
-        const uint64_t local = pixel - pixel_offsets[view_index];
-        const int px = int(local % uint64_t(view.camera.width)), py = int(local / uint64_t(view.camera.width));
-        const float* target = view.rgb.Pixel(px, py);
-        const double sx = px + UnitFloat(h1), sy = py + UnitFloat(h2);
-        const Vec3 dir_c =
-            view.camera.HasDistortion()
-                ? Unproject(view.camera, {sx, sy})
-                : Normalized(Vec3((sx - view.camera.cx) / view.camera.fx, (sy - view.camera.cy) / view.camera.fy, 1.0));
-        NerfRay ray;
-        ray.origin = Vec3f(view.T_world_camera.translation);
-        ray.dir = Vec3f(view.T_world_camera.Rotate(dir_c));
-        auto is_zero = [&](int x, int y) {
-          const float* q = view.rgb.Pixel(x, y);
-          return q[0] == 0.0f && q[1] == 0.0f && q[2] == 0.0f;
-        };
-        const bool background = is_zero(px, py);
-        // Foreground (opaque) only away from silhouettes: a pixel partly covered is not 0,
-        // yet a jittered ray through it may pass beside the object.
-        const bool foreground = fg_w > 0.0f && !background && px > 0 && py > 0 && px + 1 < view.camera.width &&
-                                py + 1 < view.camera.height && !is_zero(px - 1, py) && !is_zero(px + 1, py) &&
-                                !is_zero(px, py - 1) && !is_zero(px, py + 1);
-        if (!IntersectAabb(field.aabb, ray.origin, ray.dir, ray.t_near, ray.t_far)) {
-          // Nothing to learn from a ray outside the box; count its (constant) loss.
-          for (int ch = 0; ch < 3; ++ch) loss_sum += double(target[ch]) * target[ch] / (double(eps) * eps) / 3.0;
-          continue;
-        }
-        // Forward: the samples in occupied cells until the transmittance is spent.
-        samples.clear();
-        float transmittance = 1.0f;
-        const float offset = UnitFloat(h3);
-        nerf_detail::MarchRay(field, ray, step_m, offset, [&](float t, float dt, const Corners& c) {
-          Sample s;
-          s.corners = c;
-          s.ray.t = t;
-          s.ray.dt = dt;
-          s.ray.sigma = std::exp(nerf_detail::RawDensity(field, c));
-          float q[kNerfColorCoeffs];
-          nerf_detail::ColorCoeffs(field, c, q);
-          s.ray.color = nerf_detail::ColorFromCoeffs(q, ray.dir);
-          transmittance *= 1.0f + std::expm1(-s.ray.sigma * dt);  // 1 - α, as RayLossAndGradient
-          samples.push_back(s);
-          return transmittance >= kTrainMinTransmittance;
-        });
-        const size_t n = samples.size();
-        ray_samples.resize(n);
-        g_log_sigma.resize(n);
-        g_log_color.resize(n);
-        weights.resize(n);
-        for (size_t i = 0; i < n; ++i) ray_samples[i] = samples[i].ray;
-        nerf_train_detail::RayLossTerms terms = base_terms;
-        if (background) {
-          terms.opacity_weight = bg_w;
-          terms.opacity_target = 0.0f;
-        } else if (foreground) {
-          terms.opacity_weight = fg_w;
-          terms.opacity_target = 1.0f;
-        }
-        loss_sum += nerf_train_detail::RayLossAndGradient(ray_samples.data(), n, target, terms, g_log_sigma.data(),
-                                                          g_log_color.data(), weights.data());
-        // Samples below this weight do not count as seen for pruning (prune_relative).
-        float seen_min = 0.0f;
-        if (relative > 0.0f) {
-          float peak = 0.0f;
-          for (float w : weights) peak = std::max(peak, w);
-          seen_min = relative * peak;
-        }
-        for (size_t i = 0; i < n; ++i) {
-          Record rec;
-          rec.g_density = g_log_sigma[i];
-          for (int ch = 0; ch < 3; ++ch) rec.g_color[ch] = g_log_color[i][ch];
-          rec.w = weights[i] >= seen_min ? weights[i] : 0.0f;
-          std::memcpy(rec.slot, samples[i].corners.slot, sizeof rec.slot);
-          std::memcpy(rec.weight, samples[i].corners.weight, sizeof rec.weight);
-          rec.dir = ray.dir;
-          out.push_back(rec);
-        }
-      }
+      const size_t r_end = std::min(settings.batch, (chunk + 1) * kRaysPerChunk);
+      for (size_t r = chunk * kRaysPerChunk; r < r_end; ++r)
+        if (const std::optional<PixelRay> p = PickPixelRay(settings, r)) TrainRay(*p, settings, scratch, loss_sum, out);
       chunk_loss[chunk] = loss_sum;
     }
   });
-  time_march += seconds_since(phase_start);
-  wall_march += wall_since(phase_wall);
-  phase_wall = wall_now();
   for (const std::vector<Record>& chunk : records) samples_marched += chunk.size();
-  rays_marched += batch;
-  phase_start = cpu_now();
+  rays_marched += settings.batch;
+  double loss = 0.0;
+  for (double l : chunk_loss) loss += l;
+  return loss;
+}
 
-  // Scatter the records into the gradient arrays: partition p owns a slot
-  // range and walks all records in chunk order, so sums are deterministic.
+// Ray r of the step: a pixel drawn uniformly over every training pixel, jittered inside it;
+// none where the pixel is masked (it teaches nothing, not even whether something is there).
+std::optional<NerfTrainer::State::PixelRay> NerfTrainer::State::PickPixelRay(const StepSettings& settings,
+                                                                             size_t r) const {
+  const uint64_t h0 = Mix64(settings.step_key ^ Mix64(r));
+  const uint64_t h1 = Mix64(h0), h2 = Mix64(h1), h3 = Mix64(h2);
+  const uint64_t pixel = h0 % pixel_offsets.back();
+  const size_t view_index =
+      size_t(std::upper_bound(pixel_offsets.begin(), pixel_offsets.end(), pixel) - pixel_offsets.begin()) - 1;
+  const NerfView& view = data.train[view_index];
+  const uint64_t local = pixel - pixel_offsets[view_index];
+  const int px = int(local % uint64_t(view.camera.width)), py = int(local / uint64_t(view.camera.width));
+  if (!view.mask.empty() && view.mask.at(px, py) == 0) return std::nullopt;
+  const double sx = px + UnitFloat(h1), sy = py + UnitFloat(h2);
+  const Vec3 dir_c =
+      view.camera.HasDistortion()
+          ? Unproject(view.camera, {sx, sy})
+          : Normalized(Vec3((sx - view.camera.cx) / view.camera.fx, (sy - view.camera.cy) / view.camera.fy, 1.0));
+  PixelRay p;
+  p.ray.origin = Vec3f(view.T_world_camera.translation);
+  p.ray.dir = Vec3f(view.T_world_camera.Rotate(dir_c));
+  p.target = view.rgb.Pixel(px, py);
+  if (!view.clipped.empty()) p.clipped_channels = view.clipped.at(px, py);
+  p.offset_hash = h3;
+  auto is_zero = [&](int x, int y) {
+    const float* q = view.rgb.Pixel(x, y);
+    return q[0] == 0.0f && q[1] == 0.0f && q[2] == 0.0f;
+  };
+  p.background = is_zero(px, py);
+  // Foreground (opaque) only away from silhouettes: a pixel partly covered is not 0,
+  // yet a jittered ray through it may pass beside the object.
+  p.foreground = settings.foreground_weight > 0.0f && !p.background && px > 0 && py > 0 && px + 1 < view.camera.width &&
+                 py + 1 < view.camera.height && !is_zero(px - 1, py) && !is_zero(px + 1, py) && !is_zero(px, py - 1) &&
+                 !is_zero(px, py + 1);
+  return p;
+}
+
+// One ray: its loss is added to loss_sum, its samples' gradients appended to `out` as records.
+void NerfTrainer::State::TrainRay(PixelRay p, const StepSettings& settings, RayScratch& scratch, double& loss_sum,
+                                  std::vector<Record>& out) const {
+  NerfRay& ray = p.ray;
+  if (!IntersectAabb(field.aabb, ray.origin, ray.dir, ray.t_near, ray.t_far)) {
+    // Nothing to learn from a ray outside the box; count its (constant) loss.
+    const float eps = settings.terms.epsilon;
+    for (int ch = 0; ch < 3; ++ch) loss_sum += double(p.target[ch]) * p.target[ch] / (double(eps) * eps) / 3.0;
+    return;
+  }
+  // Forward: the samples in occupied cells until the transmittance is spent.
+  std::vector<Sample>& samples = scratch.samples;
+  samples.clear();
+  float transmittance = 1.0f;
+  nerf_detail::MarchRay(field, ray, settings.step_m, UnitFloat(p.offset_hash),
+                        [&](float t, float dt, const Corners& c) {
+                          Sample s;
+                          s.corners = c;
+                          s.ray.t = t;
+                          s.ray.dt = dt;
+                          s.ray.sigma = std::exp(nerf_detail::RawDensity(field, c));
+                          float q[kNerfColorCoeffs];
+                          nerf_detail::ColorCoeffs(field, c, q);
+                          s.ray.color = nerf_detail::ColorFromCoeffs(q, ray.dir);
+                          transmittance *= 1.0f + std::expm1(-s.ray.sigma * dt);  // 1 - α, as RayLossAndGradient
+                          samples.push_back(s);
+                          return transmittance >= kTrainMinTransmittance;
+                        });
+  const size_t n = samples.size();
+  scratch.ray_samples.resize(n);
+  scratch.g_log_sigma.resize(n);
+  scratch.g_log_color.resize(n);
+  scratch.weights.resize(n);
+  for (size_t i = 0; i < n; ++i) scratch.ray_samples[i] = samples[i].ray;
+  nerf_train_detail::RayLossTerms terms = settings.terms;
+  terms.clipped_channels = p.clipped_channels;
+  if (p.background) {
+    terms.opacity_weight = settings.background_weight;
+    terms.opacity_target = 0.0f;
+  } else if (p.foreground) {
+    terms.opacity_weight = settings.foreground_weight;
+    terms.opacity_target = 1.0f;
+  }
+  loss_sum +=
+      nerf_train_detail::RayLossAndGradient(scratch.ray_samples.data(), n, p.target, terms, scratch.g_log_sigma.data(),
+                                            scratch.g_log_color.data(), scratch.weights.data());
+  // Samples below this weight do not count as seen for pruning (prune_relative).
+  float seen_min = 0.0f;
+  if (settings.prune_relative > 0.0f) {
+    float peak = 0.0f;
+    for (float w : scratch.weights) peak = std::max(peak, w);
+    seen_min = settings.prune_relative * peak;
+  }
+  for (size_t i = 0; i < n; ++i) {
+    Record rec;
+    rec.g_density = scratch.g_log_sigma[i];
+    for (int ch = 0; ch < 3; ++ch) rec.g_color[ch] = scratch.g_log_color[i][ch];
+    rec.w = scratch.weights[i] >= seen_min ? scratch.weights[i] : 0.0f;
+    std::memcpy(rec.slot, samples[i].corners.slot, sizeof rec.slot);
+    std::memcpy(rec.weight, samples[i].corners.weight, sizeof rec.weight);
+    rec.dir = ray.dir;
+    out.push_back(rec);
+  }
+}
+
+// Scatters the records into the gradient arrays: partition p owns a slot
+// range and walks all records in chunk order, so sums are deterministic.
+void NerfTrainer::State::ScatterGradients() {
   const size_t slots = field.SlotCount();
   ParallelForChunks(kScatterParts, 1, [&](size_t part_begin, size_t part_end) {
     for (size_t part = part_begin; part < part_end; ++part) {
@@ -648,17 +790,21 @@ double NerfTrainer::State::DoStep() {
         }
     }
   });
+}
 
-  time_scatter += seconds_since(phase_start);
-  wall_scatter += wall_since(phase_wall);
-  phase_wall = wall_now();
-  phase_start = cpu_now();
-  // Sparse Adam on the touched vertices, with the TV prior's gradient.
+// Sparse Adam on the vertices this step touched, with the TV prior's gradient.
+void NerfTrainer::State::UpdateTouchedVertices(float lr_density, float lr_color) {
   ++adam_t;
-  const float b1 = 0.9f, b2 = 0.99f;
-  const float c1 = 1.0f / (1.0f - std::pow(b1, float(adam_t))), c2 = 1.0f / (1.0f - std::pow(b2, float(adam_t)));
-  const float tv_d = float(options.tv_density), tv_c = float(options.tv_color);
-  // The touched slots in ascending order (the update then walks memory in order).
+  CollectTouched();
+  // The TV prior's gradient first, reading the parameters only (each vertex adds
+  // to its own gradient), then Adam in place: the order of the vertices does not matter.
+  if (float(options.tv_density) > 0 || float(options.tv_color) > 0) AddTvGradient();
+  AdamUpdate(lr_density, lr_color);
+}
+
+// all_touched: the touched slots in ascending order (the update then walks memory in order).
+void NerfTrainer::State::CollectTouched() {
+  const size_t slots = field.SlotCount();
   constexpr size_t kScanBlocks = 64;
   touched_lists.resize(kScanBlocks);
   ParallelFor(
@@ -671,55 +817,62 @@ double NerfTrainer::State::DoStep() {
           if (touched[s]) list.push_back(int32_t(s));
       },
       1);
-  std::vector<int32_t>& all = all_touched;
-  all.clear();
-  for (const auto& list : touched_lists) all.insert(all.end(), list.begin(), list.end());
-  vertices_updated += all.size();
-  scatter_split = all.empty() ? 0 : size_t(all[all.size() / 2]);
-  // The TV prior's gradient first, reading the parameters only (each vertex adds
-  // to its own gradient), then Adam in place: the order of the vertices does not matter.
-  if (tv_d > 0 || tv_c > 0) {
-    ParallelFor(
-        all.size(),
-        [&](size_t n) {
-          const int32_t s = all[n];
-          const size_t b = size_t(s) / kNerfBrickSlots;
-          const int v = s % kNerfBrickSlots;
-          const int local[3] = {v & 3, (v >> 2) & 3, v >> 4};
-          const int ijk[3] = {field.brick_coords[3 * b] * 4 + local[0], field.brick_coords[3 * b + 1] * 4 + local[1],
-                              field.brick_coords[3 * b + 2] * 4 + local[2]};
-          constexpr int kStride[3] = {1, 4, 16};
-          float gd = 0.0f;
-          float gc[kNerfColorCoeffs] = {};
-          const float own = std::max(field.density[s], -10.0f);
-          const float* own_c = &field.color[size_t(s) * kNerfColorCoeffs];
-          for (int axis = 0; axis < 3; ++axis)
-            for (int delta = -1; delta <= 1; delta += 2) {
-              int32_t t;
-              if (local[axis] + delta >= 0 && local[axis] + delta < kNerfBrickSide) {
-                t = s + delta * kStride[axis];  // inside the same brick
-              } else {
-                int q[3] = {ijk[0], ijk[1], ijk[2]};
-                q[axis] += delta;
-                t = field.Slot(q[0], q[1], q[2]);
-              }
-              if (t < 0) continue;
-              gd += own - std::max(field.density[t], -10.0f);
-              const float* other = &field.color[size_t(t) * kNerfColorCoeffs];
-              for (int m = 0; m < kNerfColorCoeffs; ++m) gc[m] += own_c[m] - other[m];
-            }
-          g_density[s] += tv_d * gd;
-          float* g = &g_color[size_t(s) * kNerfColorCoeffs];
-          for (int m = 0; m < kNerfColorCoeffs; ++m) g[m] += tv_c * gc[m];
-        },
-        1024);
-  }
-  const float step_d = lr_d * c1, step_c = lr_c * c1;
-  const float slope_keep = 1.0f - lr_c * float(options.color_slope_decay);  // decoupled slope decay
+  all_touched.clear();
+  for (const auto& list : touched_lists) all_touched.insert(all_touched.end(), list.begin(), list.end());
+  vertices_updated += all_touched.size();
+  scatter_split = all_touched.empty() ? 0 : size_t(all_touched[all_touched.size() / 2]);
+}
+
+// Adds the gradient of the TV prior (squared differences to the 6 grid neighbours
+// that exist; log-densities floored at -10 so empty space does not pull) to every touched vertex.
+void NerfTrainer::State::AddTvGradient() {
+  const float tv_d = float(options.tv_density), tv_c = float(options.tv_color);
   ParallelFor(
-      all.size(),
+      all_touched.size(),
       [&](size_t n) {
-        const int32_t s = all[n];
+        const int32_t s = all_touched[n];
+        const size_t b = size_t(s) / kNerfBrickSlots;
+        const int v = s % kNerfBrickSlots;
+        const int local[3] = {v & 3, (v >> 2) & 3, v >> 4};
+        const int ijk[3] = {field.brick_coords[3 * b] * 4 + local[0], field.brick_coords[3 * b + 1] * 4 + local[1],
+                            field.brick_coords[3 * b + 2] * 4 + local[2]};
+        constexpr int kStride[3] = {1, 4, 16};
+        float gd = 0.0f;
+        float gc[kNerfColorCoeffs] = {};
+        const float own = std::max(field.density[s], -10.0f);
+        const float* own_c = &field.color[size_t(s) * kNerfColorCoeffs];
+        for (int axis = 0; axis < 3; ++axis)
+          for (int delta = -1; delta <= 1; delta += 2) {
+            int32_t t;
+            if (local[axis] + delta >= 0 && local[axis] + delta < kNerfBrickSide) {
+              t = s + delta * kStride[axis];  // inside the same brick
+            } else {
+              int q[3] = {ijk[0], ijk[1], ijk[2]};
+              q[axis] += delta;
+              t = field.Slot(q[0], q[1], q[2]);
+            }
+            if (t < 0) continue;
+            gd += own - std::max(field.density[t], -10.0f);
+            const float* other = &field.color[size_t(t) * kNerfColorCoeffs];
+            for (int m = 0; m < kNerfColorCoeffs; ++m) gc[m] += own_c[m] - other[m];
+          }
+        g_density[s] += tv_d * gd;
+        float* g = &g_color[size_t(s) * kNerfColorCoeffs];
+        for (int m = 0; m < kNerfColorCoeffs; ++m) g[m] += tv_c * gc[m];
+      },
+      1024);
+}
+
+// One Adam step (β1 0.9, β2 0.99) of every touched vertex; its gradient and mark are cleared.
+void NerfTrainer::State::AdamUpdate(float lr_density, float lr_color) {
+  const float b1 = 0.9f, b2 = 0.99f;
+  const float c1 = 1.0f / (1.0f - std::pow(b1, float(adam_t))), c2 = 1.0f / (1.0f - std::pow(b2, float(adam_t)));
+  const float step_d = lr_density * c1, step_c = lr_color * c1;
+  const float slope_keep = 1.0f - lr_color * float(options.color_slope_decay);  // decoupled slope decay
+  ParallelFor(
+      all_touched.size(),
+      [&](size_t n) {
+        const int32_t s = all_touched[n];
         const float gd = g_density[s];
         float& md = m_density[s];
         float& vd = v_density[s];
@@ -746,40 +899,36 @@ double NerfTrainer::State::DoStep() {
         }
       },
       1024);
-  time_adam += seconds_since(phase_start);
-  wall_adam += wall_since(phase_wall);
-  phase_wall = wall_now();
-  phase_start = cpu_now();
-  ++step;
+}
+
+// Pruning by weight every prune_every Adam steps (it rebuilds the occupancy); otherwise the
+// occupancy every occupancy_every steps, at the finer levels only once the prune delay has passed.
+void NerfTrainer::State::UpdateOccupancyOnSchedule() {
   if (options.prune_weight > 0 && adam_t >= options.prune_every && adam_t % options.prune_every == 0) {
     PruneByWeight();
     field.UpdateOccupancy(OccupancySigma());
   } else if (step % options.occupancy_every == 0 && (level == 0 || adam_t > options.prune_delay)) {
     field.UpdateOccupancy(OccupancySigma());
   }
-  time_occupancy += seconds_since(phase_start);
-  wall_occupancy += wall_since(phase_wall);
-  phase_wall = wall_now();
-  if (step % 50 == 0) {
-    char text[256];
-    std::snprintf(text, sizeof text,
-                  "nerf CPU time steps %d-%d level %d: march %.2f s, scatter %.2f s, adam %.2f s, occupancy %.2f s; "
-                  "%.1f samples/ray; %.0f vertices updated/step; %.2f %% cells occupied",
-                  step - 49, step, level, time_march, time_scatter, time_adam, time_occupancy,
-                  double(samples_marched) / double(std::max<uint64_t>(rays_marched, 1)),
-                  double(vertices_updated) / 50.0, 100.0 * field.OccupiedFraction());
-    LogVerbose(text);
-    std::snprintf(text, sizeof text,
-                  "nerf wall time of the same steps: march %.2f s, scatter %.2f s, adam %.2f s, occupancy %.2f s",
-                  wall_march, wall_scatter, wall_adam, wall_occupancy);
-    LogVerbose(text);
-    time_march = time_scatter = time_adam = time_occupancy = 0;
-    wall_march = wall_scatter = wall_adam = wall_occupancy = 0;
-    samples_marched = rays_marched = vertices_updated = 0;
-  }
-  double loss = 0.0;
-  for (double l : chunk_loss) loss += l;
-  return loss / double(batch);
+}
+
+// The verbose log of the last 50 steps: seconds per phase, samples per ray, vertices updated.
+void NerfTrainer::State::LogPhaseTimes() {
+  char text[256];
+  std::snprintf(text, sizeof text,
+                "nerf CPU time steps %d-%d level %d: march %.2f s, scatter %.2f s, adam %.2f s, occupancy %.2f s; "
+                "%.1f samples/ray; %.0f vertices updated/step; %.2f %% cells occupied",
+                step - 49, step, level, time_march, time_scatter, time_adam, time_occupancy,
+                double(samples_marched) / double(std::max<uint64_t>(rays_marched, 1)), double(vertices_updated) / 50.0,
+                100.0 * field.OccupiedFraction());
+  LogVerbose(text);
+  std::snprintf(text, sizeof text,
+                "nerf wall time of the same steps: march %.2f s, scatter %.2f s, adam %.2f s, occupancy %.2f s",
+                wall_march, wall_scatter, wall_adam, wall_occupancy);
+  LogVerbose(text);
+  time_march = time_scatter = time_adam = time_occupancy = 0;
+  wall_march = wall_scatter = wall_adam = wall_occupancy = 0;
+  samples_marched = rays_marched = vertices_updated = 0;
 }
 
 void NerfTrainer::State::PruneByWeight() {
@@ -883,137 +1032,95 @@ NerfField NerfTrainer::FinalField() const {
 
 // ------------------------------------------------------------ checkpoints
 
+// The checkpoint: the container of calib/core/binary_file.h (its version is in the magic), then
+// the identity (options JSON, dataset) as u64-length strings, step, level, Adam step, seconds
+// trained, the grid, and the field's and optimiser's arrays, each a u64 count and its values.
 namespace {
-constexpr char kCheckpointMagic[8] = {'N', 'E', 'R', 'F', 'C', 'K', 'P', '2'};
+constexpr BinaryFormat kCheckpointFormat{"nerfar training checkpoint", "NERFCKP2", false, 0, 0,
+                                         "delete it to start over"};
+constexpr size_t kMaxCheckpointBytes = size_t{16} << 30;
 
 template <typename T>
-void PutVec(std::string& out, const std::vector<T>& v) {
-  const uint64_t n = v.size();
-  out.append(reinterpret_cast<const char*>(&n), 8);
-  out.append(reinterpret_cast<const char*>(v.data()), v.size() * sizeof(T));
+void PutVec(ByteWriter& w, const std::vector<T>& v) {
+  w.Put(uint64_t(v.size()));
+  w.PutArray(v);
 }
+void PutString(ByteWriter& w, const std::string& s) {
+  w.Put(uint64_t(s.size()));
+  w.PutBytes(s);
+}
+
+// An array of `expected` values (the grid read before says how many).
 template <typename T>
-void Put(std::string& out, const T& v) {
-  out.append(reinterpret_cast<const char*>(&v), sizeof(T));
+std::vector<T> GetVec(ByteReader& r, uint64_t expected, const char* what) {
+  const uint64_t n = r.Get<uint64_t>(what);
+  if (n != expected)
+    r.Fail("checkpoint's " + std::string(what) + " has " + std::to_string(n) + " values (expected " +
+           std::to_string(expected) + ")");
+  return r.GetArray<T>(n, what);
 }
-void PutString(std::string& out, const std::string& s) {
-  Put(out, uint64_t(s.size()));
-  out += s;
-}
-
-class CheckpointReader {
- public:
-  CheckpointReader(const std::string& bytes, const std::string& path) : b_(bytes), path_(path) {}
-  void Need(uint64_t n) {
-    if (b_.size() - pos_ < n) ThrowInputError(path_, "checkpoint is truncated (delete it to start over)");
-  }
-  template <typename T>
-  T Get() {
-    Need(sizeof(T));
-    T v;
-    std::memcpy(&v, b_.data() + pos_, sizeof(T));
-    pos_ += sizeof(T);
-    return v;
-  }
-  template <typename T>
-  std::vector<T> GetVec(uint64_t expected) {
-    const uint64_t n = Get<uint64_t>();
-    if (n != expected)
-      ThrowInputError(
-          path_, "checkpoint array has " + std::to_string(n) + " values (expected " + std::to_string(expected) + ")");
-    Need(n * sizeof(T));
-    std::vector<T> v(n);
-    if (n > 0) std::memcpy(v.data(), b_.data() + pos_, n * sizeof(T));  // an empty vector's data() may be null
-    pos_ += n * sizeof(T);
-    return v;
-  }
-  std::string GetString() {
-    const uint64_t n = Get<uint64_t>();
-    Need(n);
-    std::string s = b_.substr(pos_, n);
-    pos_ += n;
-    return s;
-  }
-  bool AtEnd() const { return pos_ == b_.size(); }
-
- private:
-  const std::string& b_;
-  const std::string& path_;
-  size_t pos_ = 0;
-};
-
-uint64_t Checksum(const std::string& s, size_t n) {
-  uint64_t h = 1469598103934665603ull;
-  for (size_t i = 0; i < n; ++i) h = (h ^ static_cast<unsigned char>(s[i])) * 1099511628211ull;
-  return h;
+std::string GetString(ByteReader& r, const char* what) {
+  const uint64_t n = r.Get<uint64_t>(what);
+  return std::string(r.Take(n, what));
 }
 }  // namespace
 
 void NerfTrainer::SaveCheckpoint(const std::string& path) const {
   const State& s = *state_;
-  std::string out(kCheckpointMagic, 8);
+  BinaryFileWriter w(kCheckpointFormat);
   NerfTrainOptions identity = s.options;
   identity.max_seconds = 0;           // a resumed run may have another time budget
   identity.save_occupancy_sigma = 0;  // applies to the saved model only
-  PutString(out, identity.ToJson());
-  PutString(out, s.data.source + " " + std::to_string(s.data.train.size()));
-  Put(out, int32_t(s.step));
-  Put(out, int32_t(s.level));
-  Put(out, int32_t(s.adam_t));
-  Put(out, s.Elapsed());
+  PutString(w, identity.ToJson());
+  PutString(w, s.data.source + " " + std::to_string(s.data.train.size()));
+  w.Put(int32_t(s.step));
+  w.Put(int32_t(s.level));
+  w.Put(int32_t(s.adam_t));
+  w.Put(s.Elapsed());
   const NerfField& f = s.field;
-  Put(out, f.voxel_m);
-  for (int a = 0; a < 3; ++a) Put(out, int32_t(f.res[a]));
-  PutVec(out, f.brick_coords);
-  PutVec(out, f.density);
-  PutVec(out, f.color);
-  PutVec(out, f.occupancy);
-  PutVec(out, s.m_density);
-  PutVec(out, s.v_density);
-  PutVec(out, s.m_color);
-  PutVec(out, s.v_color);
-  PutVec(out, s.max_weight);
-  Put(out, Checksum(out, out.size()));
-  WriteFileAtomic(path, out);
+  w.Put(f.voxel_m);
+  for (int a = 0; a < 3; ++a) w.Put(int32_t(f.res[a]));
+  PutVec(w, f.brick_coords);
+  PutVec(w, f.density);
+  PutVec(w, f.color);
+  PutVec(w, f.occupancy);
+  PutVec(w, s.m_density);
+  PutVec(w, s.v_density);
+  PutVec(w, s.m_color);
+  PutVec(w, s.v_color);
+  PutVec(w, s.max_weight);
+  WriteBinaryFile(path, std::move(w));
 }
 
 void NerfTrainer::LoadCheckpoint(const std::string& path) {
   State& s = *state_;
-  const std::string bytes = ReadFileBytes(path, size_t{16} << 30);
-  if (bytes.size() < 16 || std::memcmp(bytes.data(), kCheckpointMagic, 8) != 0)
-    ThrowInputError(path, "not a nerfar training checkpoint (expected the magic 'NERFCKP2')");
-  uint64_t sum;
-  std::memcpy(&sum, bytes.data() + bytes.size() - 8, 8);
-  if (Checksum(bytes, bytes.size() - 8) != sum)
-    ThrowInputError(path, "checkpoint checksum mismatch (corrupt; delete it to start over)");
-  CheckpointReader r(bytes, path);
-  r.Get<uint64_t>();
+  const std::string bytes = ReadFileBytes(path, kMaxCheckpointBytes);
+  BinaryFile file = OpenBinaryFile(bytes, path, kCheckpointFormat);
+  ByteReader& r = file.fields;
   NerfTrainOptions identity = s.options;
   identity.max_seconds = 0;
   identity.save_occupancy_sigma = 0;
-  if (r.GetString() != identity.ToJson())
+  if (GetString(r, "options") != identity.ToJson())
     ThrowInputError(path,
                     "checkpoint was made with other training options (use the same preset and --set, or delete it)");
-  if (r.GetString() != s.data.source + " " + std::to_string(s.data.train.size()))
+  if (GetString(r, "dataset") != s.data.source + " " + std::to_string(s.data.train.size()))
     ThrowInputError(path, "checkpoint was made from another dataset (delete it to start over)");
-  const int step = r.Get<int32_t>(), level = r.Get<int32_t>(), adam_t = r.Get<int32_t>();
-  const double elapsed = r.Get<double>();
+  const int step = r.Get<int32_t>("step"), level = r.Get<int32_t>("level"), adam_t = r.Get<int32_t>("Adam step");
+  const double elapsed = r.Get<double>("seconds trained");
   NerfField f;
   f.aabb = s.data.aabb;
   f.origin = Vec3f(s.data.aabb.min);
-  f.voxel_m = r.Get<float>();
+  f.voxel_m = r.Get<float>("voxel size");
   for (int a = 0; a < 3; ++a) {
-    f.res[a] = r.Get<int32_t>();
+    f.res[a] = r.Get<int32_t>("resolution");
     if (f.res[a] < 2 || f.res[a] > 8192) ThrowInputError(path, "checkpoint grid resolution out of range");
     f.bricks[a] = (f.res[a] + 3) / 4;
   }
-  const uint64_t n_coords = r.Get<uint64_t>();
+  const uint64_t n_coords = r.Get<uint64_t>("brick list");
   if (n_coords % 3 != 0 || n_coords / 3 > size_t(f.bricks[0]) * f.bricks[1] * f.bricks[2])
     ThrowInputError(path, "checkpoint brick list is inconsistent");
-  r.Need(n_coords * 4);
+  std::vector<int32_t> values = r.GetArray<int32_t>(n_coords, "brick list");
   f.brick_table.assign(size_t(f.bricks[0]) * f.bricks[1] * f.bricks[2], -1);
-  std::vector<int32_t> values(n_coords);
-  for (uint64_t n = 0; n < n_coords; ++n) values[n] = r.Get<int32_t>();
   for (uint64_t b = 0; b < n_coords / 3; ++b) {
     const int x = values[3 * b], y = values[3 * b + 1], z = values[3 * b + 2];
     if (x < 0 || y < 0 || z < 0 || x >= f.bricks[0] || y >= f.bricks[1] || z >= f.bricks[2])
@@ -1024,16 +1131,16 @@ void NerfTrainer::LoadCheckpoint(const std::string& path) {
   }
   f.brick_coords = std::move(values);
   const uint64_t slots = n_coords / 3 * kNerfBrickSlots;
-  f.density = r.GetVec<float>(slots);
-  f.color = r.GetVec<float>(slots * kNerfColorCoeffs);
-  f.occupancy = r.GetVec<uint64_t>(n_coords / 3);
-  s.m_density = r.GetVec<float>(slots);
-  s.v_density = r.GetVec<float>(slots);
-  s.m_color = r.GetVec<float>(slots * kNerfColorCoeffs);
-  s.v_color = r.GetVec<float>(slots * kNerfColorCoeffs);
-  s.max_weight = r.GetVec<float>(slots);
-  r.Get<uint64_t>();
-  if (!r.AtEnd()) ThrowInputError(path, "checkpoint has trailing data");
+  f.density = GetVec<float>(r, slots, "density");
+  f.color = GetVec<float>(r, slots * kNerfColorCoeffs, "colour");
+  f.occupancy = GetVec<uint64_t>(r, n_coords / 3, "occupancy");
+  s.m_density = GetVec<float>(r, slots, "density moment 1");
+  s.v_density = GetVec<float>(r, slots, "density moment 2");
+  s.m_color = GetVec<float>(r, slots * kNerfColorCoeffs, "colour moment 1");
+  s.v_color = GetVec<float>(r, slots * kNerfColorCoeffs, "colour moment 2");
+  s.max_weight = GetVec<float>(r, slots, "sample weights");
+  if (r.remaining() != 0)
+    ThrowInputError(path, "checkpoint has " + std::to_string(r.remaining()) + " bytes of trailing data");
   const std::vector<std::string> problems = f.Validate();
   if (!problems.empty()) ThrowInputError(path, "checkpoint field: " + problems.front());
   s.field = std::move(f);

@@ -12,6 +12,8 @@
 // pixels (lamps, 1e3) it is the relative error, so radiance is right across
 // the range and MC noise averages out (the target enters linearly). Pixels
 // that are exactly 0 (rays that hit nothing) also pull the ray's opacity to 0.
+// A channel an 8-bit sensor clipped is a lower bound (no loss above it), and
+// masked pixels are not used.
 // Results do not depend on the thread count: rays are drawn by a counter-based
 // hash of (seed, step, ray), and gradients are accumulated in a fixed order.
 #pragma once
@@ -35,6 +37,13 @@ struct NerfView {
   CameraIntrinsics camera;
   Pose T_world_camera;  // OpenCV camera convention
   ImageF rgb;           // linear HDR, 3 channels, camera.width x camera.height
+  // Per pixel, bit c set where channel c was clipped by the sensor (an 8- or
+  // 16-bit frame at its top value): the radiance is at least rgb there, so
+  // the loss only pulls the rendering up to it, never down. Empty: none.
+  Image8 clipped;
+  // Per pixel, 0 where the pixel is not learnt from (a dataset's mask_path).
+  // Empty: every pixel.
+  Image8 mask;
 };
 
 struct NerfTrainData {
@@ -45,7 +54,11 @@ struct NerfTrainData {
 };
 
 // Reads DIR/transforms_train.json (or transforms.json) and, when present,
-// DIR/transforms_test.json as the held-out views. The dataset must give an aabb.
+// DIR/transforms_test.json as the held-out views. Images are linear (EXR) or
+// display-referred PNG/JPEG linearised as calib/linear_image.h says (DIR's
+// camera.json response, else sRGB; logged). Without an aabb the box is
+// derived (calib/scene_box.h: DIR/board.json when present, else the cameras)
+// and logged.
 NerfTrainData ReadNerfTrainData(const std::string& dataset_dir);
 
 struct NerfTrainOptions {
@@ -181,12 +194,14 @@ struct RayLossTerms {
   float opacity_target = 0;     // 0: background pixel, 1: opaque foreground pixel
   float distortion_weight = 0;  // NerfTrainOptions::distortion_weight
   float sparsity_weight = 0;    // NerfTrainOptions::sparsity_weight
+  // Bit c: target[c] was clipped, a lower bound: no loss while C[c] >= target[c].
+  unsigned clipped_channels = 0;
 };
 
-// Returns the ray's loss, Σ_ch (C - y)² / (C + ε)² / 3 + the opacity, distortion
-// and sparsity terms, and writes per sample the gradient with respect to log σ
-// and to the log radiance of each channel (times gradient_scale; C held fixed
-// in the denominator as sg(C)), and the sample's rendering weight T·α.
+// Returns the ray's loss, Σ_ch (C - y)² / (C + ε)² / 3 (for a clipped channel
+// only while C < y) + the opacity, distortion and sparsity terms, and writes per sample the gradient with respect to
+// log σ and to the log radiance of each channel (times gradient_scale; C held fixed in the denominator as sg(C)), and
+// the sample's rendering weight T·α.
 double RayLossAndGradient(const RaySample* samples, size_t count, const float target[3], const RayLossTerms& terms,
                           float* g_log_sigma, Vec3f* g_log_color, float* weights);
 

@@ -137,6 +137,24 @@ inline void BilinearAt(float a, float b, int size, float fsize, int* x0, int* y0
   *ax = fx - static_cast<float>(*x0), *ay = fy - static_cast<float>(*y0);
 }
 
+// Adds w times the bilinear value of one level at octahedral (a, b) in
+// [−1, 1]² to acc: the level blend folded into the four texel weights; the
+// padded border makes every read in range (NaN reads texel 0). Inlined into
+// the look-up (a call per level was a fifth of a pixel's instructions).
+inline void AddLevel(const float* rgb, int size, float fsize, float a, float b, float w, float* acc) {
+  int x0, y0;
+  float ax, ay;
+  BilinearAt(a, b, size, fsize, &x0, &y0, &ax, &ay);
+  const float* p00 = rgb + (size_t(y0) * (size + 2) + x0) * 3;
+  const float* p10 = p00 + size_t(size + 2) * 3;
+  const float t = w * (1 - ay), u = w * ay;
+  const float w00 = t * (1 - ax), w01 = t * ax, w10 = u * (1 - ax), w11 = u * ax;
+  for (int c = 0; c < 3; ++c) acc[c] += w00 * p00[c] + w01 * p00[3 + c] + w10 * p10[c] + w11 * p10[3 + c];
+}
+
+// The finest map a level gets for compact lobes: n × n texels (~0.01 rad).
+constexpr int kMaxCompactSize = 384;
+
 }  // namespace
 
 DistanceMap::DistanceMap(const std::vector<Vec3>& directions, const std::vector<float>& distance) {
@@ -215,12 +233,22 @@ Vec3 ShadeSamplesBruteForce(const RadianceSamples& samples, const SgMaterial& ma
   return sum;
 }
 
-PrefilteredRadiance::PrefilteredRadiance(const RadianceSamples& samples, int levels) {
+namespace {
+
+// The samples bucketed over a (θ, φ) grid (counting sort), structure of arrays.
+struct BucketedSamples {
+  static constexpr int kRows = 32, kCols = 64;
+  std::vector<int> start;  // kRows × kCols + 1 offsets
+  std::vector<float> x, y, z, lr, lg, lb, omega;
+  double spacing = 0;  // mean spacing: √ of the mean solid angle
+};
+
+BucketedSamples BucketSamples(const RadianceSamples& samples) {
+  constexpr int kRows = BucketedSamples::kRows, kCols = BucketedSamples::kCols;
   const size_t count = samples.size();
-  if (count == 0 || levels < 2 || samples.radiance.size() != count || samples.solid_angles.size() != count) return;
-  // Samples bucketed over a (θ, φ) grid (counting sort), structure of arrays.
-  constexpr int kRows = 32, kCols = 64;
-  std::vector<int> bucket(count), start(kRows * kCols + 1, 0);
+  BucketedSamples out;
+  std::vector<int> bucket(count);
+  out.start.assign(kRows * kCols + 1, 0);
   double total_solid_angle = 0;
   for (size_t i = 0; i < count; ++i) {
     float u, v;
@@ -228,87 +256,241 @@ PrefilteredRadiance::PrefilteredRadiance(const RadianceSamples& samples, int lev
     const int r = std::min(kRows - 1, static_cast<int>(v * kRows)),
               c = std::min(kCols - 1, static_cast<int>(u * kCols));
     bucket[i] = r * kCols + c;
-    ++start[bucket[i] + 1];
+    ++out.start[bucket[i] + 1];
     const double w = samples.solid_angles[i];
     if (std::isfinite(w) && w > 0) total_solid_angle += w;
   }
-  for (int b = 0; b < kRows * kCols; ++b) start[b + 1] += start[b];
-  std::vector<float> x(count), y(count), z(count), lr(count), lg(count), lb(count), omega(count);
-  {
-    std::vector<int> fill(start.begin(), start.end() - 1);
-    for (size_t i = 0; i < count; ++i) {
-      const int k = fill[bucket[i]]++;
-      const Vec3f d = Normalized(Vec3f(samples.directions[i]));
-      const Vec3& L = samples.radiance[i];
-      const double w = samples.solid_angles[i];
-      const bool ok = std::isfinite(L.x) && std::isfinite(L.y) && std::isfinite(L.z) && L.x >= 0 && L.y >= 0 &&
-                      L.z >= 0 && std::isfinite(w) && w > 0 && std::isfinite(d.x);
-      x[k] = ok ? d.x : 0.0f, y[k] = ok ? d.y : 0.0f, z[k] = ok ? d.z : 1.0f;
-      lr[k] = ok ? static_cast<float>(L.x) : 0.0f;
-      lg[k] = ok ? static_cast<float>(L.y) : 0.0f;
-      lb[k] = ok ? static_cast<float>(L.z) : 0.0f;
-      omega[k] = ok ? static_cast<float>(w) : 0.0f;
-    }
+  for (int b = 0; b < kRows * kCols; ++b) out.start[b + 1] += out.start[b];
+  for (std::vector<float>* a : {&out.x, &out.y, &out.z, &out.lr, &out.lg, &out.lb, &out.omega}) a->resize(count);
+  std::vector<int> fill(out.start.begin(), out.start.end() - 1);
+  for (size_t i = 0; i < count; ++i) {
+    const int k = fill[bucket[i]]++;
+    const Vec3f d = Normalized(Vec3f(samples.directions[i]));
+    const Vec3& L = samples.radiance[i];
+    const double w = samples.solid_angles[i];
+    const bool ok = std::isfinite(L.x) && std::isfinite(L.y) && std::isfinite(L.z) && L.x >= 0 && L.y >= 0 &&
+                    L.z >= 0 && std::isfinite(w) && w > 0 && std::isfinite(d.x);
+    out.x[k] = ok ? d.x : 0.0f, out.y[k] = ok ? d.y : 0.0f, out.z[k] = ok ? d.z : 1.0f;
+    out.lr[k] = ok ? static_cast<float>(L.x) : 0.0f;
+    out.lg[k] = ok ? static_cast<float>(L.y) : 0.0f;
+    out.lb[k] = ok ? static_cast<float>(L.z) : 0.0f;
+    out.omega[k] = ok ? static_cast<float>(w) : 0.0f;
   }
-  // The samples' mean spacing and the finest map they can fill.
-  const double spacing = std::sqrt(std::max(total_solid_angle, 1e-12) / static_cast<double>(count));
+  out.spacing = std::sqrt(std::max(total_solid_angle, 1e-12) / static_cast<double>(count));
+  return out;
+}
+
+// The direction of texel (col, row) of an n × n octahedral map.
+Vec3f TexelDirection(int col, int row, int n) {
+  return OctahedralDecode(2.0f * (col + 0.5f) / n - 1.0f, 2.0f * (row + 0.5f) / n - 1.0f);
+}
+
+// One n × n level of the samples filtered by the GGX lobe of width α (the
+// class comment's sums), border included.
+std::vector<float> FilterSamples(const BucketedSamples& s, double alpha, int n) {
+  constexpr int kRows = BucketedSamples::kRows, kCols = BucketedSamples::kCols;
+  const int padded = n + 2;
+  std::vector<float> rgb(size_t(padded) * padded * 3, 0.0f);
+  const float a2 = static_cast<float>(alpha * alpha);
+  // Support: angle between R and l up to 2 atan(6α) (θ_h up to atan(6α)).
+  const double reach = std::min(kPi, 2.0 * std::atan(6.0 * alpha));
+  const float cos_reach = static_cast<float>(std::cos(reach));
+  ParallelFor(
+      static_cast<size_t>(n),
+      [&](size_t row) {
+        for (int col = 0; col < n; ++col) {
+          const Vec3f R = TexelDirection(col, static_cast<int>(row), n);
+          float u, v;
+          Coordinates(R, &u, &v);
+          const double theta = kPi * v;
+          const double lo = theta - reach, hi = theta + reach;
+          const int r0 = std::max(0, static_cast<int>(std::floor(lo / kPi * kRows)));
+          const int r1 = std::min(kRows - 1, static_cast<int>(std::floor(hi / kPi * kRows)));
+          // Columns within reach: all near a pole, else |Δφ| ≤ asin(sin reach / sin θ) plus a bucket.
+          int half_cols = kCols;
+          if (lo > 0 && hi < kPi && reach < 0.5 * kPi) {
+            const double dphi = std::asin(std::min(1.0, std::sin(reach) / std::sin(theta)));
+            half_cols = static_cast<int>(std::ceil(dphi / (2.0 * kPi) * kCols)) + 1;
+          }
+          const int c_mid = std::min(kCols - 1, static_cast<int>(u * kCols));
+          const int c0 = half_cols >= kCols / 2 ? 0 : c_mid - half_cols;
+          const int c1 = half_cols >= kCols / 2 ? kCols - 1 : c_mid + half_cols;
+          float sw = 0, sr = 0, sg = 0, sb = 0;
+          for (int br = r0; br <= r1; ++br)
+            for (int bc = c0; bc <= c1; ++bc) {
+              const int b = br * kCols + ((bc % kCols) + kCols) % kCols;
+              for (int i = s.start[b]; i < s.start[b + 1]; ++i) {
+                const float c = R.x * s.x[i] + R.y * s.y[i] + R.z * s.z[i];
+                if (c < cos_reach || c <= 0.0f) continue;
+                // D(h) up to constants: 1/((n·h)²(α² − 1) + 1)², (n·h)² = (1 + c)/2.
+                const float denom = 0.5f * (1.0f + c) * (a2 - 1.0f) + 1.0f;
+                const float w = s.omega[i] * c / (denom * denom);
+                sw += w, sr += w * s.lr[i], sg += w * s.lg[i], sb += w * s.lb[i];
+              }
+            }
+          float* out = &rgb[((row + 1) * padded + col + 1) * 3];
+          if (sw > 0) out[0] = sr / sw, out[1] = sg / sw, out[2] = sb / sw;
+        }
+      },
+      1);
+  FillFoldedBorder(rgb.data(), n, 3);
+  return rgb;
+}
+
+// ∫ c / ((1 + c)/2 · (α² − 1) + 1)² dω over the directions at c = R·l in
+// [c0, 1] (the filter's weight without its Δω, integrated: the normaliser
+// that the samples' Σ w approximates). With u = 1 + k(1 + c), k = (α² − 1)/2:
+// ∫ c/u² dc = [(ln u + 1/u)/k² + 1/(k u)]; near α = 1 (k → 0) the weight
+// is c itself.
+double FilterWeightIntegral(double alpha, double c0) {
+  const double a2 = alpha * alpha, k = 0.5 * (a2 - 1.0);
+  if (std::abs(k) < 1e-3) {  // the closed form cancels; the integrand is smooth: Simpson
+    constexpr int kSteps = 64;
+    const auto f = [&](double c) {
+      const double u = 1.0 + k * (1.0 + c);
+      return c / (u * u);
+    };
+    const double h = (1.0 - c0) / kSteps;
+    double sum = f(c0) + f(1.0);
+    for (int i = 1; i < kSteps; ++i) sum += (i % 2 ? 4.0 : 2.0) * f(c0 + i * h);
+    return 2.0 * kPi * sum * h / 3.0;
+  }
+  const auto F = [&](double u) { return (std::log(u) + 1.0 / u) / (k * k) + 1.0 / (k * u); };
+  return 2.0 * kPi * (F(a2) - F(1.0 + k * (1.0 + c0)));
+}
+
+// Lobes too sharp for the samples, each as SgQuadrature directions with an
+// equal share of its integral (RGB), structure of arrays; and the sharpest
+// lobe's angular width.
+struct CompactPoints {
+  std::vector<Vec3f> axis;        // per lobe
+  std::vector<float> cos_extent;  // per lobe: its points lie within this of its axis
+  std::vector<int> first;         // per lobe + 1: offsets into the points
+  std::vector<Vec3f> d, energy;   // per point
+  double min_width = kPi;         // min over lobes of 1/√λ, radians
+};
+
+// Points per compact lobe: 64 equal shares lie ~0.4 lobe widths apart, so
+// a filter no narrower than that (a texel of the finest map) sees them as one.
+constexpr int kCompactPoints = 64;
+
+CompactPoints MakeCompactPoints(const SgMixture& lobes) {
+  CompactPoints out;
+  out.first.push_back(0);
+  for (const Sg& lobe : lobes) {
+    const Vec3 e = Integral(lobe) / static_cast<double>(kCompactPoints);
+    if (!(LuminanceOf(e) > 0.0) || !std::isfinite(LuminanceOf(e))) continue;
+    const std::vector<Vec3> q = SgQuadrature(lobe.axis, lobe.sharpness, kCompactPoints);
+    float cos_extent = 1.0f;
+    for (const Vec3& d : q) {
+      out.d.push_back(Vec3f(d));
+      out.energy.push_back(Vec3f(e));
+      cos_extent = std::min(cos_extent, static_cast<float>(Dot(d, Normalized(lobe.axis))));
+    }
+    out.axis.push_back(Vec3f(Normalized(lobe.axis)));
+    out.cos_extent.push_back(cos_extent);
+    out.first.push_back(static_cast<int>(out.d.size()));
+    out.min_width = std::min(out.min_width, 1.0 / std::sqrt(std::max(lobe.sharpness, 1e-12)));
+  }
+  return out;
+}
+
+// Adds the compact lobes filtered by the GGX lobe of width α to an n × n
+// level (border refilled): Σ_j w(R·l_j) E_j / ∫ w dω, the exact normaliser
+// (FilterWeightIntegral) in place of the samples' Σ w.
+void AddCompactLobes(const CompactPoints& points, double alpha, int n, std::vector<float>& rgb) {
+  if (points.axis.empty()) return;
+  const int padded = n + 2;
+  const float a2 = static_cast<float>(alpha * alpha);
+  const double reach = std::min(kPi, 2.0 * std::atan(6.0 * alpha));
+  const float cos_reach = static_cast<float>(std::cos(reach));
+  const float inv_norm = static_cast<float>(1.0 / FilterWeightIntegral(alpha, std::max(0.0, std::cos(reach))));
+  // A lobe whose points all lie beyond the reach of R adds nothing there.
+  std::vector<float> cos_skip(points.axis.size());
+  for (size_t k = 0; k < points.axis.size(); ++k)
+    cos_skip[k] = static_cast<float>(std::cos(std::min(kPi, reach + std::acos(double(points.cos_extent[k])))));
+  ParallelFor(
+      static_cast<size_t>(n),
+      [&](size_t row) {
+        for (int col = 0; col < n; ++col) {
+          const Vec3f R = TexelDirection(col, static_cast<int>(row), n);
+          Vec3f sum;
+          for (size_t k = 0; k < points.axis.size(); ++k) {
+            if (Dot(R, points.axis[k]) < cos_skip[k]) continue;
+            for (int j = points.first[k]; j < points.first[k + 1]; ++j) {
+              const float c = Dot(R, points.d[j]);
+              if (c < cos_reach || c <= 0.0f) continue;
+              const float denom = 0.5f * (1.0f + c) * (a2 - 1.0f) + 1.0f;
+              sum += points.energy[j] * (c / (denom * denom));
+            }
+          }
+          float* out = &rgb[((row + 1) * padded + col + 1) * 3];
+          out[0] += sum.x * inv_norm, out[1] += sum.y * inv_norm, out[2] += sum.z * inv_norm;
+        }
+      },
+      16);
+  FillFoldedBorder(rgb.data(), n, 3);
+}
+
+// An n × n map read bilinearly from a coarser one (coarse_n × coarse_n),
+// border included: the samples' smooth part of a level made finer for its
+// compact lobes.
+std::vector<float> Upsample(const std::vector<float>& coarse, int coarse_n, int n) {
+  const int padded = n + 2;
+  std::vector<float> rgb(size_t(padded) * padded * 3, 0.0f);
+  ParallelFor(
+      static_cast<size_t>(n),
+      [&](size_t row) {
+        for (int col = 0; col < n; ++col) {
+          const Vec3f R = TexelDirection(col, static_cast<int>(row), n);
+          float a, b;
+          OctahedralEncode(R.x, R.y, R.z, &a, &b);
+          float* out = &rgb[((row + 1) * padded + col + 1) * 3];
+          AddLevel(coarse.data(), coarse_n, static_cast<float>(coarse_n), a, b, 1.0f, out);
+        }
+      },
+      16);
+  FillFoldedBorder(rgb.data(), n, 3);
+  return rgb;
+}
+
+}  // namespace
+
+PrefilteredRadiance::PrefilteredRadiance(const RadianceSamples& samples, int levels, const SgMixture& compact) {
+  const size_t count = samples.size();
+  if (count == 0 || levels < 2 || samples.radiance.size() != count || samples.solid_angles.size() != count) return;
+  const BucketedSamples bucketed = BucketSamples(samples);
+  const CompactPoints points = MakeCompactPoints(compact);
+  // The finest map the samples can fill.
+  const double spacing = bucketed.spacing;
   const int finest = std::max(8, static_cast<int>(std::ceil(kPi / spacing)));
   levels_.resize(levels);
   for (int k = 0; k < levels; ++k) {
     const double r = double(k) / (levels - 1);
     const double alpha_brdf = std::max(r * r, kMinAlpha);
     const double alpha = std::sqrt(alpha_brdf * alpha_brdf + 0.25 * spacing * spacing);
-    const float a2 = static_cast<float>(alpha * alpha);
-    Level& level = levels_[k];
     // n = 1.5 × the rows of an equirect map of α-wide texels: the largest
     // texel (at the octahedron's vertices) is 2/n = 1.33/rows rad wide, finer
     // than that map's equator (π/rows).
     const int equirect_rows = std::clamp(static_cast<int>(std::ceil(kPi / alpha)), 8, finest);
-    const int n = (3 * equirect_rows + 1) / 2, padded = n + 2;
-    level.size = n, level.fsize = static_cast<float>(n);
-    level.rgb.assign(size_t(padded) * padded * 3, 0.0f);
-    // Support: angle between R and l up to 2 atan(6α) (θ_h up to atan(6α)).
-    const double reach = std::min(kPi, 2.0 * std::atan(6.0 * alpha));
-    const float cos_reach = static_cast<float>(std::cos(reach));
-    ParallelFor(
-        static_cast<size_t>(n),
-        [&](size_t row) {
-          for (int col = 0; col < n; ++col) {
-            const Vec3f R = OctahedralDecode(2.0f * (col + 0.5f) / n - 1.0f, 2.0f * (row + 0.5f) / n - 1.0f);
-            float u, v;
-            Coordinates(R, &u, &v);
-            const double theta = kPi * v;
-            const double lo = theta - reach, hi = theta + reach;
-            const int r0 = std::max(0, static_cast<int>(std::floor(lo / kPi * kRows)));
-            const int r1 = std::min(kRows - 1, static_cast<int>(std::floor(hi / kPi * kRows)));
-            // Columns within reach: all near a pole, else |Δφ| ≤ asin(sin reach / sin θ) plus a bucket.
-            int half_cols = kCols;
-            if (lo > 0 && hi < kPi && reach < 0.5 * kPi) {
-              const double dphi = std::asin(std::min(1.0, std::sin(reach) / std::sin(theta)));
-              half_cols = static_cast<int>(std::ceil(dphi / (2.0 * kPi) * kCols)) + 1;
-            }
-            const int c_mid = std::min(kCols - 1, static_cast<int>(u * kCols));
-            const int c0 = half_cols >= kCols / 2 ? 0 : c_mid - half_cols;
-            const int c1 = half_cols >= kCols / 2 ? kCols - 1 : c_mid + half_cols;
-            float sw = 0, sr = 0, sg = 0, sb = 0;
-            for (int br = r0; br <= r1; ++br)
-              for (int bc = c0; bc <= c1; ++bc) {
-                const int b = br * kCols + ((bc % kCols) + kCols) % kCols;
-                for (int i = start[b]; i < start[b + 1]; ++i) {
-                  const float c = R.x * x[i] + R.y * y[i] + R.z * z[i];
-                  if (c < cos_reach || c <= 0.0f) continue;
-                  // D(h) up to constants: 1/((n·h)²(α² − 1) + 1)², (n·h)² = (1 + c)/2.
-                  const float denom = 0.5f * (1.0f + c) * (a2 - 1.0f) + 1.0f;
-                  const float w = omega[i] * c / (denom * denom);
-                  sw += w, sr += w * lr[i], sg += w * lg[i], sb += w * lb[i];
-                }
-              }
-            float* out = &level.rgb[((row + 1) * padded + col + 1) * 3];
-            if (sw > 0) out[0] = sr / sw, out[1] = sg / sw, out[2] = sb / sw;
-          }
-        },
-        1);
-    FillFoldedBorder(level.rgb.data(), n, 3);
+    const int n_samples = (3 * equirect_rows + 1) / 2;
+    std::vector<float> rgb = FilterSamples(bucketed, alpha, n_samples);
+    int n = n_samples;
+    if (!points.axis.empty()) {
+      // Compact lobes: a map fine enough for the sharpest one's reflection,
+      // whose width is about the filter's and half the lobe's: its texels,
+      // 2√3/n rad at the octahedron's face centres (where they are widest),
+      // a third of that (bilinear reads then keep a peak within ~2 %), at
+      // most kMaxCompactSize a side; the samples' part read from their own
+      // map; each lobe filtered with the BRDF's α widened only by a texel.
+      const double width = std::sqrt(alpha_brdf * alpha_brdf + 0.25 * points.min_width * points.min_width);
+      n = std::max(n_samples, std::min(static_cast<int>(std::ceil(6.0 * std::sqrt(3.0) / width)), kMaxCompactSize));
+      if (n != n_samples) rgb = Upsample(rgb, n_samples, n);
+      AddCompactLobes(points, std::sqrt(alpha_brdf * alpha_brdf + 1.0 / (double(n) * n)), n, rgb);
+    }
+    levels_[k].size = n;
+    levels_[k].fsize = static_cast<float>(n);
+    levels_[k].rgb = std::move(rgb);
   }
 }
 
@@ -350,25 +532,6 @@ PrefilteredRadiance::Prepared PrefilteredRadiance::Prepare(float rough) const {
   }
   return p;
 }
-
-namespace {
-
-// Adds w times the bilinear value of one level at octahedral (a, b) in
-// [−1, 1]² to acc: the level blend folded into the four texel weights; the
-// padded border makes every read in range (NaN reads texel 0). Inlined into
-// the look-up (a call per level was a fifth of a pixel's instructions).
-inline void AddLevel(const float* rgb, int size, float fsize, float a, float b, float w, float* acc) {
-  int x0, y0;
-  float ax, ay;
-  BilinearAt(a, b, size, fsize, &x0, &y0, &ax, &ay);
-  const float* p00 = rgb + (size_t(y0) * (size + 2) + x0) * 3;
-  const float* p10 = p00 + size_t(size + 2) * 3;
-  const float t = w * (1 - ay), u = w * ay;
-  const float w00 = t * (1 - ax), w01 = t * ax, w10 = u * (1 - ax), w11 = u * ax;
-  for (int c = 0; c < 3; ++c) acc[c] += w00 * p00[c] + w01 * p00[3 + c] + w10 * p10[c] + w11 * p10[3 + c];
-}
-
-}  // namespace
 
 Vec3f PrefilteredRadiance::Lookup(const Vec3f& d, const Prepared& p) const {
   float a, b;

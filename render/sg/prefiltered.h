@@ -70,7 +70,14 @@ class PrefilteredRadiance {
   PrefilteredRadiance() = default;
   // Runs over ParallelFor. Samples with a non-finite or negative value or
   // solid angle count as black; no samples or levels < 2: empty().
-  PrefilteredRadiance(const RadianceSamples& samples, int levels);
+  // `compact`: lobes sharper than the samples resolve, given apart (a sun
+  // passed analytically, render/insert): each filtered through 64
+  // directions of equal share (SgQuadrature) with the BRDF's own α widened
+  // by the map's texel only, not by the samples' spacing; the levels are
+  // then made fine enough for the sharpest lobe's reflection (texels a
+  // third of its width, at most 384 a side), the samples' part read
+  // bilinearly from their own map.
+  PrefilteredRadiance(const RadianceSamples& samples, int levels, const SgMixture& compact = {});
   bool empty() const { return levels_.empty(); }
   int level_count() const { return static_cast<int>(levels_.size()); }
   // Prefiltered radiance around unit direction d for roughness r in [0, 1]:

@@ -90,6 +90,26 @@ Sg CosineLobe(const Vec3& normal) {
   return {normal, kCosineLobeSharpness, Vec3(kCosineLobeAmplitude, kCosineLobeAmplitude, kCosineLobeAmplitude)};
 }
 
+std::vector<Vec3> SgQuadrature(const Vec3& axis, double sharpness, int count) {
+  std::vector<Vec3> out;
+  const Vec3 p = Normalized(axis);
+  if (count < 1 || !(Length(p) > 0.5)) return out;
+  const Vec3 a = std::abs(p.x) < 0.9 ? Vec3{1, 0, 0} : Vec3{0, 1, 0};
+  const Vec3 t1 = Normalized(Cross(p, a)), t2 = Cross(p, t1);
+  const double golden = kPi * (3.0 - std::sqrt(5.0));
+  const double lambda = std::max(sharpness, 1e-12);
+  out.reserve(count);
+  for (int j = 0; j < count; ++j) {
+    const double u = (j + 0.5) / count;
+    // 1 − cos θ = −log1p(u·expm1(−2λ))/λ ∈ [0, 2]: no cancellation for sharp lobes.
+    const double one_minus_c = std::clamp(-std::log1p(u * std::expm1(-2.0 * lambda)) / lambda, 0.0, 2.0);
+    const double sin_t = std::sqrt(std::max(0.0, one_minus_c * (2.0 - one_minus_c)));
+    const double phi = golden * j;
+    out.push_back(Normalized(p * (1.0 - one_minus_c) + (t1 * std::cos(phi) + t2 * std::sin(phi)) * sin_t));
+  }
+  return out;
+}
+
 double LuminanceOf(const Vec3& rgb) { return 0.2126 * rgb.x + 0.7152 * rgb.y + 0.0722 * rgb.z; }
 
 }  // namespace nerfar

@@ -60,6 +60,14 @@ inline constexpr double kCosineLobeSharpness = 2.133;
 inline constexpr double kCosineLobeAmplitude = 1.170;
 Sg CosineLobe(const Vec3& normal);
 
+// `count` directions distributed as the lobe itself (its shape
+// exp(λ(v·p − 1)) as a density on the sphere), each standing for an equal
+// share of its integral: cos θ_j by the exact inverse of the distribution,
+// c = 1 + log1p(u_j·expm1(−2λ))/λ at u_j = (j + ½)/count, azimuths by the
+// golden angle. A quadrature for what a lobe sharper than a sampling's
+// spacing reaches (its transmittance, its reflection). count ≥ 1.
+std::vector<Vec3> SgQuadrature(const Vec3& axis, double sharpness, int count);
+
 // Luminance weights (Rec. 709) used to reduce RGB amplitudes to one number.
 double LuminanceOf(const Vec3& rgb);
 

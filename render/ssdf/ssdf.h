@@ -183,7 +183,8 @@ class SsdfBatch {
 
 // ---------------------------------------------------------------- the file
 // Binary, little-endian: magic "NERFSSDF", version, sizes, geometry, mesh
-// reference, bounds, material, options, float32 arrays, FNV-1a checksum.
+// reference, bounds, material, options, float32 arrays, checksum (the
+// container of calib/core/binary_file.h).
 inline constexpr uint32_t kSsdfFileVersion = 1;
 
 std::string SerializeSsdf(const SsdfField& field);

@@ -113,6 +113,17 @@ bool BoxOverlapsRay(const Box3& b, const Vec3f& o, const Vec3f& inv_d, float t_m
   return t0 <= t1;
 }
 
+// Environment sampling: piecewise-constant density over the equirect (u, v) square,
+// weights = luminance * sin(theta) plus a floor so every direction with radiance has a
+// positive density.
+struct EnvSampling {
+  int w = 0, h = 0;
+  std::vector<float> row_cdf;   // h + 1
+  std::vector<float> col_cdf;   // h * (w + 1)
+  std::vector<float> row_mass;  // probability of each row
+  std::vector<float> cell_pdf;  // probability of each cell (row-major)
+};
+
 }  // namespace
 
 Vec3 EquirectDirection(double u, double v) {
@@ -127,16 +138,9 @@ void EquirectCoordinates(const Vec3& d, double& u, double& v) {
 }
 
 struct Scene::Accel {
-  std::vector<Prim> prims;
-  std::vector<Node> nodes;
-  // Environment sampling: piecewise-constant density over the equirect
-  // (u, v) square, weights = luminance * sin(theta) plus a floor so every
-  // direction with radiance has a positive density.
-  int env_w = 0, env_h = 0;
-  std::vector<float> env_row_cdf;   // env_h + 1
-  std::vector<float> env_col_cdf;   // env_h * (env_w + 1)
-  std::vector<float> env_row_mass;  // probability of each row
-  std::vector<float> env_cell_pdf;  // probability of each cell (row-major)
+  std::vector<Prim> prims;  // in the order the BVH's leaves index
+  std::vector<Node> nodes;  // nodes[0] is the root
+  EnvSampling env;
 };
 
 Scene::Scene() = default;
@@ -212,27 +216,28 @@ Scene Scene::WithoutObject(int object_id) const {
   return copy;
 }
 
-void Scene::Build() {
-  for (const auto& m : materials) NERFAR_CHECK_LT(m.texture, static_cast<int>(textures.size()));
-  auto accel = std::make_unique<Accel>();
-  std::vector<Prim>& prims = accel->prims;
-  std::vector<Box3> bounds;
+namespace {
+
+// Every shape's primitives (a mesh: one per triangle) with their bounding boxes, padded so that
+// the slab tests of flat boxes (rectangles, axis-aligned triangles) are robust.
+void CollectPrimitives(const Scene& scene, std::vector<Prim>& prims, std::vector<Box3>& bounds) {
+  const int materials = static_cast<int>(scene.materials.size());
   auto add = [&](Kind kind, size_t shape, size_t triangle, const Box3& b) {
     prims.push_back({kind, static_cast<uint32_t>(shape), static_cast<uint32_t>(triangle)});
     bounds.push_back(b);
   };
-  for (size_t i = 0; i < spheres.size(); ++i) {
-    const auto& s = spheres[i];
-    NERFAR_CHECK_LT(s.material, static_cast<int>(materials.size()));
+  for (size_t i = 0; i < scene.spheres.size(); ++i) {
+    const auto& s = scene.spheres[i];
+    NERFAR_CHECK_LT(s.material, materials);
     const Vec3f r{s.radius, s.radius, s.radius};
     Box3 b;
     b.Grow(s.center - r);
     b.Grow(s.center + r);
     add(Kind::kSphere, i, 0, b);
   }
-  for (size_t i = 0; i < boxes.size(); ++i) {
-    const auto& s = boxes[i];
-    NERFAR_CHECK_LT(s.material, static_cast<int>(materials.size()));
+  for (size_t i = 0; i < scene.boxes.size(); ++i) {
+    const auto& s = scene.boxes[i];
+    NERFAR_CHECK_LT(s.material, materials);
     const float c = std::cos(s.yaw_rad), sn = std::sin(s.yaw_rad);
     Box3 b;
     for (int k = 0; k < 8; ++k) {
@@ -242,25 +247,25 @@ void Scene::Build() {
     }
     add(Kind::kBox, i, 0, b);
   }
-  for (size_t i = 0; i < cylinders.size(); ++i) {
-    const auto& s = cylinders[i];
-    NERFAR_CHECK_LT(s.material, static_cast<int>(materials.size()));
+  for (size_t i = 0; i < scene.cylinders.size(); ++i) {
+    const auto& s = scene.cylinders[i];
+    NERFAR_CHECK_LT(s.material, materials);
     Box3 b;
     b.Grow(s.base_center - Vec3f{s.radius, s.radius, 0});
     b.Grow(s.base_center + Vec3f{s.radius, s.radius, s.height});
     add(Kind::kCylinder, i, 0, b);
   }
-  for (size_t i = 0; i < rectangles.size(); ++i) {
-    const auto& s = rectangles[i];
-    NERFAR_CHECK_LT(s.material, static_cast<int>(materials.size()));
+  for (size_t i = 0; i < scene.rectangles.size(); ++i) {
+    const auto& s = scene.rectangles[i];
+    NERFAR_CHECK_LT(s.material, materials);
     Box3 b;
     for (int k = 0; k < 4; ++k)
       b.Grow(s.center + s.u_axis * ((k & 1) ? s.half_u : -s.half_u) + s.v_axis * ((k & 2) ? s.half_v : -s.half_v));
     add(Kind::kRectangle, i, 0, b);
   }
-  for (size_t i = 0; i < meshes.size(); ++i) {
-    const auto& m = meshes[i];
-    NERFAR_CHECK_LT(m.material, static_cast<int>(materials.size()));
+  for (size_t i = 0; i < scene.meshes.size(); ++i) {
+    const auto& m = scene.meshes[i];
+    NERFAR_CHECK_LT(m.material, materials);
     NERFAR_CHECK(m.normals.empty() || m.normals.size() == m.positions.size());
     for (size_t t = 0; t < m.triangles.size(); ++t) {
       Box3 b;
@@ -271,24 +276,88 @@ void Scene::Build() {
       add(Kind::kTriangle, i, t, b);
     }
   }
-  // Pad flat boxes (rectangles, axis-aligned triangles) so slab tests are robust.
   for (Box3& b : bounds) {
     b.lo -= Vec3f{1e-6f, 1e-6f, 1e-6f};
     b.hi += Vec3f{1e-6f, 1e-6f, 1e-6f};
   }
+}
 
-  // Binned SAH build, iterative.
-  std::vector<Node>& nodes = accel->nodes;
-  std::vector<uint32_t> order(prims.size());
+constexpr int kSahBins = 12;
+constexpr uint32_t kMaxLeafSize = 4;      // more primitives than this: try an SAH split
+constexpr uint32_t kMedianSplitSize = 8;  // more than this and no SAH split helps: split at the median
+
+// A split of a node's primitives: by centroid along axis, below position to the left.
+struct Split {
+  int axis = -1;  // -1: none is cheaper than the leaf
+  float position = 0;
+};
+
+// The binned SAH split of primitives order[begin, end) (box: their bounds, centroids: their
+// centroids' bounds) that is cheaper than a leaf, if there is one.
+Split FindSahSplit(const std::vector<Box3>& bounds, const std::vector<uint32_t>& order, uint32_t begin, uint32_t end,
+                   const Box3& box, const Box3& centroids) {
+  Split best;
+  float best_cost = static_cast<float>(end - begin) * box.Area();
+  for (int axis = 0; axis < 3; ++axis) {
+    const float lo = centroids.lo[axis], hi = centroids.hi[axis];
+    if (!(hi > lo)) continue;
+    Box3 bin_box[kSahBins];
+    int bin_count[kSahBins] = {};
+    const float scale = kSahBins / (hi - lo);
+    for (uint32_t i = begin; i < end; ++i) {
+      const int bin = std::min(kSahBins - 1, static_cast<int>((bounds[order[i]].Center()[axis] - lo) * scale));
+      bin_box[bin].Grow(bounds[order[i]]);
+      ++bin_count[bin];
+    }
+    float right_area[kSahBins];
+    int right_count[kSahBins];
+    Box3 acc;
+    int n = 0;
+    for (int b = kSahBins - 1; b > 0; --b) {
+      acc.Grow(bin_box[b]);
+      n += bin_count[b];
+      right_area[b] = acc.Area();
+      right_count[b] = n;
+    }
+    acc = Box3();
+    n = 0;
+    for (int b = 0; b < kSahBins - 1; ++b) {
+      acc.Grow(bin_box[b]);
+      n += bin_count[b];
+      if (n == 0 || right_count[b + 1] == 0) continue;
+      const float cost = 0.5f * box.Area() + n * acc.Area() + right_count[b + 1] * right_area[b + 1];
+      if (cost < best_cost) {
+        best_cost = cost;
+        best.axis = axis;
+        best.position = lo + (b + 1) / scale;
+      }
+    }
+  }
+  return best;
+}
+
+// The bounding-volume hierarchy over the primitives' boxes (binned SAH, iterative): the nodes
+// (root first; an inner node's children are adjacent) and the primitive order its leaves index.
+void BuildBvh(const std::vector<Box3>& bounds, std::vector<Node>& nodes, std::vector<uint32_t>& order) {
+  order.resize(bounds.size());
   for (size_t i = 0; i < order.size(); ++i) order[i] = static_cast<uint32_t>(i);
-  nodes.reserve(2 * prims.size() + 1);
+  nodes.reserve(2 * bounds.size() + 1);
   nodes.push_back({});
   struct Task {
     uint32_t node, begin, end;
   };
   std::vector<Task> stack;
-  if (!prims.empty()) stack.push_back({0, 0, static_cast<uint32_t>(prims.size())});
-  constexpr int kBins = 12;
+  if (!bounds.empty()) stack.push_back({0, 0, static_cast<uint32_t>(bounds.size())});
+  // Node `task.node` becomes inner with children over [begin, mid) and [mid, end).
+  auto split_at = [&](const Task& task, uint32_t mid) {
+    const uint32_t left = static_cast<uint32_t>(nodes.size());
+    nodes[task.node].first = left;
+    nodes[task.node].count = 0;
+    nodes.push_back({});
+    nodes.push_back({});
+    stack.push_back({left, task.begin, mid});
+    stack.push_back({left + 1, mid, task.end});
+  };
   while (!stack.empty()) {
     const Task task = stack.back();
     stack.pop_back();
@@ -300,143 +369,103 @@ void Scene::Build() {
     Node& node = nodes[task.node];
     node.box = box;
     const uint32_t count = task.end - task.begin;
-    int best_axis = -1;
-    float best_split = 0, best_cost = static_cast<float>(count) * box.Area();
-    if (count > 4) {
-      for (int axis = 0; axis < 3; ++axis) {
-        const float lo = centroids.lo[axis], hi = centroids.hi[axis];
-        if (!(hi > lo)) continue;
-        Box3 bin_box[kBins];
-        int bin_count[kBins] = {};
-        const float scale = kBins / (hi - lo);
-        for (uint32_t i = task.begin; i < task.end; ++i) {
-          const int bin = std::min(kBins - 1, static_cast<int>((bounds[order[i]].Center()[axis] - lo) * scale));
-          bin_box[bin].Grow(bounds[order[i]]);
-          ++bin_count[bin];
-        }
-        float right_area[kBins];
-        int right_count[kBins];
-        Box3 acc;
-        int n = 0;
-        for (int b = kBins - 1; b > 0; --b) {
-          acc.Grow(bin_box[b]);
-          n += bin_count[b];
-          right_area[b] = acc.Area();
-          right_count[b] = n;
-        }
-        acc = Box3();
-        n = 0;
-        for (int b = 0; b < kBins - 1; ++b) {
-          acc.Grow(bin_box[b]);
-          n += bin_count[b];
-          if (n == 0 || right_count[b + 1] == 0) continue;
-          const float cost = 0.5f * box.Area() + n * acc.Area() + right_count[b + 1] * right_area[b + 1];
-          if (cost < best_cost) {
-            best_cost = cost;
-            best_axis = axis;
-            best_split = lo + (b + 1) / scale;
-          }
-        }
-      }
-    }
-    if (best_axis < 0) {
-      if (count > 8) {  // no useful SAH split: median split keeps leaves small
-        best_axis = 0;
-        const Vec3f ext = centroids.hi - centroids.lo;
-        if (ext.y > ext.x) best_axis = 1;
-        if (ext.z > ext[best_axis]) best_axis = 2;
-        const uint32_t mid = task.begin + count / 2;
-        std::nth_element(
-            order.begin() + task.begin, order.begin() + mid, order.begin() + task.end,
-            [&](uint32_t a, uint32_t b) { return bounds[a].Center()[best_axis] < bounds[b].Center()[best_axis]; });
-        const uint32_t left = static_cast<uint32_t>(nodes.size());
-        nodes[task.node].first = left;
-        nodes[task.node].count = 0;
-        nodes.push_back({});
-        nodes.push_back({});
-        stack.push_back({left, task.begin, mid});
-        stack.push_back({left + 1, mid, task.end});
-        continue;
-      }
+    const Split split =
+        count > kMaxLeafSize ? FindSahSplit(bounds, order, task.begin, task.end, box, centroids) : Split{};
+    if (split.axis >= 0) {
+      auto mid_it = std::partition(order.begin() + task.begin, order.begin() + task.end,
+                                   [&](uint32_t p) { return bounds[p].Center()[split.axis] < split.position; });
+      const uint32_t mid = static_cast<uint32_t>(mid_it - order.begin());
+      NERFAR_CHECK(mid > task.begin && mid < task.end);
+      split_at(task, mid);
+    } else if (count > kMedianSplitSize) {
+      // No useful SAH split: a median split along the centroids' longest axis keeps leaves small.
+      int axis = 0;
+      const Vec3f ext = centroids.hi - centroids.lo;
+      if (ext.y > ext.x) axis = 1;
+      if (ext.z > ext[axis]) axis = 2;
+      const uint32_t mid = task.begin + count / 2;
+      std::nth_element(order.begin() + task.begin, order.begin() + mid, order.begin() + task.end,
+                       [&](uint32_t a, uint32_t b) { return bounds[a].Center()[axis] < bounds[b].Center()[axis]; });
+      split_at(task, mid);
+    } else {
       node.first = task.begin;
       node.count = count;
-      continue;
     }
-    auto mid_it = std::partition(order.begin() + task.begin, order.begin() + task.end,
-                                 [&](uint32_t p) { return bounds[p].Center()[best_axis] < best_split; });
-    const uint32_t mid = static_cast<uint32_t>(mid_it - order.begin());
-    NERFAR_CHECK(mid > task.begin && mid < task.end);
-    const uint32_t left = static_cast<uint32_t>(nodes.size());
-    nodes[task.node].first = left;
-    nodes[task.node].count = 0;
-    nodes.push_back({});
-    nodes.push_back({});
-    stack.push_back({left, task.begin, mid});
-    stack.push_back({left + 1, mid, task.end});
   }
-  std::vector<Prim> ordered(prims.size());
-  for (size_t i = 0; i < order.size(); ++i) ordered[i] = prims[order[i]];
-  prims.swap(ordered);
-  if (prims.empty()) nodes[0].box = Box3();
+}
 
-  // Environment sampling table, 512 x 256 cells.
-  if (environment.Present()) {
-    const int w = 512, h = 256;
-    accel->env_w = w;
-    accel->env_h = h;
-    accel_ = std::move(accel);  // EnvironmentRadiance needs no accel, but keep one owner
-    std::vector<double> weights(static_cast<size_t>(w) * h);
-    double total = 0;
-    for (int j = 0; j < h; ++j) {
-      const double sin_theta = std::sin(kPi * (j + 0.5) / h);
-      for (int i = 0; i < w; ++i) {
-        // Max over a 2x2 sub-grid so small bright features are not missed.
-        double lum = 0;
-        for (int s = 0; s < 4; ++s) {
-          const Vec3 d = EquirectDirection((i + 0.25 + 0.5 * (s & 1)) / w, (j + 0.25 + 0.5 * (s >> 1)) / h);
-          const Vec3f l = EnvironmentRadiance(Vec3f(d));
-          lum = std::max(lum, 0.2126 * l.x + 0.7152 * l.y + 0.0722 * l.z);
-        }
-        weights[static_cast<size_t>(j) * w + i] = lum * sin_theta;
-        total += lum * sin_theta;
+// The environment's sampling table over w x h cells of the equirect square.
+EnvSampling BuildEnvSampling(const Scene& scene, int w, int h) {
+  std::vector<double> weights(static_cast<size_t>(w) * h);
+  double total = 0;
+  for (int j = 0; j < h; ++j) {
+    const double sin_theta = std::sin(kPi * (j + 0.5) / h);
+    for (int i = 0; i < w; ++i) {
+      // Max over a 2x2 sub-grid so small bright features are not missed.
+      double lum = 0;
+      for (int s = 0; s < 4; ++s) {
+        const Vec3 d = EquirectDirection((i + 0.25 + 0.5 * (s & 1)) / w, (j + 0.25 + 0.5 * (s >> 1)) / h);
+        const Vec3f l = scene.EnvironmentRadiance(Vec3f(d));
+        lum = std::max(lum, 0.2126 * l.x + 0.7152 * l.y + 0.0722 * l.z);
       }
+      weights[static_cast<size_t>(j) * w + i] = lum * sin_theta;
+      total += lum * sin_theta;
     }
-    // Floor: 20% of the mean, spread like sin(theta), so surfaces that only see the
-    // dim sky (not a bright window) still get samples of it.
-    const double floor_w = 0.2 * std::max(total, 1e-12) / (static_cast<double>(w) * h);
-    total = 0;
-    for (int j = 0; j < h; ++j) {
-      const double sin_theta = std::sin(kPi * (j + 0.5) / h);
-      for (int i = 0; i < w; ++i) {
-        double& x = weights[static_cast<size_t>(j) * w + i];
-        x += floor_w * sin_theta;
-        total += x;
-      }
-    }
-    Accel& a = *accel_;
-    a.env_row_cdf.assign(h + 1, 0);
-    a.env_col_cdf.assign(static_cast<size_t>(h) * (w + 1), 0);
-    a.env_row_mass.assign(h, 0);
-    a.env_cell_pdf.assign(static_cast<size_t>(w) * h, 0);
-    double row_acc = 0;
-    for (int j = 0; j < h; ++j) {
-      double row_sum = 0;
-      for (int i = 0; i < w; ++i) row_sum += weights[static_cast<size_t>(j) * w + i];
-      double col_acc = 0;
-      for (int i = 0; i < w; ++i) {
-        const double x = weights[static_cast<size_t>(j) * w + i];
-        col_acc += x;
-        a.env_col_cdf[static_cast<size_t>(j) * (w + 1) + i + 1] = static_cast<float>(col_acc / row_sum);
-        a.env_cell_pdf[static_cast<size_t>(j) * w + i] = static_cast<float>(x / total);
-      }
-      a.env_col_cdf[static_cast<size_t>(j) * (w + 1) + w] = 1.0f;
-      row_acc += row_sum;
-      a.env_row_mass[j] = static_cast<float>(row_sum / total);
-      a.env_row_cdf[j + 1] = static_cast<float>(row_acc / total);
-    }
-    a.env_row_cdf[h] = 1.0f;
-    return;
   }
+  // Floor: 20% of the mean, spread like sin(theta), so surfaces that only see the
+  // dim sky (not a bright window) still get samples of it.
+  const double floor_w = 0.2 * std::max(total, 1e-12) / (static_cast<double>(w) * h);
+  total = 0;
+  for (int j = 0; j < h; ++j) {
+    const double sin_theta = std::sin(kPi * (j + 0.5) / h);
+    for (int i = 0; i < w; ++i) {
+      double& x = weights[static_cast<size_t>(j) * w + i];
+      x += floor_w * sin_theta;
+      total += x;
+    }
+  }
+  EnvSampling a;
+  a.w = w;
+  a.h = h;
+  a.row_cdf.assign(h + 1, 0);
+  a.col_cdf.assign(static_cast<size_t>(h) * (w + 1), 0);
+  a.row_mass.assign(h, 0);
+  a.cell_pdf.assign(static_cast<size_t>(w) * h, 0);
+  double row_acc = 0;
+  for (int j = 0; j < h; ++j) {
+    double row_sum = 0;
+    for (int i = 0; i < w; ++i) row_sum += weights[static_cast<size_t>(j) * w + i];
+    double col_acc = 0;
+    for (int i = 0; i < w; ++i) {
+      const double x = weights[static_cast<size_t>(j) * w + i];
+      col_acc += x;
+      a.col_cdf[static_cast<size_t>(j) * (w + 1) + i + 1] = static_cast<float>(col_acc / row_sum);
+      a.cell_pdf[static_cast<size_t>(j) * w + i] = static_cast<float>(x / total);
+    }
+    a.col_cdf[static_cast<size_t>(j) * (w + 1) + w] = 1.0f;
+    row_acc += row_sum;
+    a.row_mass[j] = static_cast<float>(row_sum / total);
+    a.row_cdf[j + 1] = static_cast<float>(row_acc / total);
+  }
+  a.row_cdf[h] = 1.0f;
+  return a;
+}
+
+}  // namespace
+
+void Scene::Build() {
+  for (const auto& m : materials) NERFAR_CHECK_LT(m.texture, static_cast<int>(textures.size()));
+  auto accel = std::make_unique<Accel>();
+  std::vector<Box3> bounds;
+  CollectPrimitives(*this, accel->prims, bounds);
+  std::vector<uint32_t> order;
+  BuildBvh(bounds, accel->nodes, order);
+  std::vector<Prim> ordered(order.size());
+  for (size_t i = 0; i < order.size(); ++i) ordered[i] = accel->prims[order[i]];
+  accel->prims.swap(ordered);
+  if (accel->prims.empty()) accel->nodes[0].box = Box3();
+  // The sampling table: 512 x 256 cells (the window scene's sky map has as many texels).
+  if (environment.Present()) accel->env = BuildEnvSampling(*this, 512, 256);
   accel_ = std::move(accel);
 }
 
@@ -817,15 +846,14 @@ LightSample Scene::SampleLight(int index, const Vec3f& x, float u1, float u2, fl
     return out;
   }
   // Environment: piecewise-constant over the equirect (u, v) square.
-  const Accel& a = *accel_;
-  const int h = a.env_h, w = a.env_w;
-  int row =
-      static_cast<int>(std::upper_bound(a.env_row_cdf.begin(), a.env_row_cdf.end(), u1) - a.env_row_cdf.begin()) - 1;
+  const EnvSampling& a = accel_->env;
+  const int h = a.h, w = a.w;
+  int row = static_cast<int>(std::upper_bound(a.row_cdf.begin(), a.row_cdf.end(), u1) - a.row_cdf.begin()) - 1;
   row = std::clamp(row, 0, h - 1);
-  while (row < h - 1 && a.env_row_mass[row] <= 0) ++row;
-  const float row_lo = a.env_row_cdf[row], row_mass = std::max(a.env_row_mass[row], 1e-30f);
+  while (row < h - 1 && a.row_mass[row] <= 0) ++row;
+  const float row_lo = a.row_cdf[row], row_mass = std::max(a.row_mass[row], 1e-30f);
   const float fv = std::clamp((u1 - row_lo) / row_mass, 0.0f, 1.0f);
-  const float* cdf = a.env_col_cdf.data() + static_cast<size_t>(row) * (w + 1);
+  const float* cdf = a.col_cdf.data() + static_cast<size_t>(row) * (w + 1);
   int col = static_cast<int>(std::upper_bound(cdf, cdf + w + 1, u2) - cdf) - 1;
   col = std::clamp(col, 0, w - 1);
   const float col_mass = std::max(cdf[col + 1] - cdf[col], 1e-30f);
@@ -834,7 +862,7 @@ LightSample Scene::SampleLight(int index, const Vec3f& x, float u1, float u2, fl
   const Vec3 d = EquirectDirection(u, v);
   const double sin_theta = std::sin(kPi * v);
   if (sin_theta <= 1e-7) return out;
-  const double pdf_uv = static_cast<double>(a.env_cell_pdf[static_cast<size_t>(row) * w + col]) * w * h;
+  const double pdf_uv = static_cast<double>(a.cell_pdf[static_cast<size_t>(row) * w + col]) * w * h;
   out.wi = Vec3f(d);
   out.distance = kInf;
   out.radiance = EnvironmentRadiance(out.wi);

@@ -146,6 +146,170 @@ Dataset MakeDataset(const SynthScene& synth, const CameraIntrinsics& camera, con
   return dataset;
 }
 
+// What every part of the dataset is rendered from: the scene, its cameras and the render settings.
+struct SynthPlan {
+  SynthScene synth;
+  CameraIntrinsics camera;
+  std::vector<Pose> train, test;
+  Dataset train_set;     // the training views' file names and poses
+  RenderOptions render;  // train and test views; insert renders and probes change the spp
+};
+
+// The progress log, with work counted in pixel-samples so that the ETA weighs each render by its spp.
+class WorkMeter {
+ public:
+  WorkMeter(const SynthOptions& options, size_t n_objects) : progress_("synth " + options.scene, 1000) {
+    view_cost_ = static_cast<double>(options.width) * options.height;
+    total_ = view_cost_ * options.spp * (options.views + options.test_views) +
+             view_cost_ * options.insert_spp * options.test_views * (1 + n_objects) +
+             static_cast<double>(kEnvWidth) * kEnvHeight * options.probe_spp * n_objects;
+  }
+  void View(int spp) { Advance(view_cost_ * spp); }
+  void Probe(int spp) { Advance(static_cast<double>(kEnvWidth) * kEnvHeight * spp); }
+  void Finish(const std::string& line) { progress_.Finish(line); }
+
+ private:
+  void Advance(double cost) {
+    done_ += cost;
+    progress_.Update(static_cast<size_t>(std::min(1000.0, 1000.0 * done_ / total_)));
+  }
+  Progress progress_;
+  double view_cost_ = 0, total_ = 0, done_ = 0;
+};
+
+SynthPlan MakePlan(const SynthOptions& options) {
+  SynthPlan plan;
+  plan.synth = MakeSynthScene(options.scene, options.seed);
+  plan.camera = SynthCamera(options.width, options.height);
+  plan.train = HemisphereCameras(options.views, options.seed, 1, plan.synth.aabb);
+  plan.test = HemisphereCameras(options.test_views, options.seed, 2, plan.synth.aabb);
+  plan.train_set = MakeDataset(plan.synth, plan.camera, plan.train, "train");
+  plan.render.spp = options.spp;
+  plan.render.bounce = options.bounce;
+  plan.render.seed = options.seed;
+  return plan;
+}
+
+// The small files first, so that a folder is usable for its metadata at once.
+void WriteMetadata(const std::string& dir, const SynthPlan& plan) {
+  WriteDataset(dir + "/transforms_train.json", plan.train_set);
+  WriteDataset(dir + "/transforms.json", plan.train_set);
+  WriteDataset(dir + "/transforms_test.json", MakeDataset(plan.synth, plan.camera, plan.test, "test"));
+  WriteBoard(dir + "/board.json", plan.synth.board);
+  WriteJsonFile(dir + "/lights.json", LightsJson(plan.synth));
+  WriteExrRgb(dir + "/env.exr", RenderEnvironment(plan.synth.scene, kEnvWidth, kEnvHeight, 4), ExrPixelType::kFloat);
+}
+
+// train/ and test/ views and the contact sheet of the first training views; returns the images written.
+int WriteTrainTestViews(const std::string& dir, const SynthOptions& options, const SynthPlan& plan, WorkMeter& meter) {
+  int images = 0;
+  std::vector<ImageF> sheet_images;
+  for (int i = 0; i < options.views; ++i) {
+    ImageF image = RenderView(plan.synth.scene, plan.camera, plan.train[i], plan.render, static_cast<uint64_t>(i));
+    WriteExrRgb(dir + "/" + plan.train_set.frames[i].file_path, image);
+    if (static_cast<int>(sheet_images.size()) < options.contact_sheet_views) sheet_images.push_back(std::move(image));
+    ++images;
+    meter.View(options.spp);
+  }
+  for (int i = 0; i < options.test_views; ++i) {
+    const ImageF image =
+        RenderView(plan.synth.scene, plan.camera, plan.test[i], plan.render, kTestStream + static_cast<uint64_t>(i));
+    WriteExrRgb(dir + Numbered("/test/r_", i, ".exr"), image);
+    ++images;
+    meter.View(options.spp);
+  }
+  if (!sheet_images.empty()) WriteImage8(dir + "/contact_sheet.png", ContactSheet(sheet_images, 4));
+  return images;
+}
+
+// objects/NAME.obj and NAME.json (the material with its bounds and counts) and insert/NAME/pose.json.
+void WriteObjectFiles(const std::string& dir, const InsertObject& object) {
+  const std::string mesh_path = dir + "/objects/" + object.name + ".obj";
+  WriteMeshObj(mesh_path, object.mesh);
+  Material material = object.material;
+  material.mesh = mesh_path;
+  material.brdf =
+      "simplified Disney: Lambert diffuse (1 - metallic) albedo / pi plus GGX specular (alpha = roughness^2, "
+      "Smith G, Schlick Fresnel), F0 = mix(f0, albedo, metallic)";
+  const Bounds bounds = ComputeBounds(object.mesh);
+  material.bbox_min = bounds.min;
+  material.bbox_max = bounds.max;
+  material.center_local = Vec3{0, 0, 0};
+  material.n_vertices = static_cast<long long>(object.mesh.VertexCount());
+  material.n_triangles = static_cast<long long>(object.mesh.TriangleCount());
+  WriteMaterial(dir + "/objects/" + object.name + ".json", material);
+  ObjectPlacement placement = object.placement;
+  placement.object = object.name;
+  placement.mesh = "objects/" + object.name + ".obj (relative to the scene directory)";
+  WriteObjectPlacement(dir + "/insert/" + object.name + "/pose.json", placement);
+}
+
+// insert/: the test views without any object (bg), then per object its files, the probe at its
+// centre without it, and the test views with it (rgb, mask, depth). The renders with and without
+// an object use the same random numbers. Returns the images written; `frames` gets each
+// render's seconds.
+int WriteInsertGroundTruth(const std::string& dir, const SynthOptions& options, const SynthPlan& plan, WorkMeter& meter,
+                           Json& frames) {
+  MakeDirectories(dir + "/insert");
+  MakeDirectories(dir + "/objects");
+  RenderOptions insert_render = plan.render;
+  insert_render.spp = options.insert_spp;
+  int images = 0;
+  for (int i = 0; i < options.test_views; ++i) {
+    const double t0 = Now();
+    WriteExrRgb(dir + Numbered("/insert/bg_", i, ".exr"),
+                RenderView(plan.synth.scene, plan.camera, plan.test[i], insert_render,
+                           kInsertStream + static_cast<uint64_t>(i)));
+    frames[Numbered("bg_", i, ".exr")] = Now() - t0;
+    ++images;
+    meter.View(options.insert_spp);
+  }
+  for (size_t k = 0; k < plan.synth.objects.size(); ++k) {
+    const InsertObject& object = plan.synth.objects[k];
+    const std::string object_dir = dir + "/insert/" + object.name;
+    MakeDirectories(object_dir);
+    WriteObjectFiles(dir, object);
+    RenderOptions probe_render = plan.render;
+    probe_render.spp = options.probe_spp;
+    WriteExrRgb(object_dir + "/probe.exr",
+                RenderProbe(plan.synth.scene, *object.placement.center_world, kEnvWidth, kEnvHeight, probe_render),
+                ExrPixelType::kFloat);
+    meter.Probe(options.probe_spp);
+    const Scene with_object = SceneWithObject(plan.synth, static_cast<int>(k));
+    for (int i = 0; i < options.test_views; ++i) {
+      const double t0 = Now();
+      WriteExrRgb(
+          object_dir + Numbered("/rgb_", i, ".exr"),
+          RenderView(with_object, plan.camera, plan.test[i], insert_render, kInsertStream + static_cast<uint64_t>(i)));
+      frames[object.name + Numbered("/rgb_", i, ".exr")] = Now() - t0;
+      ImageF depth;
+      Image8 mask;
+      RenderFirstHit(with_object, plan.camera, plan.test[i], static_cast<int>(k), depth, mask);
+      WriteImage8(object_dir + Numbered("/mask_", i, ".png"), mask);
+      WriteExr(object_dir + Numbered("/depth_", i, ".exr"), depth, {"Y"}, ExrPixelType::kFloat);
+      images += 2;
+      meter.View(options.insert_spp);
+    }
+  }
+  return images;
+}
+
+// insert/timing.json: the insert renders' seconds and how they were made.
+void WriteInsertTiming(const std::string& dir, const SynthOptions& options, const Json& frames, double seconds) {
+  Json timing = Json::object();
+  timing["frames"] = frames;
+  timing["device"] = "CPU";
+  timing["threads"] = ThreadCount();
+  timing["resolution"] = Json::array({options.width, options.height});
+  timing["samples_per_pixel"] = options.insert_spp;
+  timing["train_test_samples_per_pixel"] = options.spp;
+  timing["probe_samples_per_pixel"] = options.probe_spp;
+  timing["bounce"] = options.bounce;
+  timing["engine"] = "nerfar synth (next-event estimation, box pixel filter)";
+  timing["total_seconds"] = seconds;
+  WriteJsonFile(dir + "/insert/timing.json", timing);
+}
+
 }  // namespace
 
 std::vector<std::string> SynthOptions::Validate() const {
@@ -251,134 +415,20 @@ SynthReport WriteSynthDataset(const SynthOptions& options) {
   const std::string dir = options.output_dir;
   MakeDirectories(dir + "/train");
   MakeDirectories(dir + "/test");
-
-  const SynthScene synth = MakeSynthScene(options.scene, options.seed);
-  const CameraIntrinsics camera = SynthCamera(options.width, options.height);
-  const std::vector<Pose> train = HemisphereCameras(options.views, options.seed, 1, synth.aabb);
-  const std::vector<Pose> test = HemisphereCameras(options.test_views, options.seed, 2, synth.aabb);
-  RenderOptions render;
-  render.spp = options.spp;
-  render.bounce = options.bounce;
-  render.seed = options.seed;
-
-  // Small files first, so a folder is usable for its metadata at once.
-  const Dataset train_set = MakeDataset(synth, camera, train, "train");
-  WriteDataset(dir + "/transforms_train.json", train_set);
-  WriteDataset(dir + "/transforms.json", train_set);
-  WriteDataset(dir + "/transforms_test.json", MakeDataset(synth, camera, test, "test"));
-  WriteBoard(dir + "/board.json", synth.board);
-  WriteJsonFile(dir + "/lights.json", LightsJson(synth));
-  WriteExrRgb(dir + "/env.exr", RenderEnvironment(synth.scene, kEnvWidth, kEnvHeight, 4), ExrPixelType::kFloat);
-
-  const size_t n_objects = options.insert ? synth.objects.size() : 0;
-  // Work units in pixel-samples, so the ETA weighs insert renders by their spp.
-  const double view_cost = static_cast<double>(options.width) * options.height;
-  const double total_cost = view_cost * options.spp * (options.views + options.test_views) +
-                            view_cost * options.insert_spp * options.test_views * (1 + n_objects) +
-                            static_cast<double>(kEnvWidth) * kEnvHeight * options.probe_spp * n_objects;
-  Progress progress("synth " + options.scene, 1000);
-  double done_cost = 0;
-  auto advance = [&](double cost) {
-    done_cost += cost;
-    progress.Update(static_cast<size_t>(std::min(1000.0, 1000.0 * done_cost / total_cost)));
-  };
-
-  std::vector<ImageF> sheet_images;
-  for (int i = 0; i < options.views; ++i) {
-    ImageF image = RenderView(synth.scene, camera, train[i], render, static_cast<uint64_t>(i));
-    WriteExrRgb(dir + "/" + train_set.frames[i].file_path, image);
-    if (static_cast<int>(sheet_images.size()) < options.contact_sheet_views) sheet_images.push_back(std::move(image));
-    ++report.images;
-    advance(view_cost * options.spp);
-  }
-  for (int i = 0; i < options.test_views; ++i) {
-    const ImageF image = RenderView(synth.scene, camera, test[i], render, kTestStream + static_cast<uint64_t>(i));
-    WriteExrRgb(dir + Numbered("/test/r_", i, ".exr"), image);
-    ++report.images;
-    advance(view_cost * options.spp);
-  }
-  if (!sheet_images.empty()) WriteImage8(dir + "/contact_sheet.png", ContactSheet(sheet_images, 4));
+  const SynthPlan plan = MakePlan(options);
+  WriteMetadata(dir, plan);
+  WorkMeter meter(options, options.insert ? plan.synth.objects.size() : 0);
+  report.images += WriteTrainTestViews(dir, options, plan, meter);
   report.seconds_train_test = Now() - start;
-
   if (options.insert) {
     const double insert_start = Now();
-    MakeDirectories(dir + "/insert");
-    MakeDirectories(dir + "/objects");
-    RenderOptions insert_render = render;
-    insert_render.spp = options.insert_spp;
-    Json timing = Json::object();
     Json frames = Json::object();
-    // Without the object: the same random numbers as the renders with it.
-    for (int i = 0; i < options.test_views; ++i) {
-      const double t0 = Now();
-      WriteExrRgb(dir + Numbered("/insert/bg_", i, ".exr"),
-                  RenderView(synth.scene, camera, test[i], insert_render, kInsertStream + static_cast<uint64_t>(i)));
-      frames[Numbered("bg_", i, ".exr")] = Now() - t0;
-      ++report.images;
-      advance(view_cost * options.insert_spp);
-    }
-    for (size_t k = 0; k < synth.objects.size(); ++k) {
-      const InsertObject& object = synth.objects[k];
-      const std::string object_dir = dir + "/insert/" + object.name;
-      MakeDirectories(object_dir);
-      // The object's files: mesh, material (with bounds and counts), placement.
-      const std::string mesh_path = dir + "/objects/" + object.name + ".obj";
-      WriteMeshObj(mesh_path, object.mesh);
-      Material material = object.material;
-      material.mesh = mesh_path;
-      material.brdf =
-          "simplified Disney: Lambert diffuse (1 - metallic) albedo / pi plus GGX specular (alpha = roughness^2, "
-          "Smith G, Schlick Fresnel), F0 = mix(f0, albedo, metallic)";
-      const Bounds bounds = ComputeBounds(object.mesh);
-      material.bbox_min = bounds.min;
-      material.bbox_max = bounds.max;
-      material.center_local = Vec3{0, 0, 0};
-      material.n_vertices = static_cast<long long>(object.mesh.VertexCount());
-      material.n_triangles = static_cast<long long>(object.mesh.TriangleCount());
-      WriteMaterial(dir + "/objects/" + object.name + ".json", material);
-      ObjectPlacement placement = object.placement;
-      placement.object = object.name;
-      placement.mesh = "objects/" + object.name + ".obj (relative to the scene directory)";
-      WriteObjectPlacement(object_dir + "/pose.json", placement);
-
-      // Probe at the centre without the object.
-      RenderOptions probe_render = render;
-      probe_render.spp = options.probe_spp;
-      WriteExrRgb(object_dir + "/probe.exr",
-                  RenderProbe(synth.scene, *object.placement.center_world, kEnvWidth, kEnvHeight, probe_render),
-                  ExrPixelType::kFloat);
-      advance(static_cast<double>(kEnvWidth) * kEnvHeight * options.probe_spp);
-
-      const Scene with_object = SceneWithObject(synth, static_cast<int>(k));
-      for (int i = 0; i < options.test_views; ++i) {
-        const double t0 = Now();
-        WriteExrRgb(object_dir + Numbered("/rgb_", i, ".exr"),
-                    RenderView(with_object, camera, test[i], insert_render, kInsertStream + static_cast<uint64_t>(i)));
-        frames[object.name + Numbered("/rgb_", i, ".exr")] = Now() - t0;
-        ImageF depth;
-        Image8 mask;
-        RenderFirstHit(with_object, camera, test[i], static_cast<int>(k), depth, mask);
-        WriteImage8(object_dir + Numbered("/mask_", i, ".png"), mask);
-        WriteExr(object_dir + Numbered("/depth_", i, ".exr"), depth, {"Y"}, ExrPixelType::kFloat);
-        report.images += 2;
-        advance(view_cost * options.insert_spp);
-      }
-    }
+    report.images += WriteInsertGroundTruth(dir, options, plan, meter, frames);
     report.seconds_insert = Now() - insert_start;
-    timing["frames"] = frames;
-    timing["device"] = "CPU";
-    timing["threads"] = ThreadCount();
-    timing["resolution"] = Json::array({options.width, options.height});
-    timing["samples_per_pixel"] = options.insert_spp;
-    timing["train_test_samples_per_pixel"] = options.spp;
-    timing["probe_samples_per_pixel"] = options.probe_spp;
-    timing["bounce"] = options.bounce;
-    timing["engine"] = "nerfar synth (next-event estimation, box pixel filter)";
-    timing["total_seconds"] = report.seconds_insert;
-    WriteJsonFile(dir + "/insert/timing.json", timing);
+    WriteInsertTiming(dir, options, frames, report.seconds_insert);
   }
   report.seconds_total = Now() - start;
-  progress.Finish(std::to_string(report.images) + " images in " + FormatDuration(report.seconds_total));
+  meter.Finish(std::to_string(report.images) + " images in " + FormatDuration(report.seconds_total));
   return report;
 }
 

@@ -10,6 +10,8 @@
 #include "app/cli.h"
 #include "calib/board.h"
 #include "calib/core/error.h"
+#include "calib/core/exr.h"
+#include "calib/core/image_io.h"
 #include "calib/core/json.h"
 #include "render/lighting/env_light.h"
 #include "render/mesh/mesh.h"
@@ -35,7 +37,7 @@ TEST(App, HelpListsTheCommands) {
 }
 
 TEST(App, EveryCommandHasHelp) {
-  for (const char* command : {"bench", "version"}) {
+  for (const char* command : {"bench", "version", "board", "import"}) {
     const Result result = RunNerfar(std::string(command) + " --help");
     EXPECT_EQ(result.exit_code, 0) << command;
     EXPECT_NE(result.output.find("usage: nerfar"), std::string::npos) << command << ": " << result.output;
@@ -163,6 +165,46 @@ TEST(App, LiveHeadlessReportsAVideoItCannotWriteAndStillWritesTheSession) {
   const Json report = ReadJsonFile(session + "/report.json");
   EXPECT_EQ(report.at("errors").at("outputs").get<int>(), 1) << report.dump();
   EXPECT_EQ(report.at("tracking").at("frames").get<int>(), 3);
+}
+
+// `nerfar env` on the tiny scene's slab: bad --truth or --report are usage
+// errors (exit 2, the file named) found before the estimate runs; a small
+// estimate with a truth states the fit residual and the irradiance error and
+// writes the report picture beside env.json, or into the folder --report names.
+TEST(App, EnvReportsTheFitAndRejectsBadTruth) {
+  testing::TempDir dir;
+  WriteTinyScene(dir.path());
+  const std::string env = "env " + dir.File("scene.nerf") + " -o " + dir.File("e.json");
+  Result r = RunNerfar(env + " --truth " + dir.File("nope.exr"));
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.output.find(dir.File("nope.exr")), std::string::npos) << r.output;
+  WriteExrRgb(dir.File("square.exr"), ImageF(16, 16, 3, 1.0f));
+  r = RunNerfar(env + " --truth " + dir.File("square.exr"));
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.output.find(dir.File("square.exr") + ": is 16x16 (expected an equirect panorama"), std::string::npos)
+      << r.output;
+  r = RunNerfar(env + " --report " + dir.File("report.txt"));
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.output.find("report.txt"), std::string::npos) << r.output;
+  EXPECT_EQ(RunNerfar(env + " --report " + dir.File("r.png") + " --no-report").exit_code, 2);
+  EXPECT_FALSE(std::filesystem::exists(dir.File("e.json")));
+
+  WriteExrRgb(dir.File("truth.exr"), ImageF(64, 32, 3, 0.5f), ExrPixelType::kFloat);
+  const std::string small = " --preset fast --set views=6 --set pixels_per_view=32 --set rays_per_point=32 --threads 2";
+  r = RunNerfar(env + " --truth " + dir.File("truth.exr") + small);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("fit residual over"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("irradiance error against " + dir.File("truth.exr")), std::string::npos) << r.output;
+  const Image8 picture = ReadImage8(dir.File("e_report.png"));
+  EXPECT_GT(picture.width, 1000);
+  EXPECT_GT(picture.height, picture.width);  // panoramas, views, legend and text stacked
+  const Json written = ReadJsonFile(dir.File("e.json"));
+  EXPECT_GT(written.at("fit").at("samples").get<int>(), 0) << written.dump();
+  r = RunNerfar("env " + dir.File("scene.nerf") + " -o " + dir.File("e2.json") + " --report " + dir.File("pics") + "/" +
+                small);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_TRUE(std::filesystem::is_regular_file(dir.File("pics/e2_report.png")));
+  EXPECT_FALSE(std::filesystem::exists(dir.File("e2_report.png")));
 }
 
 TEST(ArgParser, ParsesOptionsPositionalsAndRejectsMisuse) {

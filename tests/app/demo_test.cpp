@@ -148,11 +148,14 @@ TEST(Demo, QuickDemoEndToEndPutsTheTorusOnTheSurfaceUnderTheImageCentre) {
           brighter = std::max(brighter, diff);
         }
         const bool in = g.rect.Contains(x, y) && g.object[g.Index(x, y)] >= 0;
-        // 15 levels: the one-sample stream re-rendered is identical, and the
+        // 3 levels: the one-sample stream re-rendered is identical, and the
         // composite's round trip (8-bit -> linear / gain -> 8-bit) moves bare
-        // pixels by a level at most; the torus (orange on a beige table)
-        // differs by more almost everywhere.
-        const bool changed = d > 15;
+        // pixels by a level at most, so any pixel moved by more was drawn
+        // over. The torus's shading follows the estimated light, which can
+        // leave parts of it within a few levels of the table's colour only
+        // where they truly look alike; a missing or misplaced torus leaves
+        // its silhouette unchanged.
+        const bool changed = d > 3;
         if (in) {
           ++silhouette;
           sx += x;
@@ -170,14 +173,13 @@ TEST(Demo, QuickDemoEndToEndPutsTheTorusOnTheSurfaceUnderTheImageCentre) {
     ASSERT_GT(silhouette, 0);
     std::printf("torus silhouette %d px, changed inside %d, changed outside %d (brighter %d)\n", silhouette,
                 changed_inside, changed_outside, brighter_outside);
-    // Most of the silhouette is drawn (parts of the torus lit like the table
-    // can stay within 40 levels of it), and little is drawn elsewhere: the
-    // pixels outside it that got brighter are the edge pixels the tracked
-    // pose shifts by ~1 px (a misplaced orange torus on the beige table
-    // raises red by far more than 15 levels over hundreds of pixels). The
-    // ones that got darker are its shadow, as large as the light makes it
-    // (session 8: 912 of the 959 changed outside, 47 brighter).
-    EXPECT_GT(changed_inside, silhouette * 6 / 10);
+    // Nearly all of the silhouette is drawn (its edge pixels, where the
+    // tracked pose shifts it by ~1 px, may not be), and little is drawn
+    // brighter elsewhere: those are the edge pixels again (a misplaced
+    // orange torus on the beige table raises red by far more than 15 levels
+    // over hundreds of pixels). The pixels outside that got darker are its
+    // shadow, as large as the light makes it.
+    EXPECT_GT(changed_inside, silhouette * 9 / 10);
     EXPECT_LT(brighter_outside, silhouette / 10);
     if (changed_inside > 0) {
       // Centroids within 2 px: the tracked pose against the true one (~1 px).

@@ -167,6 +167,14 @@ TEST(InputsAreNeverWritten, CalibrateTrackCapture) {
                 dir.File("ds/train/r_000.exr"));
 }
 
+// import into its own source folder: its split files are the ones it would write.
+TEST(InputsAreNeverWritten, ImportIntoItsSource) {
+  testing::TempDir dir;
+  WriteTinyDataset(dir.File("ds"));
+  ExpectRefused("import " + dir.File("ds") + " -o " + dir.File("ds"), dir.File("ds") + "/transforms_train.json",
+                dir.File("ds") + "/transforms_train.json", dir.File("ds/transforms_train.json"));
+}
+
 TEST(InputsAreNeverWritten, LiveAndReport) {
   testing::TempDir dir;
   MakeDirectories(dir.File("scene"));

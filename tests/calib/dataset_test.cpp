@@ -1,6 +1,8 @@
 // calib/dataset, board, object: the OpenGL <-> OpenCV pose conversion against
 // the README's ray formula, write -> read round trips, bad input (each problem
-// named with the file and a JSON pointer), and the shared scenes as they are.
+// named with the file and a JSON pointer), the files instant-ngp, nerfstudio
+// and their COLMAP conversions write (hand-written here after their writers),
+// and the shared scenes as they are.
 #include "calib/dataset.h"
 
 #include <gtest/gtest.h>
@@ -302,6 +304,183 @@ TEST_F(BadDataset, NonRigidMatrices) {
 TEST_F(BadDataset, MissingFileNamesThePath) {
   const std::string m = InputErrorOf([&] { ReadDataset(tmp_.File("nope.json")); });
   EXPECT_NE(m.find(tmp_.File("nope.json")), std::string::npos) << m;
+}
+
+// ------------------------------------------------- other tools' dialects
+
+// The file instant-ngp's scripts/colmap2nerf.py writes: sizes as floats, k3/k4
+// and is_fisheye, aabb_scale, a sharpness per frame, no aabb, "./" paths.
+const char* kInstantNgpFile = R"({
+  "camera_angle_x": 1.0471975511965976, "camera_angle_y": 0.8172757101952249,
+  "fl_x": 346.41016151377545, "fl_y": 346.41016151377545,
+  "k1": 0.0, "k2": 0.0, "k3": 0.0, "k4": 0.0, "p1": 0.0, "p2": 0.0, "is_fisheye": false,
+  "cx": 200.0, "cy": 150.0, "w": 400.0, "h": 300.0, "aabb_scale": 4,
+  "frames": [
+    {"file_path": "./images/0001.jpg", "sharpness": 181.5,
+     "transform_matrix": [[1, 0, 0, 0.5], [0, 1, 0, -0.2], [0, 0, 1, 3.0], [0, 0, 0, 1]]},
+    {"file_path": "./images/0002.jpg", "sharpness": 160.25,
+     "transform_matrix": [[0, -1, 0, 0], [1, 0, 0, 0], [0, 0, 1, 3.0], [0, 0, 0, 1]]}]})";
+
+// nerfstudio's colmap_to_json with two COLMAP cameras: the intrinsics in every
+// frame (no shared ones), colmap_im_id, mask_path, applied_transform and
+// ply_file_path.
+const char* kNerfstudioFile = R"({
+  "frames": [
+    {"file_path": "images/frame_00001.png", "colmap_im_id": 1, "mask_path": "masks/frame_00001.png",
+     "fl_x": 500.5, "fl_y": 501.0, "cx": 320.2, "cy": 239.8, "w": 640, "h": 480,
+     "k1": -0.01, "k2": 0.002, "p1": 0.0001, "p2": -0.0002, "camera_model": "OPENCV",
+     "transform_matrix": [[1, 0, 0, 0.1], [0, 1, 0, 0.2], [0, 0, 1, 0.3], [0, 0, 0, 1]]},
+    {"file_path": "images/frame_00002.png", "colmap_im_id": 2, "mask_path": "masks/frame_00002.png",
+     "fl_x": 800.0, "fl_y": 800.0, "cx": 400.0, "cy": 300.0, "w": 800, "h": 600,
+     "k1": 0.0, "k2": 0.0, "p1": 0.0, "p2": 0.0, "camera_model": "OPENCV",
+     "transform_matrix": [[1, 0, 0, 0.4], [0, 1, 0, 0.5], [0, 0, 1, 0.6], [0, 0, 0, 1]]}],
+  "applied_transform": [[1, 0, 0, 0], [0, 0, 1, 0], [0, -1, 0, 0]],
+  "ply_file_path": "sparse_pc.ply"})";
+
+TEST(DatasetDialects, InstantNgp) {
+  TempDir tmp;
+  WriteText(tmp.File("transforms.json"), kInstantNgpFile);
+  fs::create_directories(tmp.File("images"));
+  for (const char* name : {"images/0001.jpg", "images/0002.jpg"}) WriteText(tmp.File(name), "x");
+  const Dataset d = ReadDataset(tmp.File("transforms.json"));
+  EXPECT_EQ(d.camera.width, 400);
+  EXPECT_EQ(d.camera.height, 300);
+  EXPECT_FALSE(d.per_frame_cameras);
+  EXPECT_FALSE(d.aabb.has_value());
+  ASSERT_EQ(d.frames.size(), 2u);
+  EXPECT_EQ(d.frames[1].image_path, tmp.File("images/0002.jpg"));
+  EXPECT_EQ(d.ignored_keys, std::vector<std::string>{"frames[].sharpness (in 2 frames)"});
+  // instant-ngp's box: 0.5 ± 4/2 in its space, back through its default scale
+  // 0.33 and offset 0.5: (0.5 - 2 - 0.5) / 0.33 = -6.0606 .. (0.5 + 2 - 0.5) / 0.33.
+  ASSERT_TRUE(d.ngp_box.has_value());
+  EXPECT_NEAR(d.ngp_box->min.y, -2.0 / 0.33, 1e-12);
+  EXPECT_NEAR(d.ngp_box->max.z, 2.0 / 0.33, 1e-12);
+}
+
+TEST(DatasetDialects, InstantNgpScaleAndOffset) {
+  TempDir tmp;
+  auto doc = nlohmann::json::parse(kInstantNgpFile);
+  doc["aabb_scale"] = 1;
+  doc["scale"] = 2.0;
+  doc["offset"] = {0.5, 0.0, 1.0};
+  WriteText(tmp.File("t.json"), doc.dump());
+  const Dataset d = ReadDataset(tmp.File("t.json"), false);
+  // p · 2 + offset in [0, 1]  <=>  p in [(0 - offset) / 2, (1 - offset) / 2].
+  ASSERT_TRUE(d.ngp_box.has_value());
+  EXPECT_NEAR(d.ngp_box->min.x, -0.25, 1e-12);
+  EXPECT_NEAR(d.ngp_box->max.x, 0.25, 1e-12);
+  EXPECT_NEAR(d.ngp_box->min.y, 0.0, 1e-12);
+  EXPECT_NEAR(d.ngp_box->max.y, 0.5, 1e-12);
+  EXPECT_NEAR(d.ngp_box->min.z, -0.5, 1e-12);
+  EXPECT_NEAR(d.ngp_box->max.z, 0.0, 1e-12);
+}
+
+TEST(DatasetDialects, NeRFSyntheticPathsWithoutExtension) {
+  TempDir tmp;
+  auto doc = nlohmann::json::parse(kInstantNgpFile);
+  doc["frames"][0]["file_path"] = "./train/r_0";
+  doc["frames"][1]["file_path"] = "./train/r_1";
+  WriteText(tmp.File("transforms_train.json"), doc.dump());
+  fs::create_directories(tmp.File("train"));
+  WriteText(tmp.File("train/r_0.png"), "x");
+  WriteText(tmp.File("train/r_1.png"), "x");
+  const Dataset d = ReadDataset(tmp.File("transforms_train.json"));
+  EXPECT_EQ(d.frames[0].image_path, tmp.File("train/r_0.png"));
+}
+
+TEST(DatasetDialects, NerfstudioPerFrameCamerasAndMasks) {
+  TempDir tmp;
+  WriteText(tmp.File("transforms.json"), kNerfstudioFile);
+  const Dataset d = ReadDataset(tmp.File("transforms.json"), false);
+  EXPECT_TRUE(d.per_frame_cameras);
+  ASSERT_EQ(d.frames.size(), 2u);
+  const CameraIntrinsics& a = d.CameraOf(d.frames[0]);
+  const CameraIntrinsics& b = d.CameraOf(d.frames[1]);
+  EXPECT_EQ(a.width, 640);
+  EXPECT_EQ(a.fy, 501.0);
+  EXPECT_EQ(a.k2, 0.002);
+  EXPECT_EQ(b.width, 800);
+  EXPECT_EQ(b.fx, 800.0);
+  EXPECT_EQ(d.camera.width, 640);  // the shared camera is the first frame's
+  EXPECT_EQ(d.frames[1].mask_path, tmp.File("masks/frame_00002.png"));
+  const std::vector<std::string> ignored = {"applied_transform", "ply_file_path",
+                                            "frames[].colmap_im_id (in 2 frames)"};
+  EXPECT_EQ(d.ignored_keys, ignored);
+  // Written back, per-frame intrinsics and masks survive.
+  WriteDataset(tmp.File("out.json"), d);
+  const Dataset r = ReadDataset(tmp.File("out.json"), false);
+  EXPECT_TRUE(r.per_frame_cameras);
+  EXPECT_EQ(r.CameraOf(r.frames[1]).cx, 400.0);
+  EXPECT_EQ(r.frames[0].mask_file, "masks/frame_00001.png");
+}
+
+TEST(DatasetDialects, FrameIntrinsicsOverrideSharedOnes) {
+  // Shared w, h and camera_angle_x; the second frame gives its own fl_x (the
+  // shared angle then says nothing about it, so it is not checked against it).
+  TempDir tmp;
+  WriteText(tmp.File("t.json"), R"({"w": 400, "h": 300, "cx": 200, "cy": 150, "camera_angle_x": 1.0471975511965976,
+    "frames": [{"file_path": "a.png", "transform_matrix": [[1,0,0,0],[0,1,0,0],[0,0,1,2],[0,0,0,1]], "k1": 0.01},
+               {"file_path": "b.png", "transform_matrix": [[1,0,0,0],[0,1,0,0],[0,0,1,2],[0,0,0,1]], "fl_x": 300}]})");
+  const Dataset d = ReadDataset(tmp.File("t.json"), false);
+  ASSERT_TRUE(d.per_frame_cameras);
+  EXPECT_NEAR(d.CameraOf(d.frames[0]).fx, 200.0 / std::tan(kPi / 6), 1e-9);
+  EXPECT_EQ(d.CameraOf(d.frames[0]).k1, 0.01);
+  EXPECT_EQ(d.CameraOf(d.frames[1]).fx, 300.0);
+  EXPECT_EQ(d.CameraOf(d.frames[1]).fy, 300.0);  // fl_y defaults to the frame's fl_x
+  EXPECT_EQ(d.CameraOf(d.frames[1]).width, 400);
+}
+
+TEST_F(BadDataset, WholeFloatsAreIntegersOthersAreNot) {
+  auto doc = good_;
+  doc["w"] = 400.0;
+  doc["h"] = 300.0;
+  EXPECT_EQ(Read(doc), "");
+  doc["w"] = 400.5;
+  const std::string m = Read(doc);
+  EXPECT_TRUE(Names(m, "/w")) << m;
+  EXPECT_NE(m.find("expected an integer"), std::string::npos) << m;
+}
+
+TEST_F(BadDataset, OtherToolsKeysAreIgnoredTyposOfOursAreNot) {
+  auto doc = good_;
+  doc["ply_file_path"] = "x.ply";
+  doc["frames"][0]["depth_file_path"] = "d.png";
+  EXPECT_EQ(Read(doc), "");
+  doc["fl_xx"] = 346.0;
+  doc["frames"][1]["mask_pth"] = "m.png";
+  doc["frames"][1]["file_paht"] = "m.png";
+  const std::string m = Read(doc);
+  EXPECT_NE(m.find(path_ + ": /fl_xx: unknown key (a typo of \"fl_x\"?)"), std::string::npos) << m;
+  EXPECT_NE(m.find("/frames/1/mask_pth: unknown key (a typo of \"mask_path\"?)"), std::string::npos) << m;
+  EXPECT_NE(m.find("/frames/1/file_paht: unknown key (a typo of \"file_path\"?)"), std::string::npos) << m;
+  EXPECT_EQ(m.find("ply_file_path"), std::string::npos) << m;
+}
+
+TEST_F(BadDataset, FisheyeIsRefusedWithWhatToDo) {
+  auto doc = good_;
+  doc["camera_model"] = "OPENCV_FISHEYE";
+  doc["k4"] = 0.01;
+  doc["is_fisheye"] = true;
+  const std::string m = Read(doc);
+  EXPECT_TRUE(Names(m, "/camera_model")) << m;
+  EXPECT_TRUE(Names(m, "/k4")) << m;
+  EXPECT_TRUE(Names(m, "/is_fisheye")) << m;
+  EXPECT_NE(m.find("undistort the images first"), std::string::npos) << m;
+  doc = good_;
+  doc["k4"] = 0.0;
+  doc["is_fisheye"] = false;
+  EXPECT_EQ(Read(doc), "");
+}
+
+TEST_F(BadDataset, MissingMaskIsNamed) {
+  auto doc = good_;
+  doc["frames"][0]["mask_path"] = "masks/a.png";
+  WriteText(tmp_.File("a.exr"), "x");
+  WriteText(tmp_.File("b.exr"), "x");
+  WriteText(path_, doc.dump());
+  const std::string m = InputErrorOf([&] { ReadDataset(path_, true); });
+  EXPECT_NE(m.find("/frames/0/mask_path: mask " + tmp_.File("masks/a.png") + " does not exist"), std::string::npos)
+      << m;
 }
 
 // ------------------------------------------------------------- board

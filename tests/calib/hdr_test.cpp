@@ -240,7 +240,9 @@ TEST(CameraFile, TransformsJsonIsACameraSource) {
   d.camera.fx = d.camera.fy = 346.41;
   d.camera.cx = 200;
   d.camera.cy = 150;
-  d.frames.push_back({"a.exr", "", Pose::Identity()});
+  DatasetFrame frame;
+  frame.file_path = "a.exr";
+  d.frames.push_back(frame);
   WriteDataset(tmp.File("transforms.json"), d);
   const CameraFile r = ReadCameraFile(tmp.File("transforms.json"));
   EXPECT_EQ(r.camera.fx, 346.41);

@@ -1,5 +1,5 @@
 // Shared by the fuzz targets: a per-process scratch file for readers that
-// take a path, and the FNV-1a checksum that the .nerf, .ssdf and checkpoint
+// take a path, and the checksum (calib/core/binary_file.h) that the .nerf, .ssdf and checkpoint
 // files end with (appended by the targets so that mutated bodies get past
 // the checksum and reach the parser; the raw bytes are tried as well).
 #pragma once
@@ -12,6 +12,7 @@
 #include <filesystem>
 #include <string>
 
+#include "calib/core/binary_file.h"
 #include "calib/core/error.h"
 
 namespace nerfar::fuzz {
@@ -37,13 +38,10 @@ inline bool WriteBytes(const std::string& path, const std::string& bytes) {
   return std::fclose(file) == 0 && ok;
 }
 
-// bytes followed by their FNV-1a 64 (little-endian), as the binary formats end.
+// bytes followed by their checksum (little-endian), as the binary formats end.
 inline std::string WithChecksum(std::string bytes) {
-  std::uint64_t h = 1469598103934665603ull;
-  for (const char c : bytes) h = (h ^ static_cast<unsigned char>(c)) * 1099511628211ull;
-  char sum[8];
-  std::memcpy(sum, &h, 8);
-  bytes.append(sum, 8);
+  const std::uint64_t sum = BinaryChecksum(bytes);
+  bytes.append(reinterpret_cast<const char*>(&sum), 8);
   return bytes;
 }
 

@@ -246,6 +246,7 @@ TEST(Shadow, CoarseToFineMatchesEveryNode) {
   light.push_back(OneLobe({0, 0, 1}, 0.5, 0.3)[0]);
   InsertOptions every, coarse;
   every.kappa_step = coarse.kappa_step = 1;
+  every.kappa_grid_width = coarse.kappa_grid_width = 0;  // the grid in this frame's pixels
   every.kappa_coarse_factor = 1;
   coarse.kappa_coarse_factor = 4;
   ImageF fa(camera.width, camera.height, 3, 1.0f), fb = fa;

@@ -15,6 +15,7 @@
 
 #include "render/insert/inserter.h"
 #include "render/insert/kappa_lattice.h"
+#include "render/insert/shadow_pass.h"
 #include "tests/insert/insert_fixtures.h"
 #include "tests/insert/kappa_compare.h"
 #include "tests/insert/test_camera.h"
@@ -175,6 +176,7 @@ TEST(KappaSpeedPaths, RefineByHalvesStaysCloseToEveryNodeWithFewerKappa) {
   const ShadowScene s;
   InsertOptions every;
   every.kappa_step = 1;
+  every.kappa_grid_width = 0;  // the grid in this frame's pixels
   every.kappa_coarse_factor = 1;
   every.kappa_cache_spacing_radii = 0.0;  // exact κ at each receiver
   every.shadow_epsilon_snap = false;
@@ -201,6 +203,59 @@ TEST(KappaSpeedPaths, RefineByHalvesStaysCloseToEveryNodeWithFewerKappa) {
     EXPECT_LT(dh.Relative(), 0.01) << "coarse " << coarse;
     EXPECT_LT(dh.max, halves.kappa_refine_delta) << "coarse " << coarse;
   }
+}
+
+// A small ball (1.5 cm) under a high sharp sun: its visible shadow is a
+// sliver beside its outline, smaller than a coarse cell (16 px here), which
+// the coarse nodes around it all see lit. The cells on the objects' outline
+// are refined whatever their corners, and cells whose border its refined
+// neighbours found differing follow: the layer stays close to every node's.
+TEST(KappaSpeedPaths, ShadowSmallerThanACoarseCellIsFoundAtTheOutline) {
+  AnalyticScene scene{PlainTable()};
+  const SphereObject object({0.0, 0.0, 0.015}, 0.015);
+  const CameraIntrinsics camera = testing::TestCamera(160, 120);
+  const Pose cam = LookAt({0.25, -0.3, 0.35}, {0.0, 0.0, 0.01});
+  const SgMixture light = OneLobe({0.25, 0.35, 1.0}, 3000.0, 3000.0);
+  const auto render = [&](int coarse, InsertLayers& layers) {
+    InsertOptions o;
+    o.kappa_step = 1;
+    o.kappa_grid_width = 0;  // the grid in this frame's pixels
+    o.kappa_coarse_factor = coarse;
+    o.kappa_cache_spacing_radii = 0.0;
+    o.shadow_epsilon_snap = false;
+    ImageF frame(camera.width, camera.height, 3, 0.5f);
+    Inserter(scene, {}, o).Render(camera, cam, {object.Object(&light)}, frame, &layers);
+  };
+  InsertLayers every, coarse;
+  render(1, every);
+  render(16, coarse);
+  ASSERT_EQ(coarse.kappa_rect.area(), every.kappa_rect.area());
+  const testing::KappaDifference d = testing::CompareKappa(coarse.kappa, every.kappa);
+  ASSERT_GT(d.shadow, 5.0);  // a shadow in view
+  // A shadow missed leaves all of it (relative 1.0, as before the outline
+  // rule); found, only interpolation within δ remains (measured 0.0003).
+  EXPECT_LT(d.Relative(), 0.05) << "shadow mass " << d.shadow << ", worst pixel " << d.max;
+}
+
+// The κ grid is given for 1280-pixel frames and scales with the width:
+// the same at 1280, twice as wide at 2560; fast's 4 px / coarse 16 px are
+// 1.25 / 5 px of a 400-pixel view (step 1, coarse factor 5), balanced's
+// 2 / 8 px 0.625 / 2.5 (step 1, factor 3: 2.5 rounds away from 0); a width
+// of 0 keeps the frame's own pixels.
+TEST(KappaSpeedPaths, GridScalesWithTheFrameWidth) {
+  const InsertOptions fast = InsertOptions::Preset("fast"), balanced = InsertOptions::Preset("balanced");
+  const auto spacing = [](const InsertOptions& o, int width) {
+    const KappaSpacing s = KappaSpacingFor(o, width);
+    return std::make_pair(s.step, s.factor);
+  };
+  EXPECT_EQ(spacing(fast, 1280), std::make_pair(4, size_t(4)));
+  EXPECT_EQ(spacing(fast, 2560), std::make_pair(8, size_t(4)));
+  EXPECT_EQ(spacing(fast, 400), std::make_pair(1, size_t(5)));
+  EXPECT_EQ(spacing(balanced, 400), std::make_pair(1, size_t(3)));
+  EXPECT_EQ(spacing(balanced, 100), std::make_pair(1, size_t(1)));
+  InsertOptions own = fast;
+  own.kappa_grid_width = 0;
+  EXPECT_EQ(spacing(own, 400), std::make_pair(4, size_t(4)));
 }
 
 // The lattice's table (the earlier frames' nodes in an open-addressing

@@ -48,18 +48,37 @@ TEST(ShadowError, PerfectNoneAndHalfStrength) {
 TEST(ShadowError, MaskedPixelsDoNotCountAndBlackBackgroundIsUnshadowed) {
   const ImageF bg(kW, kH, 3, 0.5f);
   const ImageF truth = WithDisc(0.5f, 0.2f);
-  // Our image is wrong only far inside a masked square (more than 2 px, the
-  // blur's reach, from its edge): the error stays 0.
+  // Our image is wrong all over a masked square (an object drawn there):
+  // the masked pixels are replaced by the background before the blur, as
+  // eval/metrics.py does, so nothing of it leaks into κ around it: 0.
   ImageF ours = truth;
   ImageF mask = EmptyMask();
   for (int y = 20; y < 40; ++y)
     for (int x = 30; x < 50; ++x) {
       mask.at(x, y) = 1.0f;
-      if (x >= 33 && x < 47 && y >= 23 && y < 37)
-        for (int c = 0; c < 3; ++c) ours.at(x, y, c) = 100.0f;
+      for (int c = 0; c < 3; ++c) ours.at(x, y, c) = 100.0f;
     }
   const ShadowError e = ComputeShadowError(ours, bg, truth, bg, mask);
   EXPECT_NEAR(e.error, 0.0, 1e-12);
+  // A view whose region holds 50 pixels or fewer is left out (NaN), as
+  // eval/e2e.sh leaves it out of the median: the object's mask covers all
+  // of the shadow but a 6x6 window (36 px); with a 10x10 window (100 px) it
+  // counts.
+  for (const int side : {6, 10}) {
+    ImageF cover(kW, kH, 1, 1.0f);
+    for (int y = 30; y < 30 + side; ++y)
+      for (int x = 40; x < 40 + side; ++x) cover.at(x, y) = 0.0f;
+    const double error = ComputeShadowError(bg, bg, truth, bg, cover).error;
+    EXPECT_EQ(std::isnan(error), side == 6) << side;
+  }
+  // κ is clipped to [0, 2]: a spot 10x too bright counts as κ = 2.
+  ImageF bright = truth;
+  for (int y = 26; y < 35; ++y)
+    for (int x = 36; x < 45; ++x)
+      for (int c = 0; c < 3; ++c) bright.at(x, y, c) = 5.0f;
+  const ShadowError clipped = ComputeShadowError(bright, bg, truth, bg, EmptyMask());
+  EXPECT_GT(clipped.error, 0.1);
+  EXPECT_LE(clipped.mean_kappa, 2.0);
   // A black background (nothing seen) is κ = 1 for both: no region at all.
   const ImageF black(kW, kH, 3, 0.0f);
   const ShadowError b = ComputeShadowError(black, black, black, black, EmptyMask());

@@ -29,6 +29,7 @@ EnvLight SampleLight() {
   env.threshold = 0.05;
   env.source = "scene.nerf";
   env.options_json = R"({"pixels_per_view":64})";
+  env.fit = {6400, 0.31, 0.052, true, 0.57, 0.19};
   return env;
 }
 
@@ -53,6 +54,28 @@ TEST(EnvLightFile, RoundTripIsExact) {
   EXPECT_EQ(back.threshold, env.threshold);
   EXPECT_EQ(back.source, env.source);
   EXPECT_EQ(back.options_json, env.options_json);
+  EXPECT_EQ(back.fit.samples, 6400);
+  EXPECT_EQ(back.fit.relative_rms, env.fit.relative_rms);
+  EXPECT_EQ(back.fit.loss, env.fit.loss);
+  EXPECT_TRUE(back.fit.near_only_fitted);
+  EXPECT_EQ(back.fit.near_only_relative_rms, env.fit.near_only_relative_rms);
+  EXPECT_EQ(back.fit.near_only_loss, env.fit.near_only_loss);
+}
+
+// The fit's residual is documentation added to the format later: files
+// without it (or without its near-field-only part) still read.
+TEST(EnvLightFile, FitResidualIsOptional) {
+  EnvLight env = SampleLight();
+  env.fit = {};
+  const std::string without = SerializeEnvLight(env);
+  EXPECT_EQ(without.find("\"fit\""), std::string::npos) << without;
+  EXPECT_EQ(ParseEnvLight(without, "old.json").fit.samples, 0);
+  env.fit = {100, 0.2, 0.01, false, 0, 0};
+  const std::string no_near = SerializeEnvLight(env);
+  EXPECT_EQ(no_near.find("near_field_only"), std::string::npos) << no_near;
+  const EnvLight back = ParseEnvLight(no_near, "mem");
+  EXPECT_EQ(back.fit.samples, 100);
+  EXPECT_FALSE(back.fit.near_only_fitted);
 }
 
 TEST(EnvLightFile, EmptyMixtureIsValid) {
@@ -99,6 +122,13 @@ TEST(EnvLightFile, BadFilesNameEveryProblem) {
   ExpectError(Replace(kGood, "\"negligible\":false,", ""), "negligible");
   ExpectError(Replace(kGood, "\"threshold\":0.05", "\"threshold\":2"), "/energy/threshold");
   ExpectError(Replace(kGood, "0.5", "-0.5"), "/energy/env_to_near_surface");
+  const std::string with_fit =
+      Replace(kGood, "\"threshold\":0.05}", R"("threshold":0.05},"fit":{"samples":9,"relative_rms":0.3,"loss":0.1})");
+  EXPECT_NO_THROW(ParseEnvLight(with_fit, "good.json"));
+  ExpectError(Replace(with_fit, "\"relative_rms\":0.3", "\"relative_rms\":-1"), "/fit/relative_rms");
+  ExpectError(Replace(with_fit, "\"loss\":0.1", "\"loss\":0.1,\"los\":2"), "los");
+  ExpectError(Replace(with_fit, "\"loss\":0.1", "\"loss\":0.1,\"near_field_only\":{\"loss\":1}"),
+              "/fit/near_field_only");
   // Two problems in one file: both reported at once.
   try {
     ParseEnvLight(Replace(Replace(kGood, "[0,0,1]", "[0,0,2]"), "\"threshold\":0.05", "\"threshold\":2"), "b.json");

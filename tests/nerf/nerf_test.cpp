@@ -12,6 +12,7 @@
 #include <fstream>
 #include <random>
 
+#include "calib/core/binary_file.h"
 #include "calib/core/error.h"
 #include "calib/core/metrics.h"
 #include "calib/core/parallel.h"
@@ -19,6 +20,7 @@
 #include "render/nerf/nerf_file.h"
 #include "render/nerf/nerf_train.h"
 #include "tests/nerf/box_scene.h"
+#include "tests/nerf/format_fixtures.h"
 #include "tests/support/support.h"
 
 namespace nerfar {
@@ -427,13 +429,6 @@ TEST(NerfFile, QuantisationErrorIsWithinTheStatedBound) {
   }
 }
 
-// FNV-1a, as the file's checksum is stated to be.
-uint64_t Fnv1aForTest(const std::string& bytes) {
-  uint64_t h = 1469598103934665603ull;
-  for (unsigned char c : bytes) h = (h ^ c) * 1099511628211ull;
-  return h;
-}
-
 template <typename T>
 void PutForTest(std::string& out, const T& v) {
   out.append(reinterpret_cast<const char*>(&v), sizeof(T));
@@ -464,7 +459,7 @@ TEST(NerfFile, ReadsVersion1Files) {
     PutForTest(v1, half(f.density[s]));
     for (int m = 0; m < kNerfColorCoeffs; ++m) PutForTest(v1, half(f.color[s * kNerfColorCoeffs + m]));
   }
-  PutForTest(v1, Fnv1aForTest(v1));
+  PutForTest(v1, BinaryChecksum(v1));
   const NerfField g = ParseNerf(v1, "old.nerf");
   ASSERT_EQ(g.BrickCount(), f.BrickCount());
   for (size_t s = 0; s < f.SlotCount(); ++s) {
@@ -489,7 +484,7 @@ TEST(NerfFile, ReadsVersion1Files) {
 TEST(NerfFile, APayloadSizeTheFileCannotHoldIsRefusedBeforeAllocating) {
   std::string bytes = testing::ReadText(testing::TestDataPath("../fuzz/regressions/nerf/payload_size_4gb.bin"));
   ASSERT_GT(bytes.size(), 100u);
-  PutForTest(bytes, Fnv1aForTest(bytes));
+  PutForTest(bytes, BinaryChecksum(bytes));
   try {
     ParseNerf(bytes, "bomb.nerf");
     ADD_FAILURE() << "accepted the file";
@@ -515,7 +510,7 @@ TEST(NerfFile, CorruptPayloadWithAValidChecksumIsRejected) {
   for (size_t at : {good.size() / 3, good.size() / 2, good.size() - 20}) {
     std::string bad = good.substr(0, good.size() - 8);
     bad[at] = char(bad[at] ^ 0x5a);
-    PutForTest(bad, Fnv1aForTest(bad));
+    PutForTest(bad, BinaryChecksum(bad));
     try {
       ParseNerf(bad, "bad.nerf");
       ADD_FAILURE() << "accepted a corrupt payload (byte " << at << ")";
@@ -541,7 +536,7 @@ TEST(NerfFile, RandomlyCorruptedFilesWithValidChecksumsNeverCrash) {
       const size_t at = trial < 150 ? rng() % std::min<size_t>(bad.size(), 160) : rng() % bad.size();  // header first
       bad[at] = char(rng() & 0xff);
     }
-    PutForTest(bad, Fnv1aForTest(bad));
+    PutForTest(bad, BinaryChecksum(bad));
     try {
       const NerfField f = ParseNerf(bad, "fuzz.nerf");
       EXPECT_TRUE(f.Validate().empty()) << "trial " << trial;
@@ -551,6 +546,80 @@ TEST(NerfFile, RandomlyCorruptedFilesWithValidChecksumsNeverCrash) {
     }
   }
   EXPECT_GT(refused, 100) << "precondition: most corruptions are caught";
+}
+
+// ---- files written by earlier builds (tests/data/formats, see tests/make_format_fixtures.cpp)
+
+// Each value of `loaded` within its channel's quantisation step of `field`, where `field` has
+// a value: the file's stated bound, span / (2^bits - 3), with the span of everything a brick may
+// hold (log-density -30..log 50, colour bases log 1e-2..log 1e2 and 0, slopes ±0.3).
+void ExpectWithinQuantisation(const NerfField& loaded, const NerfField& field, const NerfFileOptions& o) {
+  ASSERT_EQ(std::vector<int>(loaded.res, loaded.res + 3), std::vector<int>(field.res, field.res + 3));
+  const double density_step = (std::log(50.0) + 30.0) / ((1 << o.density_bits) - 3);
+  const double base_step = std::log(1e4) / ((1 << o.color_base_bits) - 3);
+  const double slope_step = 0.6 / ((1 << o.color_slope_bits) - 3);
+  size_t checked = 0;
+  for (int k = 0; k < field.res[2]; ++k)
+    for (int j = 0; j < field.res[1]; ++j)
+      for (int i = 0; i < field.res[0]; ++i) {
+        const int32_t s = field.Slot(i, j, k), t = loaded.Slot(i, j, k);
+        if (s < 0 || field.density[s] <= kNerfEmptyDensityRaw) continue;
+        ASSERT_GE(t, 0) << "vertex " << i << " " << j << " " << k << " not stored";
+        ASSERT_NEAR(loaded.density[t], field.density[s], density_step) << "vertex " << i << " " << j << " " << k;
+        for (int m = 0; m < kNerfColorCoeffs; ++m)
+          ASSERT_NEAR(loaded.color[size_t(t) * kNerfColorCoeffs + m], field.color[size_t(s) * kNerfColorCoeffs + m],
+                      m % 4 == 0 ? base_step : slope_step)
+              << "vertex " << i << " " << j << " " << k << " coefficient " << m;
+        ++checked;
+      }
+  EXPECT_GT(checked, 50u) << "precondition: the ball has vertices";
+}
+
+TEST(OldFiles, NerfFilesReadAndSaveToTheSameBytes) {
+  NerfFileOptions raw;
+  raw.compress = false;
+  raw.density_bits = 16;
+  raw.color_base_bits = 10;
+  raw.color_slope_bits = 6;
+  const NerfField field = testing::FormatFixtureField();
+  for (const auto& [name, options] : {std::pair{"field.nerf", NerfFileOptions{}}, std::pair{"field_raw.nerf", raw}}) {
+    SCOPED_TRACE(name);
+    const std::string old = testing::ReadText(testing::TestDataPath(std::string("formats/") + name));
+    const NerfField loaded = ParseNerf(old, name);
+    ExpectWithinQuantisation(loaded, field, options);
+    // The fixture is a loaded field saved again: from there on the bytes repeat (nerf_file.h).
+    EXPECT_TRUE(SerializeNerf(loaded, options) == old) << "the writer no longer writes the file it wrote";
+  }
+}
+
+TEST(OldFiles, CheckpointLoadsAndSavesEveryValue) {
+  const NerfTrainData data = testing::FormatFixtureTrainData();
+  NerfTrainer trainer(data, testing::FormatFixtureTrainOptions());
+  const std::string old_path = testing::TestDataPath("formats/train.ckpt");
+  // Refused as "made with other training options" when NerfTrainOptions gained a field since the
+  // fixture was written (its JSON is the checkpoint's identity): then write the fixtures again.
+  trainer.LoadCheckpoint(old_path);
+  EXPECT_EQ(trainer.step(), testing::kFormatFixtureTrainSteps);
+  EXPECT_TRUE(trainer.field().Validate().empty());
+  EXPECT_GT(trainer.field().BrickCount(), 0u);
+  testing::TempDir dir;
+  trainer.SaveCheckpoint(dir.File("again.ckpt"));
+  const std::string old = testing::ReadText(old_path), again = testing::ReadText(dir.File("again.ckpt"));
+  ASSERT_EQ(again.size(), old.size());
+  // The same bytes but the seconds trained (a double after the magic, the two identity strings
+  // and step, level and Adam step) and the checksum over them.
+  size_t elapsed_at = 8;
+  for (int n = 0; n < 2; ++n) {
+    uint64_t length;
+    std::memcpy(&length, old.data() + elapsed_at, 8);
+    elapsed_at += 8 + length;
+  }
+  elapsed_at += 12;
+  ASSERT_LT(elapsed_at + 8, old.size() - 8);
+  EXPECT_TRUE(again.compare(0, elapsed_at, old, 0, elapsed_at) == 0) << "identity, step, level";
+  EXPECT_TRUE(again.compare(elapsed_at + 8, old.size() - 16 - elapsed_at, old, elapsed_at + 8,
+                            old.size() - 16 - elapsed_at) == 0)
+      << "grid, field and optimiser state";
 }
 
 // Brute-force volume rendering with the point queries (no skipping, no early
@@ -1069,6 +1138,61 @@ TEST(NerfTrain, RayLossGradientMatchesFiniteDifferences) {
         EXPECT_NEAR(g_color[i][ch], fd_color[i][ch], 1e-3 * largest) << c.name << ", d/dlog c, sample " << i;
     }
   }
+}
+
+// A clipped channel's target is a lower bound: where the rendering is above it
+// the channel adds neither loss nor gradient (as if the target were the
+// rendering itself); below it the loss is the ordinary one. Both expectations
+// come from the unclipped path, which the finite-difference test checks.
+TEST(NerfTrain, ClippedChannelIsALowerBound) {
+  const size_t n = 12;
+  std::vector<nerf_train_detail::RaySample> s(n);
+  for (size_t i = 0; i < n; ++i) {
+    s[i].dt = 0.01f;
+    s[i].t = 0.5f + 0.01f * float(i);
+    s[i].sigma = 20.0f + 10.0f * float(i);
+    s[i].color = Vec3f(0.5f + 0.1f * float(i), 2.0f, 0.2f);
+  }
+  float rendered[3] = {0, 0, 0};
+  {
+    std::vector<float> g_sigma(n), weights(n);
+    std::vector<Vec3f> g_color(n);
+    const float zero[3] = {0, 0, 0};
+    nerf_train_detail::RayLossAndGradient(s.data(), n, zero, {}, g_sigma.data(), g_color.data(), weights.data());
+    for (size_t i = 0; i < n; ++i)
+      for (int ch = 0; ch < 3; ++ch) rendered[ch] += weights[i] * s[i].color[ch];
+  }
+  ASSERT_GT(rendered[1], 0.5f);  // precondition: a mostly opaque ray of green radiance ~2
+  struct Result {
+    double loss;
+    std::vector<float> g_sigma;
+    std::vector<Vec3f> g_color;
+  };
+  const auto run = [&](const float target[3], unsigned clipped) {
+    nerf_train_detail::RayLossTerms terms;
+    terms.epsilon = 0.3f;
+    terms.clipped_channels = clipped;
+    Result r{0, std::vector<float>(n), std::vector<Vec3f>(n)};
+    std::vector<float> weights(n);
+    r.loss = nerf_train_detail::RayLossAndGradient(s.data(), n, target, terms, r.g_sigma.data(), r.g_color.data(),
+                                                   weights.data());
+    return r;
+  };
+  // Green clipped at half the rendering: the same as a target equal to the rendering.
+  const float below[3] = {0.4f, 0.5f * rendered[1], 0.1f};
+  const float matched[3] = {0.4f, rendered[1], 0.1f};
+  const Result clipped = run(below, 1u << 1), reference = run(matched, 0);
+  EXPECT_EQ(clipped.loss, reference.loss);
+  for (size_t i = 0; i < n; ++i) {
+    EXPECT_EQ(clipped.g_sigma[i], reference.g_sigma[i]);
+    EXPECT_EQ(clipped.g_color[i], reference.g_color[i]);
+  }
+  // Green clipped at twice the rendering: the ordinary loss, pulling it up.
+  const float above[3] = {0.4f, 2.0f * rendered[1], 0.1f};
+  const Result bound = run(above, 1u << 1), plain = run(above, 0);
+  EXPECT_EQ(bound.loss, plain.loss);
+  for (size_t i = 0; i < n; ++i) EXPECT_EQ(bound.g_color[i], plain.g_color[i]);
+  EXPECT_LT(bound.g_color[0][1], 0.0f);  // descent raises the green radiance
 }
 
 // Where the transmittance along `ray` falls to 0.9 and to 0.1, by brute-force

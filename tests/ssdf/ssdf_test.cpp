@@ -13,7 +13,9 @@
 #include <filesystem>
 #include <random>
 
+#include "calib/core/binary_file.h"
 #include "calib/core/parallel.h"
+#include "tests/ssdf/format_fixtures.h"
 #include "tests/support/support.h"
 
 namespace nerfar {
@@ -422,12 +424,6 @@ TEST(Bake, IndependentOfTheThreadCount) {
 
 // ---------------------------------------------------------------- file
 
-uint64_t Fnv1a(const std::string& s, size_t size) {
-  uint64_t h = 1469598103934665603ull;
-  for (size_t i = 0; i < size; ++i) h = (h ^ static_cast<unsigned char>(s[i])) * 1099511628211ull;
-  return h;
-}
-
 void ExpectRejected(const std::string& bytes, const std::string& fragment) {
   try {
     ParseSsdf(bytes, "field.ssdf");
@@ -485,7 +481,7 @@ TEST(File, CorruptAndTruncatedFilesAreRejected) {
 
   // Well-formed checksum, bad contents: every check still runs.
   const auto resealed = [](std::string bytes) {
-    const uint64_t h = Fnv1a(bytes, bytes.size() - 8);
+    const uint64_t h = BinaryChecksum(std::string_view(bytes).substr(0, bytes.size() - 8));
     std::memcpy(bytes.data() + bytes.size() - 8, &h, 8);
     return bytes;
   };
@@ -525,7 +521,7 @@ TEST(File, RandomlyDamagedHeadersNeverCrash) {
   for (int i = 0; i < 500; ++i) {
     std::string bytes = good;
     for (int k = 0; k < 3; ++k) bytes[where(rng)] = static_cast<char>(byte(rng));
-    const uint64_t h = Fnv1a(bytes, bytes.size() - 8);
+    const uint64_t h = BinaryChecksum(std::string_view(bytes).substr(0, bytes.size() - 8));
     std::memcpy(bytes.data() + bytes.size() - 8, &h, 8);
     try {
       const SsdfField field = ParseSsdf(bytes, "field.ssdf");
@@ -554,6 +550,27 @@ TEST(File, SharedObjectsBakeAndLoadBackBitIdentical) {
     EXPECT_TRUE(SerializeSsdf(back) == testing::ReadText(path));
     EXPECT_EQ(back.mesh_reference, mesh.source);
   }
+}
+
+// A .ssdf written by an earlier build (tests/data/formats, see tests/make_format_fixtures.cpp)
+// reads with what was written into it and saves to the same bytes.
+TEST(OldFiles, SsdfReadsAndSavesToTheSameBytes) {
+  const std::string old = testing::ReadText(testing::TestDataPath("formats/tetra.ssdf"));
+  const SsdfField field = ParseSsdf(old, "tetra.ssdf");
+  const SsdfBakeOptions options = testing::FormatFixtureSsdfOptions();
+  EXPECT_EQ(field.grid(), options.grid);
+  EXPECT_EQ(field.dirs(), options.dirs);
+  EXPECT_EQ(field.components(), options.components);
+  EXPECT_EQ(field.mesh_reference, testing::FormatFixtureMesh().source);
+  ASSERT_TRUE(field.material.has_value());
+  const Material expected = testing::FormatFixtureMaterial();
+  EXPECT_EQ(field.material->albedo.y, expected.albedo.y);
+  EXPECT_EQ(field.material->roughness, expected.roughness);
+  EXPECT_EQ(field.material->metallic, expected.metallic);
+  EXPECT_EQ(field.material->f0, expected.f0);
+  EXPECT_EQ(field.material->albedo_texture, expected.albedo_texture);
+  EXPECT_NE(field.options_json.find("\"grid\":4"), std::string::npos) << field.options_json;
+  EXPECT_TRUE(SerializeSsdf(field) == old) << "the writer no longer writes the file it wrote";
 }
 
 }  // namespace

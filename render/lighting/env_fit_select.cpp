@@ -1,0 +1,137 @@
+// The environment fit's model selection steps (env_fit_internal.h): sharp
+// sources added one at a time and re-tested once the whole dictionary is in,
+// and per-lobe chroma; each change kept only when its log-likelihood gain
+// beats BIC's penalty for the parameters it adds.
+#include <algorithm>
+#include <cmath>
+#include <string>
+#include <vector>
+
+#include "calib/core/log.h"
+#include "render/lighting/env_fit.h"
+#include "render/lighting/env_fit_internal.h"
+#include "render/lighting/env_internal.h"
+#include "render/sg/sg.h"
+
+namespace nerfar::env_internal {
+namespace {
+
+// BIC's penalty (k/2)·ln n for k more parameters, times the options' factor.
+double BicPenalty(const FitState& st, const EnvEstimateOptions& o, int parameters) {
+  return o.evidence_bic_factor * 0.5 * parameters * std::log(static_cast<double>(st.s->size()));
+}
+
+// Both models take the same alternation steps; then the log-likelihood gain
+// of `with` over `without` (ReflectingGain).
+double GainAfterSteps(FitState& without, FitState& with, int steps) {
+  int a = 0, b = 0;
+  Iterate(without, steps, &a, 0, nullptr);
+  Iterate(with, steps, &b, 0, nullptr);
+  return ReflectingGain(without, with);
+}
+
+// Appends a lobe (amplitude 0) as a column of the fit.
+void AppendLobe(FitState& st, const Vec3& axis, double sharpness, bool source, const EnvShadowRays& shadow,
+                const EnvEstimateOptions& o) {
+  const Eigen::MatrixXd column = LobeIrradianceMatrix(*st.s, {axis}, {sharpness}, shadow, o.source_bundle_rays, o.seed);
+  st.A.conservativeResize(Eigen::NoChange, st.A.cols() + 1);
+  st.A.col(st.A.cols() - 1) = column.col(0);
+  st.mu.conservativeResize(st.mu.rows() + 1, Eigen::NoChange);
+  st.mu.row(st.mu.rows() - 1).setZero();
+  st.lobe_integral.push_back(SgUnitIntegral(sharpness));
+  st.lobes.Add(axis, sharpness, source);
+}
+
+// Removes column k of the fit.
+void RemoveLobe(FitState& st, Eigen::Index k) {
+  const Eigen::Index d = st.A.cols();
+  st.A.block(0, k, st.A.rows(), d - k - 1) = st.A.rightCols(d - k - 1).eval();
+  st.A.conservativeResize(Eigen::NoChange, d - 1);
+  st.mu.block(k, 0, d - k - 1, 3) = st.mu.bottomRows(d - k - 1).eval();
+  st.mu.conservativeResize(d - 1, Eigen::NoChange);
+  st.lobe_integral.erase(st.lobe_integral.begin() + k);
+  st.lobes.axes.erase(st.lobes.axes.begin() + k);
+  st.lobes.sharpness.erase(st.lobes.sharpness.begin() + k);
+  st.lobes.source.erase(st.lobes.source.begin() + k);
+  st.lobes.coloured.erase(st.lobes.coloured.begin() + k);
+}
+
+}  // namespace
+
+// Sharp sources, one at a time: the search's best light is added as a lobe
+// and the whole model re-solved for a few steps; it is kept when its
+// log-likelihood gain (the robust loss as a Cauchy likelihood, as the
+// environment's own model selection) exceeds BIC's penalty for one lobe's
+// parameters, and the search goes on; otherwise the search stops. Returns
+// the sources kept.
+int AddSources(FitState& st, const EnvShadowRays& shadow, const EnvEstimateOptions& o, const EnvProgress& progress) {
+  const double penalty = BicPenalty(st, o, kSgLobeParameters);
+  int kept = 0;
+  for (; kept < o.sources_max; ++kept) {
+    if (progress) progress("sources", static_cast<size_t>(kept), static_cast<size_t>(o.sources_max));
+    const SourceCandidate found = FindSource(st, shadow, o);
+    if (!(found.score > 0)) break;
+    FitState trial = st;
+    AppendLobe(trial, found.axis, found.sharpness, true, shadow, o);
+    const double gain = GainAfterSteps(st, trial, o.source_steps);
+    const double elevation = std::asin(std::clamp(found.axis.z, -1.0, 1.0)) * 180 / kPi;
+    const double azimuth = std::atan2(found.axis.y, found.axis.x) * 180 / kPi;
+    LogInfo("env fit: source " + std::to_string(kept + 1) + " at azimuth " + std::to_string(azimuth) + " elevation " +
+            std::to_string(elevation) + " deg, sharpness " + std::to_string(found.sharpness) +
+            ": log-likelihood gain " + std::to_string(gain) + ", BIC penalty " + std::to_string(penalty) +
+            (gain > penalty ? " (kept)" : " (not supported: search ends)"));
+    if (!(gain > penalty)) break;
+    st = std::move(trial);
+  }
+  if (progress) progress("sources", static_cast<size_t>(o.sources_max), static_cast<size_t>(o.sources_max));
+  return kept;
+}
+
+// Each source again, once the whole dictionary is in the model: removed when
+// keeping it no longer gains more log-likelihood than BIC's penalty (the
+// finer lobes may now explain what it did). Returns the sources left.
+int KeepSupportedSources(FitState& st, const EnvEstimateOptions& o) {
+  const double penalty = BicPenalty(st, o, kSgLobeParameters);
+  for (Eigen::Index k = st.A.cols() - 1; k >= 0; --k) {
+    if (!st.lobes.source[k]) continue;
+    FitState trial = st;
+    RemoveLobe(trial, k);
+    const double gain = GainAfterSteps(trial, st, o.source_steps);
+    LogVerbose("env fit: source at column " + std::to_string(k) + " with the whole dictionary: log-likelihood gain " +
+               std::to_string(gain) + ", BIC penalty " + std::to_string(penalty));
+    if (!(gain > penalty)) st = std::move(trial);
+  }
+  return static_cast<int>(std::count(st.lobes.source.begin(), st.lobes.source.end(), true));
+}
+
+// Per-lobe chroma, one lobe at a time: the lobe is given an RGB amplitude
+// (from grey) and the model re-solved for a few steps, as is the model
+// without the change; it keeps its colour when the log-likelihood gain
+// exceeds BIC's penalty for the chroma's two parameters. Albedo and light
+// trade colour freely, so a neutral scene gives no lobe the evidence (its
+// light stays grey) while a coloured source beside another (a blue sky beside
+// a white sun: the shadows bluer than the lit table) does. Only the lights'
+// relative colour is seen (a common tint goes to the albedo unless the near
+// field pins it), so the lobes are tried from the weakest up: the strongest,
+// tried last, stays the white point unless the data still asks otherwise,
+// as a camera white-balances to the dominant light.
+// Returns the lobes made coloured.
+int FreeChroma(FitState& st, const EnvEstimateOptions& o) {
+  const double penalty = BicPenalty(st, o, kChromaParameters);
+  std::vector<Eigen::Index> order;
+  for (Eigen::Index k = 0; k < st.mu.rows(); ++k)
+    if (st.mu.row(k).maxCoeff() > 0) order.push_back(k);
+  const auto energy = [&](Eigen::Index k) { return st.mu.row(k).sum() * st.lobe_integral[k]; };
+  std::stable_sort(order.begin(), order.end(), [&](Eigen::Index a, Eigen::Index b) { return energy(a) < energy(b); });
+  int coloured = 0;
+  for (Eigen::Index k : order) {
+    FitState trial = st;
+    trial.lobes.coloured[k] = true;
+    if (!(GainAfterSteps(st, trial, o.chroma_steps) > penalty)) continue;
+    st = std::move(trial);
+    ++coloured;
+  }
+  return coloured;
+}
+
+}  // namespace nerfar::env_internal

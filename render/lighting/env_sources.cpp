@@ -1,0 +1,174 @@
+// The search for a sharp source (env_fit_internal.h): given the fit so far,
+// the direction and size of the one light that lowers its weighted data term
+// most, seen through shadow rays from the samples (env_shadow.h). A source's
+// best amplitude and the term's drop are closed form for a fixed column
+// (ResidualPull), so directions are scored without refitting: first a point
+// source from an even set of directions on a subset of the samples, then the
+// best few directions refined continuously (re-marching at every step), then
+// the size from a ladder of sharpnesses, each seen through a bundle of rays
+// spread over the lobe (its penumbra).
+#include <algorithm>
+#include <cmath>
+
+#include "render/lighting/env_fit_internal.h"
+#include "render/lighting/env_internal.h"
+#include "render/sg/sphere.h"
+
+namespace nerfar::env_internal {
+namespace {
+
+// Directions refined after the coarse search: the best few local maxima, so
+// that a second, nearly as good direction (a shadow pattern's mirror image
+// across a symmetric object) is not lost to the coarse grid's sampling.
+constexpr int kRefinedDirections = 3;
+// Coarse maxima closer than this many grid spacings are one maximum.
+constexpr double kDistinctSpacings = 3;
+// Candidates scored per batch of shadow rays.
+constexpr size_t kCandidateBatch = 64;
+
+// About m of the samples, spread evenly, leaving out emitter-like ones: a
+// lamp's own surface glows with light no reflection explains, and would steer
+// the search towards whatever lights it.
+std::vector<uint32_t> EvenSubset(const FitState& st, size_t m) {
+  std::vector<uint32_t> reflecting;
+  for (size_t i = 0; i < st.emitter.size(); ++i)
+    if (!st.emitter[i]) reflecting.push_back(static_cast<uint32_t>(i));
+  const size_t n = reflecting.size();
+  m = std::min(m, n);
+  std::vector<uint32_t> subset;
+  for (size_t k = 0; k < m; ++k) subset.push_back(reflecting[k * n / m]);
+  return subset;
+}
+
+// Scores of point sources (bundle of one ray) in the given directions.
+std::vector<double> PointScores(const FitState& st, const ResidualPull& pull, const EnvShadowRays& shadow,
+                                const std::vector<Vec3>& axes, double sharpness, uint64_t seed) {
+  std::vector<double> scores;
+  for (size_t begin = 0; begin < axes.size(); begin += kCandidateBatch) {
+    const size_t end = std::min(axes.size(), begin + kCandidateBatch);
+    const std::vector<Vec3> batch(axes.begin() + begin, axes.begin() + end);
+    const std::vector<double> lambda(batch.size(), sharpness);
+    for (const std::vector<double>& b : BundleIrradiance(*st.s, shadow, pull.subset(), batch, lambda, 1, seed))
+      scores.push_back(pull.Score(b));
+  }
+  return scores;
+}
+
+// The best directions of the coarse grid, at least kDistinctSpacings apart.
+std::vector<Vec3> CoarseMaxima(const std::vector<Vec3>& grid, const std::vector<double>& scores, double spacing) {
+  std::vector<size_t> order(grid.size());
+  for (size_t k = 0; k < order.size(); ++k) order[k] = k;
+  std::sort(order.begin(), order.end(), [&](size_t a, size_t b) { return scores[a] > scores[b]; });
+  std::vector<Vec3> maxima;
+  const double min_cos = std::cos(kDistinctSpacings * spacing);
+  for (size_t k : order) {
+    if (!(scores[k] > 0) || static_cast<int>(maxima.size()) == kRefinedDirections) break;
+    bool distinct = true;
+    for (const Vec3& m : maxima) distinct = distinct && Dot(m, grid[k]) < min_cos;
+    if (distinct) maxima.push_back(grid[k]);
+  }
+  return maxima;
+}
+
+// Compass search on the sphere: the four neighbours at angle h along the
+// tangent frame; move to the best when it scores higher, else halve h; stop
+// below h_min (a tenth of the sharpest lobe's width).
+SourceCandidate RefineDirection(const FitState& st, const ResidualPull& pull, const EnvShadowRays& shadow,
+                                const Vec3& start, double h, double sharpness, uint64_t seed) {
+  SourceCandidate best{start, sharpness, PointScores(st, pull, shadow, {start}, sharpness, seed)[0]};
+  const double h_min = 0.1 / std::sqrt(sharpness);
+  for (int step = 0; step < 100 && h > h_min; ++step) {
+    Vec3 u, v;
+    OrthonormalBasis(best.axis, u, v);
+    std::vector<Vec3> around;
+    for (const Vec3& t : {u, u * -1.0, v, v * -1.0})
+      around.push_back(Normalized(best.axis * std::cos(h) + t * std::sin(h)));
+    const std::vector<double> scores = PointScores(st, pull, shadow, around, sharpness, seed);
+    const size_t k = static_cast<size_t>(std::max_element(scores.begin(), scores.end()) - scores.begin());
+    if (scores[k] > best.score) {
+      best.axis = around[k];
+      best.score = scores[k];
+    } else {
+      h *= 0.5;
+    }
+  }
+  return best;
+}
+
+// The size: a geometric ladder of sharpnesses from the options' range, each
+// lobe's column from `bundle` rays spread over it; the best score wins.
+SourceCandidate ChooseSize(const FitState& st, const ResidualPull& pull, const EnvShadowRays& shadow, const Vec3& axis,
+                           const EnvEstimateOptions& o) {
+  std::vector<double> ladder;
+  const double ratio = std::sqrt(10.0);
+  for (double lambda = o.source_sharpness_min; lambda <= o.source_sharpness_max * 1.0001; lambda *= ratio)
+    ladder.push_back(lambda);
+  const std::vector<Vec3> axes(ladder.size(), axis);
+  const std::vector<std::vector<double>> columns =
+      BundleIrradiance(*st.s, shadow, pull.subset(), axes, ladder, o.source_bundle_rays, o.seed);
+  SourceCandidate best{axis, ladder.back(), 0};
+  for (size_t k = 0; k < ladder.size(); ++k) {
+    const double score = pull.Score(columns[k]);
+    if (score > best.score) best = {axis, ladder[k], score};
+  }
+  return best;
+}
+
+}  // namespace
+
+ResidualPull::ResidualPull(const FitState& st, std::vector<uint32_t> subset) : subset_(std::move(subset)) {
+  const Eigen::MatrixXd S = Shading(st);
+  const Eigen::Index m = static_cast<Eigen::Index>(subset_.size());
+  p_ = Eigen::VectorXd::Zero(m);
+  q_ = Eigen::VectorXd::Zero(m);
+  for (Eigen::Index a = 0; a < m; ++a) {
+    const size_t i = subset_[a];
+    for (int c = 0; c < 3; ++c) {
+      const double w = st.inv_scale[i][c] * st.inv_scale[i][c];
+      const double f = st.albedo[st.cell[i]][c] / kPi;
+      const double r = Channel(st.s->radiance[i], c) - f * S(static_cast<Eigen::Index>(i), c);
+      p_[a] += w * f * r;
+      q_[a] += w * f * f;
+    }
+  }
+  std::vector<Eigen::Index> lit;
+  for (Eigen::Index k = 0; k < st.mu.rows(); ++k)
+    if (st.mu.row(k).maxCoeff() > 0) lit.push_back(k);
+  active_.resize(m, static_cast<Eigen::Index>(lit.size()));
+  for (size_t k = 0; k < lit.size(); ++k)
+    for (Eigen::Index a = 0; a < m; ++a) active_(a, k) = st.A(subset_[a], lit[k]);
+  Eigen::MatrixXd gram = active_.transpose() * q_.asDiagonal() * active_;
+  if (gram.rows() > 0) gram.diagonal().array() += 1e-9 * std::max(1e-300, gram.diagonal().maxCoeff());
+  gram_.compute(gram);
+  active_pull_ = active_.transpose() * p_;
+}
+
+double ResidualPull::Score(const std::vector<double>& b) const {
+  const Eigen::Map<const Eigen::VectorXd> column(b.data(), static_cast<Eigen::Index>(b.size()));
+  double num = column.dot(p_), den = column.dot(q_.cwiseProduct(column));
+  if (active_.cols() > 0) {
+    const Eigen::VectorXd c = active_.transpose() * q_.cwiseProduct(column);
+    const Eigen::VectorXd g_c = gram_.solve(c);
+    num -= g_c.dot(active_pull_);
+    den -= g_c.dot(c);
+  }
+  return num > 0 && den > 1e-12 * column.dot(q_.cwiseProduct(column)) ? num * num / den : 0.0;
+}
+
+SourceCandidate FindSource(const FitState& st, const EnvShadowRays& shadow, const EnvEstimateOptions& o) {
+  const ResidualPull coarse(st, EvenSubset(st, static_cast<size_t>(o.source_search_samples)));
+  const ResidualPull fine(st, EvenSubset(st, static_cast<size_t>(o.source_refine_samples)));
+  const std::vector<Vec3> grid = FibonacciSphere(o.source_candidates);
+  const double spacing = std::sqrt(4 * kPi / o.source_candidates);
+  const double point = o.source_sharpness_max;  // the search's point source
+  const std::vector<double> scores = PointScores(st, coarse, shadow, grid, point, o.seed);
+  SourceCandidate best;
+  for (const Vec3& start : CoarseMaxima(grid, scores, spacing)) {
+    const SourceCandidate refined = RefineDirection(st, fine, shadow, start, spacing, point, o.seed);
+    if (refined.score > best.score) best = refined;
+  }
+  if (!(best.score > 0)) return best;
+  return ChooseSize(st, fine, shadow, best.axis, o);
+}
+
+}  // namespace nerfar::env_internal
