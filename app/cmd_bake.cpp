@@ -10,6 +10,7 @@
 #include "calib/core/atomic_file.h"
 #include "calib/core/error.h"
 #include "calib/core/log.h"
+#include "calib/core/output_guard.h"
 #include "calib/core/parallel.h"
 #include "calib/object.h"
 #include "render/mesh/mesh.h"
@@ -64,7 +65,7 @@ int RunBake(const CommandArgs& args) {
     material = ReadMaterial(material_path);
     inputs.push_back(material_path);
   }
-  CheckNotSameFile(output, inputs);
+  CheckOutputsSpareInputs({output}, inputs);
   const TriangleMesh mesh = ReadMesh(mesh_path);
   if (!material) material = mesh.material;
 

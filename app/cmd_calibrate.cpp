@@ -9,6 +9,7 @@
 #include <string>
 
 #include "app/cli.h"
+#include "app/command_files.h"
 #include "app/commands.h"
 #include "app/sources.h"
 #include "calib/board.h"
@@ -86,7 +87,7 @@ int RunCalibrate(const CommandArgs& args) {
   usage.ThrowIfAny();
   if (!job.images_dir.empty() && !std::filesystem::is_directory(job.images_dir))
     ThrowInputError(job.images_dir, "no such folder (expected a folder of board images)");
-  CheckNotSameFile(job.output, {job.board_path});
+  CheckOutputsSpareInputs({job.output}, Paths(job.board_path, job.images_dir, SourceInputs(job.source)));
 
   const Board board = ReadBoard(job.board_path);
   TagDetector detector(TagDetectorOptions::Preset(job.detector_preset));

@@ -5,7 +5,8 @@
 // bracket merged to linear HDR where the camera can change its exposure (a
 // single frame through the camera response otherwise; EXR frames of an
 // image folder are taken as they are). The dataset (transforms_*.json, EXR
-// views) is rewritten after every view, so an interrupted session resumes.
+// views) is rewritten after every view, so an interrupted session resumes;
+// SIGINT / SIGTERM end it after the view in progress.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -16,8 +17,10 @@
 #include <string>
 
 #include "app/cli.h"
+#include "app/command_files.h"
 #include "app/commands.h"
 #include "app/sources.h"
+#include "app/stop_signal.h"
 #include "calib/board.h"
 #include "calib/camera_file.h"
 #include "calib/core/atomic_file.h"
@@ -293,6 +296,8 @@ int RunCapture(const CommandArgs& args) {
     usage.Add("", "--views >= 1, --brackets 1..9, --ev-step > 0, --test-every >= 0, --max-frames >= 1");
   usage.ThrowIfAny();
 
+  CheckOutputsSpareInputs(CaptureOutputs(options.output, options.views),
+                          Paths(options.board_path, options.camera_path, SourceInputs(options.source)));
   const Board board = ReadBoard(options.board_path);
   const CameraFile camera = ReadCameraFile(options.camera_path);
   MakeDirectories(options.output);
@@ -315,7 +320,8 @@ int RunCapture(const CommandArgs& args) {
   Progress progress("capture", static_cast<size_t>(options.views));
   Frame frame;
   int frames_read = 0;
-  while (session.ViewCount() < options.views && frames_read < options.max_frames) {
+  const StopScope stop_scope;  // a signal ends the session after the view in progress
+  while (session.ViewCount() < options.views && frames_read < options.max_frames && !StopRequested()) {
     const FrameStatus status = source->Next(frame, 1000);
     if (status == FrameStatus::kEndOfStream) break;
     if (status != FrameStatus::kOk) {
@@ -354,6 +360,10 @@ int RunCapture(const CommandArgs& args) {
   std::printf("views: %d (wanted %d)\n%s", session.ViewCount(), options.views, session.coverage().Render().c_str());
   for (const auto& [reason, count] : skipped) std::printf("  frames skipped (%s): %d\n", reason.c_str(), count);
   std::printf("wrote %s/transforms_train.json and transforms_test.json\n", options.output.c_str());
+  if (StopRequested()) {
+    LogInfo("capture: stopped by a signal; run the same command to resume");
+    return StopExitCode();
+  }
   if (session.ViewCount() == 0) {
     std::fprintf(stderr, "error: capture: no frame gave a usable view (see the reasons above)\n");
     return 1;

@@ -17,6 +17,7 @@
 #include "calib/core/error.h"
 #include "calib/core/image_io.h"
 #include "calib/core/log.h"
+#include "calib/core/output_guard.h"
 #include "render/lighting/env_estimate.h"
 #include "render/lighting/env_light.h"
 #include "render/lighting/env_report.h"
@@ -95,13 +96,10 @@ int RunEnv(const CommandArgs& args) {
       list.ThrowIfAny();
     }
   }
-  CheckNotSameFile(output, {nerf_path});
-  if (!preview.empty()) CheckNotSameFile(preview, {nerf_path, output});
-  if (!dump.empty()) CheckNotSameFile(dump, {nerf_path, output, preview});
   if (no_report && !report_option.empty())
     throw InputError("nerfar env: --report and --no-report contradict each other");
   const std::string report_path = no_report ? "" : ReportPath(output, report_option);
-  if (!report_path.empty()) CheckNotSameFile(report_path, {nerf_path, output, preview, dump, truth_path});
+  CheckOutputsSpareInputs({output, preview, dump, report_path}, {nerf_path, truth_path});
   // The truth is read before the estimate, so that a bad file fails at once.
   const ImageF truth = truth_path.empty() ? ImageF() : ReadTruePanorama(truth_path);
   const NerfField field = LoadNerf(nerf_path);

@@ -17,6 +17,7 @@
 #include <string>
 
 #include "app/cli.h"
+#include "app/command_files.h"
 #include "app/commands.h"
 #include "calib/board.h"
 #include "calib/camera_file.h"
@@ -233,15 +234,17 @@ int RunImport(const CommandArgs& args) {
   }
   test.aabb = train.aabb;
 
-  MakeDirectories(job.output);
   const fs::path dst(job.output);
-  CheckNotSameFile((dst / "transforms_train.json").string(), {splits.train.path, splits.test.path});
+  const std::string camera_path =
+      !job.camera_path.empty() ? job.camera_path : (fs::path(job.source) / "camera.json").string();
+  CheckOutputsSpareInputs(
+      FilesIn(job.output, {"transforms_train.json", "transforms_test.json", "camera.json", "board.json"}),
+      Paths(DatasetInputs(splits.train), DatasetInputs(splits.test), camera_path, job.board_path));
+  MakeDirectories(job.output);
   PointPathsFrom(job.output, train);
   PointPathsFrom(job.output, test);
   WriteDataset((dst / "transforms_train.json").string(), train);
   WriteDataset((dst / "transforms_test.json").string(), test);
-  const std::string camera_path =
-      !job.camera_path.empty() ? job.camera_path : (fs::path(job.source) / "camera.json").string();
   std::error_code error;
   if (fs::is_regular_file(camera_path, error))
     WriteCameraFile((dst / "camera.json").string(), ReadCameraFile(camera_path));

@@ -16,6 +16,7 @@
 
 #include "app/bench.h"
 #include "app/cli.h"
+#include "app/command_files.h"
 #include "app/commands.h"
 #include "calib/core/atomic_file.h"
 #include "calib/core/error.h"
@@ -352,6 +353,9 @@ int RunInsert(const CommandArgs& args) {
 
   // Inputs.
   const Dataset dataset = ReadDataset(DatasetSplitPath(dataset_dir, split));
+  CheckOutputsSpareInputs(InsertOutputs(output, dataset, object_paths.size()),
+                          Paths(nerf_path, env_path, light_probe, probe_distances, frames_dir, DatasetInputs(dataset),
+                                object_paths, pose_paths, mesh_paths, material_paths, InsertTruthInputs(truth_dir)));
   // Without a NeRF (ground-truth inputs) the scene is empty: nothing occludes.
   NerfField nerf = without_nerf ? NerfField{} : LoadNerf(nerf_path);
   // The field does not change from here on: rays read its compact copy (same samples, quantised values).
@@ -371,7 +375,6 @@ int RunInsert(const CommandArgs& args) {
     }
   }
   std::vector<LoadedObject> loaded(object_paths.size());
-  std::vector<std::string> inputs = {nerf_path, env_path};
   for (size_t i = 0; i < object_paths.size(); ++i) {
     LoadedObject& o = loaded[i];
     o.field = ReadSsdf(object_paths[i]);
@@ -390,8 +393,6 @@ int RunInsert(const CommandArgs& args) {
       LogWarning("insert: " + object_paths[i] + " carries no material; using the default grey");
     }
     o.visibility = std::make_unique<SsdfVisibility>(o.field, o.placement.T_world_object, o.placement.scale);
-    inputs.push_back(object_paths[i]);
-    inputs.push_back(pose_paths[i]);
   }
   SgMixture probe_light;
   RadianceSamples probe_samples;  // the probe's pixels (down to 128 × 64) for the prefiltered specular term
@@ -460,8 +461,6 @@ int RunInsert(const CommandArgs& args) {
     }
   }
   MakeDirectories(output);
-  for (const auto& in : inputs)
-    if (!in.empty()) CheckNotSameFile((fs::path(output) / "probe.exr").string(), {in});
   const std::string options_json = options.ToJson();
   LogInfo("insert: options " + options_json + ", threads " + std::to_string(ThreadCount()) +
           (without_nerf ? std::string()

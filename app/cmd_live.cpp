@@ -5,15 +5,21 @@
 // frame (app/live/pipeline.h). With a display: the window (click to place,
 // drag to move, keys and panel for the rest; app/live/live_ui.h). Without
 // one, or with --headless: the same views written to files. Every run ends
-// with the session report (SESSION/report.json and report.png).
+// with the session report (SESSION/report.json and report.png), also after
+// SIGINT / SIGTERM. A camera that disappears is opened again; frames that
+// fail and views that cannot be written are counted in the report (exit 1
+// when a view could not be written), never the end of the run.
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <ctime>
 #include <filesystem>
+#include <functional>
 #include <nlohmann/json.hpp>
+#include <utility>
 
 #include "app/cli.h"
+#include "app/command_files.h"
 #include "app/commands.h"
 #include "app/live/live_ui.h"
 #include "app/live/pipeline.h"
@@ -21,6 +27,7 @@
 #include "app/live/scene.h"
 #include "app/live/window.h"
 #include "app/sources.h"
+#include "app/stop_signal.h"
 #include "calib/core/atomic_file.h"
 #include "calib/core/error.h"
 #include "calib/core/image_io.h"
@@ -28,6 +35,7 @@
 #include "calib/core/media.h"
 #include "calib/core/parallel.h"
 #include "render/synth/camera_stream.h"
+#include "tracking/reconnecting_source.h"
 
 namespace nerfar {
 
@@ -143,8 +151,16 @@ int RunLive(const CommandArgs& args) {
 
   // Scene, objects, source, camera, board.
   const LiveScenePaths paths = FindLiveScene(scene_dir);
-  LiveSceneData scene = LoadLiveScene(paths);
   if (object_paths.empty()) object_paths = paths.objects;
+  const std::string session_dir =
+      !output.empty() ? output : (fs::path(scene_dir) / "sessions" / SessionName()).string();
+  const std::string video_file = !video_path.empty() ? video_path : (fs::path(session_dir) / "live.mp4").string();
+  const std::string sheet_file =
+      !sheet_path.empty() ? sheet_path : (fs::path(session_dir) / "contact_sheet.png").string();
+  CheckOutputsSpareInputs(Paths(LiveSessionOutputs(session_dir), video_file, sheet_file),
+                          Paths(paths.nerf, paths.env, paths.board, paths.camera, camera_path, board_path, object_paths,
+                                SourceInputs(source_name)));
+  LiveSceneData scene = LoadLiveScene(paths);
   if (object_paths.empty())
     throw InputError("nerfar live: no object: give --object OBJ (.ssdf or mesh), or bake one into " + scene_dir);
   std::vector<LiveObjectAsset> objects;
@@ -183,7 +199,18 @@ int RunLive(const CommandArgs& args) {
   std::vector<LiveAsset> assets;
   for (const LiveObjectAsset& o : objects)
     assets.push_back({o.name, &o.mesh, o.field ? &*o.field : nullptr, o.material});
+  source = ReconnectOnLoss(std::move(source), [&source_name] { return OpenSource(source_name); });
   LivePipeline pipeline(*source, board, camera, *scene.field, scene.env.lobes, assets, options);
+  // A view that cannot be written (a full disk, a folder gone) is reported, not the end of the run.
+  const auto write_view = [&pipeline](const std::function<void()>& write) {
+    try {
+      write();
+      return true;
+    } catch (const std::exception& e) {
+      pipeline.ReportOutputError(e.what());
+      return false;
+    }
+  };
   if (!anchor_text.empty() || scale != 1.0) {
     LiveObjectState s = pipeline.object(0);
     s.placed = !anchor_text.empty();
@@ -195,8 +222,6 @@ int RunLive(const CommandArgs& args) {
   const bool window_mode = !headless && LiveWindow::DisplayAvailable();
   if (!window_mode && !headless) LogInfo("live: no display: running headless (views written to files)");
   if (!window_mode && anchor_text.empty()) auto_place = true;
-  const std::string session_dir =
-      !output.empty() ? output : (fs::path(scene_dir) / "sessions" / SessionName()).string();
   MakeDirectories(session_dir);
   const int requested_views =
       views != 0 ? (views | kViewAr) : (window_mode ? kViewAr : (kViewAr | kViewAlongside | kViewLayers));
@@ -221,12 +246,13 @@ int RunLive(const CommandArgs& args) {
   };
 
   const auto t_start = LiveClock::now();
+  const StopScope stop_scope;  // a signal ends the loop; the session files are written as after any run
   std::optional<LiveFrame> last;
   if (window_mode) {
     LiveWindow window("nerfar live - " + paths.dir, 1280, 720);
     LiveUi ui(window, pipeline, session_dir);
     pipeline.Start();
-    while (ui.Tick(std::chrono::milliseconds(30))) {
+    while (ui.Tick(std::chrono::milliseconds(30)) && !StopRequested()) {
       if (ui.shown()) try_auto_place(*ui.shown());
       if (frames > 0 && ui.frames_shown() >= frames) break;
     }
@@ -235,8 +261,8 @@ int RunLive(const CommandArgs& args) {
     last = ui.shown();
   } else {
     const int limit = frames > 0 ? frames : 60;
-    const std::string video_file = !video_path.empty() ? video_path : (fs::path(session_dir) / "live.mp4").string();
     std::unique_ptr<VideoWriter> video;
+    bool video_failed = false;
     std::vector<Image8> sheet_tiles;
     std::vector<std::string> captions;
     const int sheet_every = std::max(1, limit / 4);
@@ -244,8 +270,13 @@ int RunLive(const CommandArgs& args) {
     const auto consume = [&](LiveFrame f) {
       pipeline.MarkDisplayed(f);
       try_auto_place(f);
-      if (!video) video = std::make_unique<VideoWriter>(video_file, f.ar.width, f.ar.height, 30.0);
-      video->Write(f.ar);
+      if (!video_failed) {
+        video_failed = !write_view([&] {
+          if (!video) video = std::make_unique<VideoWriter>(video_file, f.ar.width, f.ar.height, 30.0);
+          video->Write(f.ar);
+        });
+        if (video_failed) video.reset();
+      }
       if (n % sheet_every == sheet_every - 1 && sheet_tiles.size() < 12) {
         const std::string label = "frame " + std::to_string(f.index) + " " + TrackingStateName(f.state);
         sheet_tiles.push_back(f.ar);
@@ -260,7 +291,7 @@ int RunLive(const CommandArgs& args) {
     };
     if (realtime) {
       pipeline.Start();
-      while (n < limit) {
+      while (n < limit && !StopRequested()) {
         std::optional<LiveFrame> f = pipeline.TakeLatest(std::chrono::milliseconds(200));
         if (f)
           consume(std::move(*f));
@@ -269,26 +300,27 @@ int RunLive(const CommandArgs& args) {
       }
       pipeline.Stop();
     } else {
-      while (n < limit) {
+      while (n < limit && !StopRequested()) {
         // The extra views cost more than the AR frame: made for the frames
         // that go into the contact sheet (the video holds the AR view).
         pipeline.set_views(n % sheet_every == sheet_every - 1 ? requested_views : kViewAr);
         std::optional<LiveFrame> f = pipeline.Step();
-        if (!f) break;
-        consume(std::move(*f));
+        if (f)
+          consume(std::move(*f));
+        else if (pipeline.source_ended())
+          break;
       }
     }
-    if (video) video->Close();
-    if (!sheet_tiles.empty())
-      WriteImage8(!sheet_path.empty() ? sheet_path : (fs::path(session_dir) / "contact_sheet.png").string(),
-                  ContactSheet(sheet_tiles, 3, 320, captions));
-    LogInfo("live: wrote " + std::to_string(n) + " frames to " + video_file);
+    if (video) write_view([&] { video->Close(); });
+    if (!sheet_tiles.empty()) write_view([&] { WriteImage8(sheet_file, ContactSheet(sheet_tiles, 3, 320, captions)); });
+    if (!video_failed) LogInfo("live: wrote " + std::to_string(n) + " frames to " + video_file);
   }
   const double wall_s = std::chrono::duration<double>(LiveClock::now() - t_start).count();
   if (last) {
-    WriteImage8((fs::path(session_dir) / "last_ar.png").string(), last->ar);
-    if (!last->alongside.empty()) WriteImage8((fs::path(session_dir) / "last_alongside.png").string(), last->alongside);
-    if (!last->layers.empty()) WriteImage8((fs::path(session_dir) / "last_layers.png").string(), last->layers);
+    const std::pair<const char*, const Image8*> views[] = {
+        {"last_ar.png", &last->ar}, {"last_alongside.png", &last->alongside}, {"last_layers.png", &last->layers}};
+    for (const auto& [name, image] : views)
+      if (!image->empty()) write_view([&] { WriteImage8((fs::path(session_dir) / name).string(), *image); });
   }
   SessionInfo info;
   info.scene_dir = scene_dir;
@@ -304,6 +336,12 @@ int RunLive(const CommandArgs& args) {
   const Json report = BuildReport(session_dir, &report_dir);
   WriteReport(report, report_dir);
   LogInfo("live: session report " + report_dir + "/report.json and report.png");
+  if (StopRequested()) return StopExitCode();
+  if (const std::uint64_t failed = pipeline.counters().output_errors; failed > 0) {
+    std::fprintf(stderr, "error: live: %llu views could not be written (see %s/report.json)\n",
+                 static_cast<unsigned long long>(failed), report_dir.c_str());
+    return 1;
+  }
   return 0;
 }
 

@@ -11,11 +11,13 @@
 #include <vector>
 
 #include "app/cli.h"
+#include "app/command_files.h"
 #include "app/commands.h"
 #include "calib/core/atomic_file.h"
 #include "calib/core/error.h"
 #include "calib/core/json.h"
 #include "calib/core/log.h"
+#include "calib/dataset.h"
 #include "render/nerf/nerf_eval.h"
 #include "render/nerf/nerf_file.h"
 
@@ -85,6 +87,9 @@ int RunRender(const CommandArgs& args) {
   file_options.compress = !no_compress;
   if (const std::vector<std::string> problems = file_options.Validate(); !problems.empty())
     throw InputError("nerfar render: " + problems.front());
+  const Dataset split = ReadDataset(DatasetSplitPath(dataset, options.split));
+  CheckOutputsSpareInputs(Paths(RenderOutputs(output, split), save_model),
+                          Paths(model, DatasetInputs(split), RenderReferenceInputs(dataset)));
   NerfField field = LoadNerf(model);
   if (occupancy_sigma > 0) field.UpdateOccupancy(float(occupancy_sigma));
   // What the model takes as a file (as written by --save-model, or with the default file options).

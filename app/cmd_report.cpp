@@ -10,6 +10,7 @@
 #include "app/commands.h"
 #include "app/live/report.h"
 #include "calib/core/log.h"
+#include "calib/core/output_guard.h"
 
 namespace nerfar {
 
@@ -25,6 +26,8 @@ int RunReport(const CommandArgs& args) {
   if (!parser.Parse(args)) return 0;
   std::string report_dir;
   const Json report = BuildReport(dir, &report_dir);
+  CheckOutputsSpareInputs(FilesIn(report_dir, {"report.json", "report.png"}),
+                          report.at("inputs").get<std::vector<std::string>>());
   WriteReport(report, report_dir);
   LogInfo("report: wrote " + report_dir + "/report.json and report.png");
   return 0;

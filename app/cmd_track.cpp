@@ -7,6 +7,7 @@
 #include <nlohmann/json.hpp>
 
 #include "app/cli.h"
+#include "app/command_files.h"
 #include "app/commands.h"
 #include "app/sources.h"
 #include "calib/board.h"
@@ -48,6 +49,7 @@ int RunTrack(const CommandArgs& args) {
   if (source_name.empty() || board_path.empty() || camera_path.empty())
     throw InputError("nerfar track: --source, --board and --camera are required (see 'nerfar track --help')");
 
+  CheckOutputsSpareInputs({output, overlay}, Paths(board_path, camera_path, SourceInputs(source_name)));
   const Board board = ReadBoard(board_path);
   const CameraFile camera = ReadCameraFile(camera_path);
   bool exr_folder = false;

@@ -1,17 +1,19 @@
 // nerfar train DATASET -o scene.nerf [--preset P] [--minutes M] [--set key=value]...
 // Trains the HDR NeRF; checkpoints beside the output (OUTPUT.ckpt) every few
-// seconds and on Ctrl-C; running the same command again resumes from it.
+// seconds and on SIGINT (Ctrl-C) or SIGTERM; running the same command again
+// resumes from it.
 // --stop-at-step N writes the model of step N and keeps the checkpoint, so the
 // coarse levels of a long schedule can be looked at before it is resumed.
 #include <algorithm>
 #include <cmath>
-#include <csignal>
 #include <cstdio>
 #include <filesystem>
 #include <string>
 
 #include "app/cli.h"
+#include "app/command_files.h"
 #include "app/commands.h"
+#include "app/stop_signal.h"
 #include "calib/core/atomic_file.h"
 #include "calib/core/error.h"
 #include "calib/core/log.h"
@@ -20,9 +22,6 @@
 
 namespace nerfar {
 namespace {
-
-volatile std::sig_atomic_t g_stop = 0;
-extern "C" void OnInterrupt(int) { g_stop = 1; }
 
 std::string Fixed(double v, int digits) {
   char buffer[64];
@@ -52,7 +51,7 @@ int RunTrain(const CommandArgs& args) {
                 "this option resumes)");
   parser.Flag("--restart", &restart, "ignore an existing checkpoint and start over");
   parser.Epilog("Options (--set): " + NerfTrainOptions::Preset("balanced").ToJson() +
-                "\nCtrl-C stops after the current step and keeps a checkpoint; the same command resumes.\n"
+                "\nCtrl-C or SIGTERM stops after the current step and keeps a checkpoint; the same command resumes.\n"
                 "Example: nerfar train ../shared/scenes/lamps -o lamps.nerf --preset fast");
   if (!parser.Parse(args)) return 0;
   if (output.empty()) throw InputError("nerfar train: -o FILE is required (see 'nerfar train --help')");
@@ -71,12 +70,9 @@ int RunTrain(const CommandArgs& args) {
       list.ThrowIfAny();
     }
   }
-  const NerfTrainData data = ReadNerfTrainData(dataset);
-  std::vector<std::string> inputs;
-  for (const NerfView& v : data.train) inputs.push_back(v.image_path);
-  inputs.push_back(data.source);
-  CheckNotSameFile(output, inputs);
   const std::string checkpoint = output + ".ckpt";
+  CheckOutputsSpareInputs({output, checkpoint}, DatasetFolderInputs(dataset));
+  const NerfTrainData data = ReadNerfTrainData(dataset);
   LogInfo("train: " + std::to_string(data.train.size()) + " training views, " + std::to_string(data.held_out.size()) +
           " held-out; preset " + preset + "; options " + options.ToJson());
 
@@ -88,50 +84,42 @@ int RunTrain(const CommandArgs& args) {
             FormatDuration(trainer.elapsed_seconds()) + " trained)");
   }
 
-  g_stop = 0;
-  auto previous = std::signal(SIGINT, OnInterrupt);
-  const auto restore = [&] { std::signal(SIGINT, previous); };
+  const StopScope stop_scope;  // a signal ends the current step, then the checkpoint is written
   // Progress counts schedule per-mille so the ETA is right under a time budget too.
   Progress progress("train", 1000);
   double last_checkpoint = trainer.elapsed_seconds(), last_eval = -1e9, eval_gap = 20.0;
   double checkpoint_gap = checkpoint_seconds;
   double loss = 0, psnr = std::nan("");
-  try {
-    const auto stop_here = [&] { return stop_at_step > 0 && trainer.step() >= stop_at_step; };
-    while (!trainer.Done() && !g_stop && !stop_here()) {
-      loss = trainer.Step();
-      const double now = trainer.elapsed_seconds();
-      // Held-out PSNR every 30 s, but never more than ~5 % of the time (a
-      // foggy early field on a loaded machine renders slowly); eval_views 0: none.
-      if (options.eval_views > 0 && now - last_eval > eval_gap) {
-        psnr = trainer.HeldOutPsnr(options.eval_views);
-        last_eval = trainer.elapsed_seconds();
-        LogVerbose("train: held-out psnr_tm " + Fixed(psnr, 2) + " dB at step " + std::to_string(trainer.step()) +
-                   " took " + FormatDuration(last_eval - now));
-        eval_gap = std::max(30.0, 19.0 * (last_eval - now));
-      }
-      progress.Update(size_t(trainer.progress() * 1000), "step " + std::to_string(trainer.step()) + " level " +
-                                                             std::to_string(trainer.level()) + " loss " +
-                                                             Fixed(loss, 5) + " held-out psnr_tm " + Fixed(psnr, 2));
-      if (now - last_checkpoint > checkpoint_gap) {
-        trainer.SaveCheckpoint(checkpoint);
-        last_checkpoint = trainer.elapsed_seconds();
-        // Never more than ~5 % of the time: an accurate model's checkpoint is
-        // ~1.2 GB (6 s a write under load: 10 % of the time at 60 s).
-        checkpoint_gap = std::max(checkpoint_seconds, 19.0 * (last_checkpoint - now));
-      }
+  const auto stop_here = [&] { return stop_at_step > 0 && trainer.step() >= stop_at_step; };
+  while (!trainer.Done() && !StopRequested() && !stop_here()) {
+    loss = trainer.Step();
+    const double now = trainer.elapsed_seconds();
+    // Held-out PSNR every 30 s, but never more than ~5 % of the time (a
+    // foggy early field on a loaded machine renders slowly); eval_views 0: none.
+    if (options.eval_views > 0 && now - last_eval > eval_gap) {
+      psnr = trainer.HeldOutPsnr(options.eval_views);
+      last_eval = trainer.elapsed_seconds();
+      LogVerbose("train: held-out psnr_tm " + Fixed(psnr, 2) + " dB at step " + std::to_string(trainer.step()) +
+                 " took " + FormatDuration(last_eval - now));
+      eval_gap = std::max(30.0, 19.0 * (last_eval - now));
     }
-  } catch (...) {
-    restore();
-    throw;
+    progress.Update(size_t(trainer.progress() * 1000), "step " + std::to_string(trainer.step()) + " level " +
+                                                           std::to_string(trainer.level()) + " loss " + Fixed(loss, 5) +
+                                                           " held-out psnr_tm " + Fixed(psnr, 2));
+    if (now - last_checkpoint > checkpoint_gap) {
+      trainer.SaveCheckpoint(checkpoint);
+      last_checkpoint = trainer.elapsed_seconds();
+      // Never more than ~5 % of the time: an accurate model's checkpoint is
+      // ~1.2 GB (6 s a write under load: 10 % of the time at 60 s).
+      checkpoint_gap = std::max(checkpoint_seconds, 19.0 * (last_checkpoint - now));
+    }
   }
-  restore();
-  if (g_stop) {
+  if (StopRequested()) {
     trainer.SaveCheckpoint(checkpoint);
     progress.Finish("interrupted");
     LogInfo("train: stopped at step " + std::to_string(trainer.step()) + "; checkpoint " + checkpoint +
             " (run the same command to resume)");
-    return 130;
+    return StopExitCode();
   }
   const bool partial = !trainer.Done();  // --stop-at-step: keep the checkpoint to resume
   if (partial) trainer.SaveCheckpoint(checkpoint);

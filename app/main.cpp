@@ -1,16 +1,18 @@
 // nerfar: git-style subcommands. Maps the two kinds of failure (error.h) to
-// exit codes 2 (bad usage or input) and 1 (run time), and makes sure nothing
-// escapes as a crash.
+// exit codes 2 (bad usage or input) and 1 (run time), makes sure nothing
+// escapes as a crash, and ends cleanly on SIGINT / SIGTERM (app/stop_signal.h).
 #include <cstdio>
 #include <exception>
 #include <new>
 #include <string>
 
 #include "app/commands.h"
+#include "app/stop_signal.h"
 #include "calib/core/error.h"
 
 int main(int argc, char** argv) {
   using namespace nerfar;
+  InstallStopHandlers();
   const std::string command = argc > 1 ? argv[1] : "help";
   const CommandArgs args(argv + (argc > 1 ? 2 : argc), argv + argc);
   for (const Command& entry : AllCommands()) {

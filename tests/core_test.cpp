@@ -1,12 +1,20 @@
 // calib/core: EXR and PNG round trips, strict JSON, atomic files, the binary
 // container, math, threads, tone mapping and metrics.
+#include <fcntl.h>
 #include <gtest/gtest.h>
+#include <sys/syscall.h>
+#include <unistd.h>
 
+#include <climits>
 #include <cmath>
+#include <csignal>
 #include <cstring>
 #include <filesystem>
+#include <mutex>
 #include <nlohmann/json.hpp>
 #include <opencv2/videoio.hpp>
+#include <string>
+#include <vector>
 
 #include "calib/core/atomic_file.h"
 #include "calib/core/binary_file.h"
@@ -18,8 +26,41 @@
 #include "calib/core/math.h"
 #include "calib/core/media.h"
 #include "calib/core/metrics.h"
+#include "calib/core/output_guard.h"
 #include "calib/core/parallel.h"
 #include "tests/support/support.h"
+
+// The file-system calls of an AtomicFile commit, in order: this program's own
+// fsync and rename stand in for the C library's (the static core library
+// resolves to them at link time), record what they were called on while
+// g_recording is set, and then do the real system call.
+namespace {
+std::mutex g_calls_mutex;
+bool g_recording = false;
+std::vector<std::string> g_calls;  // "fsync PATH", "rename FROM -> TO"
+
+std::string PathOfDescriptor(int fd) {
+  char target[PATH_MAX] = {};
+  const std::string link = "/proc/self/fd/" + std::to_string(fd);
+  const ssize_t n = ::readlink(link.c_str(), target, sizeof target - 1);
+  return n > 0 ? std::string(target, static_cast<size_t>(n)) : "?";
+}
+
+void Record(const std::string& call) {
+  std::lock_guard<std::mutex> lock(g_calls_mutex);
+  if (g_recording) g_calls.push_back(call);
+}
+}  // namespace
+
+extern "C" int fsync(int fd) {
+  Record("fsync " + PathOfDescriptor(fd));
+  return static_cast<int>(::syscall(SYS_fsync, fd));
+}
+
+extern "C" int rename(const char* from, const char* to) {
+  Record(std::string("rename ") + from + " -> " + to);
+  return static_cast<int>(::syscall(SYS_renameat, AT_FDCWD, from, AT_FDCWD, to));
+}
 
 namespace nerfar {
 namespace {
@@ -61,6 +102,25 @@ TEST(Exr, HalfRoundTripKeepsThreeDigits) {
   for (size_t i = 0; i < image.pixels.size(); ++i)
     // half has a 10-bit mantissa: relative rounding error <= 2^-11 ≈ 4.9e-4.
     EXPECT_NEAR(back.pixels[i], image.pixels[i], image.pixels[i] * 4.9e-4) << i;
+}
+
+TEST(Exr, RadianceBeyondHalfRangeRoundTripsExactly) {
+  TempDir dir;
+  // A lamp filament of 1e6 in an otherwise ordinary frame; half tops out at
+  // 65504 (1e6 would be written as inf), so the file must hold floats.
+  ImageF image = Ramp(8, 4, 3);
+  image.at(5, 2, 1) = 1e6f;
+  image.at(1, 3, 0) = -7e4f;
+  for (const ExrPixelType asked : {ExrPixelType::kHalf, ExrPixelType::kFloat}) {
+    WriteExrRgb(dir.File("bright.exr"), image, asked);
+    const ImageF back = ReadExrRgb(dir.File("bright.exr"));
+    EXPECT_EQ(back.pixels, image.pixels);
+  }
+  // One channel (the Y of depth or κ layers) likewise.
+  ImageF depth(3, 2, 1, 2.0f);
+  depth.pixels[4] = 1e6f;
+  WriteExr(dir.File("y.exr"), depth, {"Y"});
+  EXPECT_EQ(ReadExrChannel(dir.File("y.exr")).pixels, depth.pixels);
 }
 
 TEST(Exr, AnyChannelsInRequestedOrder) {
@@ -281,12 +341,126 @@ TEST(AtomicFile, UncommittedWritesLeaveTheTargetAlone) {
   EXPECT_EQ(testing::ReadText(dir.File("t.txt")), "new");
 }
 
-TEST(AtomicFile, RefusesToOverwriteAnInput) {
+TEST(AtomicFile, CommitFlushesTheFileBeforeTheRenameAndTheFolderAfter) {
+  TempDir dir;
+  const std::string canonical_dir = std::filesystem::canonical(dir.path()).string();
+  {
+    std::lock_guard<std::mutex> lock(g_calls_mutex);
+    g_calls.clear();
+    g_recording = true;
+  }
+  std::string temp;
+  {
+    AtomicFile file(dir.File("data.bin"));
+    temp = std::filesystem::path(file.temp_path()).filename().string();
+    testing::WriteText(file.temp_path(), "payload");
+    file.Commit();
+  }
+  std::vector<std::string> calls;
+  {
+    std::lock_guard<std::mutex> lock(g_calls_mutex);
+    g_recording = false;
+    calls = g_calls;
+  }
+  // Data on disk before the name points at it; the name itself on disk after.
+  const std::vector<std::string> expected = {
+      "fsync " + canonical_dir + "/" + temp,
+      "rename " + dir.File(temp) + " -> " + dir.File("data.bin"),
+      "fsync " + canonical_dir,
+  };
+  EXPECT_EQ(calls, expected);
+  EXPECT_EQ(testing::ReadText(dir.File("data.bin")), "payload");
+}
+
+TEST(AtomicFile, AFailedCommitRemovesTheTemporaryFileAndNamesTheTarget) {
+  TempDir dir;
+  std::filesystem::create_directories(dir.File("target_is_a_folder/inside"));
+  std::string message;
+  try {
+    WriteFileAtomic(dir.File("target_is_a_folder"), "x");
+  } catch (const std::runtime_error& e) {
+    message = e.what();
+  }
+  EXPECT_NE(message.find(dir.File("target_is_a_folder")), std::string::npos) << message;
+  size_t entries = 0;
+  for ([[maybe_unused]] const auto& entry : std::filesystem::directory_iterator(dir.path())) ++entries;
+  EXPECT_EQ(entries, 1u) << "only the folder itself: no temporary file left";
+}
+
+// What a SIGINT / SIGTERM handler does before the process ends (app/stop_signal.cpp).
+extern "C" void RemoveTemporaryFilesOnSignal(int) { RemoveTemporaryFiles(); }
+
+TEST(AtomicFile, ASignalHandlerRemovesTheTemporaryFilesOfWritesInProgress) {
+  TempDir dir;
+  AtomicFile first(dir.File("a.exr")), second(dir.File("b.json"));
+  testing::WriteText(first.temp_path(), "half an image");
+  testing::WriteText(second.temp_path(), "{\"half\":");
+  testing::WriteText(dir.File("kept.txt"), "a finished file");
+  // The temporary name keeps the extension (writers that pick a format by it).
+  EXPECT_EQ(std::filesystem::path(first.temp_path()).extension(), ".exr");
+  auto* previous = std::signal(SIGUSR1, RemoveTemporaryFilesOnSignal);
+  std::raise(SIGUSR1);
+  std::signal(SIGUSR1, previous);
+  EXPECT_FALSE(std::filesystem::exists(first.temp_path()));
+  EXPECT_FALSE(std::filesystem::exists(second.temp_path()));
+  EXPECT_EQ(testing::ReadText(dir.File("kept.txt")), "a finished file");
+}
+
+TEST(AtomicFile, ReadRefusesFilesOverTheLimit) {
   TempDir dir;
   testing::WriteText(dir.File("in.txt"), "x");
-  EXPECT_THROW(CheckNotSameFile(dir.File("in.txt"), {dir.File("in.txt")}), InputError);
-  EXPECT_NO_THROW(CheckNotSameFile(dir.File("out.txt"), {dir.File("in.txt")}));
   EXPECT_THROW(ReadFileBytes(dir.File("in.txt"), 0), InputError);
+  EXPECT_EQ(ReadFileBytes(dir.File("in.txt"), 1), "x");
+}
+
+// The message of the guard's refusal for these lists ("" when it accepts them).
+std::string GuardMessage(const std::vector<std::string>& outputs, const std::vector<std::string>& inputs) {
+  return InputErrorOf([&] { CheckOutputsSpareInputs(outputs, inputs); });
+}
+
+TEST(OutputGuard, AnOutputThatIsAnInputIsRefusedNamingBoth) {
+  TempDir dir;
+  MakeDirectories(dir.File("in"));
+  testing::WriteText(dir.File("in/a.exr"), "a");
+  const std::string message = GuardMessage({dir.File("out.json"), dir.File("in/a.exr")}, {dir.File("in/a.exr")});
+  EXPECT_NE(message.find("would overwrite the input"), std::string::npos) << message;
+  EXPECT_EQ(message.rfind(dir.File("in/a.exr") + ": ", 0), 0u) << message;
+  // Nothing shared: accepted; empty paths (options not given) are ignored.
+  EXPECT_EQ(GuardMessage({dir.File("out.json"), ""}, {dir.File("in/a.exr"), ""}), "");
+}
+
+TEST(OutputGuard, TheSameFileIsFoundThroughRelativePathsLinksAndHardLinks) {
+  TempDir dir;
+  MakeDirectories(dir.File("in"));
+  testing::WriteText(dir.File("in/a.exr"), "a");
+  // Dot segments and a relative path from the current folder.
+  const std::string relative =
+      std::filesystem::relative(dir.File("in/a.exr"), std::filesystem::current_path()).string();
+  EXPECT_NE(GuardMessage({dir.File("in/./../in/a.exr")}, {relative}), "");
+  // A symbolic link to the file, and an output inside a linked folder.
+  std::filesystem::create_symlink(dir.File("in/a.exr"), dir.File("link.exr"));
+  std::filesystem::create_directory_symlink(dir.File("in"), dir.File("linked_dir"));
+  EXPECT_NE(GuardMessage({dir.File("link.exr")}, {dir.File("in/a.exr")}), "");
+  EXPECT_NE(GuardMessage({dir.File("linked_dir/a.exr")}, {dir.File("in/a.exr")}), "");
+  // A hard link: another name, the same file.
+  std::filesystem::create_hard_link(dir.File("in/a.exr"), dir.File("hard.exr"));
+  EXPECT_NE(GuardMessage({dir.File("hard.exr")}, {dir.File("in/a.exr")}), "");
+  // A file that does not exist yet beside the input is not the input.
+  EXPECT_EQ(GuardMessage({dir.File("linked_dir/b.exr")}, {dir.File("in/a.exr")}), "");
+}
+
+TEST(OutputGuard, AFolderInputStandsForItsFilesAndOutputsMustBeDistinct) {
+  TempDir dir;
+  MakeDirectories(dir.File("frames"));
+  testing::WriteText(dir.File("frames/r_000.png"), "p");
+  const std::vector<std::string> written = FilesIn(dir.File("frames"), {"r_000.exr", "r_000.png"});
+  ASSERT_EQ(written.size(), 2u);
+  EXPECT_EQ(written[1], dir.File("frames") + "/r_000.png");
+  const std::string message = GuardMessage(written, {dir.File("frames")});
+  EXPECT_NE(message.find(dir.File("frames/r_000.png")), std::string::npos) << message;
+  EXPECT_EQ(GuardMessage(FilesIn(dir.File("frames"), {"r_000.exr"}), {dir.File("frames")}), "");
+  const std::string twice = GuardMessage({dir.File("env.json"), dir.File("./env.json")}, {});
+  EXPECT_NE(twice.find("two outputs"), std::string::npos) << twice;
 }
 
 TEST(Math, AxisAngleRoundTripOverStratifiedRotations) {

@@ -27,12 +27,21 @@ LiveUi::LiveUi(LiveWindow& window, LivePipeline& pipeline, std::string session_d
 
 LiveUi::~LiveUi() { StopRecording(); }
 
+void LiveUi::ReportFailure(const std::string& what, const std::exception& e) {
+  status_ = what + " failed: " + e.what();
+  pipeline_.ReportOutputError(e.what());
+}
+
 void LiveUi::StartRecording() {
   if (video_ || !shown_) return;
-  MakeDirectories(session_dir_);
   const std::string path = (fs::path(session_dir_) / "recording.mp4").string();
-  video_ = std::make_unique<VideoWriter>(path, shown_->ar.width, shown_->ar.height, 30.0);
-  status_ = "recording to " + path;
+  try {
+    MakeDirectories(session_dir_);
+    video_ = std::make_unique<VideoWriter>(path, shown_->ar.width, shown_->ar.height, 30.0);
+    status_ = "recording to " + path;
+  } catch (const std::exception& e) {
+    ReportFailure("recording", e);
+  }
 }
 
 void LiveUi::StopRecording() {
@@ -41,17 +50,19 @@ void LiveUi::StopRecording() {
     video_->Close();
     status_ = "recorded " + std::to_string(video_->frames_written()) + " frames";
   } catch (const std::exception& e) {
-    status_ = std::string("recording failed: ") + e.what();
-    LogWarning("live: " + status_);
+    ReportFailure("recording", e);
   }
   video_.reset();
 }
 
 std::string LiveUi::Screenshot() {
-  MakeDirectories(session_dir_);
-  char name[64];
-  std::snprintf(name, sizeof name, "screenshot_%03d.png", screenshots_++);
-  pending_screenshot_ = (fs::path(session_dir_) / name).string();
+  // The next free name: a screenshot never replaces a file already there.
+  std::error_code error;
+  do {
+    char name[64];
+    std::snprintf(name, sizeof name, "screenshot_%03d.png", screenshots_++);
+    pending_screenshot_ = (fs::path(session_dir_) / name).string();
+  } while (fs::exists(pending_screenshot_, error));
   window_.RequestScreenshot();
   return pending_screenshot_;
 }
@@ -146,7 +157,12 @@ void LiveUi::DrawPanel() {
     const LiveCounters c = pipeline_.counters();
     ImGui::Text("dropped: %llu before processing, %llu before display", (unsigned long long)c.dropped_before_process,
                 (unsigned long long)c.dropped_before_display);
+    if (c.frame_errors + c.source_errors + c.output_errors > 0)
+      ImGui::Text("errors: %llu frames, %llu source (%llu reconnections), %llu outputs",
+                  (unsigned long long)c.frame_errors, (unsigned long long)c.source_errors,
+                  (unsigned long long)c.reconnects, (unsigned long long)c.output_errors);
   }
+  if (pipeline_.source_lost()) ImGui::TextWrapped("camera lost: opening it again...");
   int views = pipeline_.views();
   bool alongside = views & kViewAlongside, layers = views & kViewLayers;
   if (ImGui::Checkbox("alongside (N)", &alongside)) pipeline_.set_views(views ^ kViewAlongside);
@@ -216,12 +232,24 @@ bool LiveUi::Tick(std::chrono::milliseconds wait) {
   const std::vector<InputEvent> events = window_.Present(views, [this] { DrawPanel(); });
   if (frame) {
     pipeline_.MarkDisplayed(*shown_);
-    if (video_) video_->Write(shown_->ar);
+    if (video_) {
+      try {
+        video_->Write(shown_->ar);
+      } catch (const std::exception& e) {
+        ReportFailure("recording", e);
+        video_.reset();
+      }
+    }
   }
   if (!pending_screenshot_.empty()) {
     if (std::optional<Image8> shot = window_.TakeScreenshot()) {
-      WriteImage8(pending_screenshot_, *shot);
-      LogInfo("live: wrote " + pending_screenshot_);
+      try {
+        MakeDirectories(session_dir_);
+        WriteImage8(pending_screenshot_, *shot);
+        LogInfo("live: wrote " + pending_screenshot_);
+      } catch (const std::exception& e) {
+        ReportFailure("screenshot", e);
+      }
       pending_screenshot_.clear();
     }
   }

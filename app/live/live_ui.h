@@ -3,12 +3,15 @@
 // view places the selected object on the scene surface under the cursor,
 // drag moves it along the surface, keys and sliders rotate, scale and edit
 // the material, preset switch), draws the ImGui panel (stage times, tracking
-// state, latency) and records video and screenshots into the session folder.
+// state, latency, errors) and records video and screenshots into the session
+// folder; a recording or screenshot that cannot be written is shown in the
+// panel and counted by the pipeline, and the session goes on.
 // Keys: Tab selects the next object, A/D rotate ±15°, W/S scale ×1.1 / ÷1.1,
 // 1/2/3 preset fast / balanced / accurate, N alongside view, L layers, H HUD,
 // R record on/off, P screenshot, Esc quit.
 #pragma once
 
+#include <exception>
 #include <memory>
 #include <optional>
 #include <string>
@@ -44,6 +47,7 @@ class LiveUi {
  private:
   void DrawPanel();
   void PlaceAt(int view, double x, double y);
+  void ReportFailure(const std::string& what, const std::exception& e);
 
   LiveWindow& window_;
   LivePipeline& pipeline_;

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <exception>
 
 #include "calib/core/error.h"
 #include "calib/core/image_io.h"
@@ -30,6 +31,25 @@ constexpr float kDisplayCap = 0.995f;
 // A ray "meets a surface" at this scene opacity: a fast-preset NeRF reaches
 // only ~0.6 on its solid table top, so 0.5 would miss half of it.
 constexpr float kSurfaceOpacity = 0.3f;
+
+// After the source threw: a device that fails at once on every call must not
+// make the capture loop spin (ReconnectingSource paces its own reopening).
+constexpr auto kFailedSourcePause = std::chrono::milliseconds(50);
+// Frames whose time stamps fall this far behind their due time (a source that
+// came back, a file that restarted) re-anchor the pacing instead of bursting.
+constexpr auto kPaceSlack = std::chrono::seconds(1);
+// Failures logged as they happen; later ones are counted (session report).
+constexpr std::uint64_t kErrorsLogged = 20;
+
+std::string ExceptionText(const std::exception_ptr& error) {
+  try {
+    std::rethrow_exception(error);
+  } catch (const std::exception& e) {
+    return e.what();
+  } catch (...) {
+    return "unknown exception";
+  }
+}
 
 // 8-bit frame (grey or RGB) -> linear RGB under the response.
 ImageF Linearise(const Image8& image, bool display_response) {
@@ -294,26 +314,98 @@ std::optional<LivePipeline::Captured> LivePipeline::Capture(bool& end) {
   }
   if (status == FrameStatus::kTimeout) return std::nullopt;
   if (status != FrameStatus::kOk) {
-    std::lock_guard<std::mutex> lock(stats_mutex_);
-    ++counters_.source_errors;
+    {
+      std::lock_guard<std::mutex> lock(stats_mutex_);
+      ++counters_.source_errors;
+    }
+    // A lost device is recorded once, when it goes; every corrupt frame is.
+    const bool lost = status == FrameStatus::kLost;
+    if (!(lost && source_lost_.exchange(true)))
+      RecordError(-1, "source", std::string(FrameStatusName(status)) + ": " + source_.LastError());
     return std::nullopt;
+  }
+  if (source_lost_.exchange(false)) {
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    ++counters_.reconnects;
+    LogInfo("live: frames again from the source (frame " + std::to_string(c.frame.index) + ")");
   }
   {
     std::lock_guard<std::mutex> lock(stats_mutex_);
     if (!have_start_) {
       have_start_ = true;
-      start_ = LiveClock::now();
-      first_t_ns_ = c.frame.t_ns;
+      start_ = pace_start_ = LiveClock::now();
+      pace_first_t_ns_ = c.frame.t_ns;
     }
   }
   if (options_.pace) {
-    const auto due = start_ + std::chrono::nanoseconds(c.frame.t_ns - first_t_ns_);
-    if (due > LiveClock::now()) std::this_thread::sleep_until(due);
+    const auto now = LiveClock::now();
+    auto due = pace_start_ + std::chrono::nanoseconds(c.frame.t_ns - pace_first_t_ns_);
+    if (due + kPaceSlack < now || due > now + kPaceSlack) {
+      pace_start_ = due = now;
+      pace_first_t_ns_ = c.frame.t_ns;
+    }
+    if (due > now) std::this_thread::sleep_until(due);
   }
   c.captured = LiveClock::now();
   std::lock_guard<std::mutex> lock(stats_mutex_);
   ++counters_.captured;
   return c;
+}
+
+std::optional<LivePipeline::Captured> LivePipeline::CaptureGuarded(bool& end) {
+  try {
+    return Capture(end);
+  } catch (...) {
+    end = false;
+    {
+      std::lock_guard<std::mutex> lock(stats_mutex_);
+      ++counters_.source_errors;
+    }
+    source_lost_.store(true);
+    RecordError(-1, "source", ExceptionText(std::current_exception()));
+    std::this_thread::sleep_for(kFailedSourcePause);
+    return std::nullopt;
+  }
+}
+
+std::optional<LiveFrame> LivePipeline::ProcessGuarded(Captured captured) {
+  const std::int64_t index = captured.frame.index;
+  try {
+    return Process(std::move(captured));
+  } catch (...) {
+    {
+      std::lock_guard<std::mutex> lock(stats_mutex_);
+      ++counters_.frame_errors;
+    }
+    RecordError(index, "process", ExceptionText(std::current_exception()));
+    return std::nullopt;
+  }
+}
+
+void LivePipeline::RecordError(std::int64_t frame, const std::string& stage, const std::string& what) {
+  std::uint64_t count = 0;
+  {
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    errors_.push_back({frame, stage, what});
+    if (errors_.size() > kErrorsKept) errors_.erase(errors_.begin());
+    count = counters_.source_errors + counters_.frame_errors + counters_.output_errors;
+  }
+  if (count <= kErrorsLogged)
+    LogWarning("live: " + stage + (frame >= 0 ? " (frame " + std::to_string(frame) + ")" : "") + ": " + what +
+               (count == kErrorsLogged ? " (further errors are counted in the session report only)" : ""));
+}
+
+void LivePipeline::ReportOutputError(const std::string& what) {
+  {
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    ++counters_.output_errors;
+  }
+  RecordError(-1, "output", what);
+}
+
+std::vector<LiveError> LivePipeline::errors() const {
+  std::lock_guard<std::mutex> lock(stats_mutex_);
+  return errors_;
 }
 
 LiveFrame LivePipeline::Process(Captured captured) {
@@ -480,8 +572,12 @@ LiveFrame LivePipeline::Process(Captured captured) {
   t0 = LiveClock::now();
   if (hud_.load()) {
     double fps = 0, latency = -1;
+    LiveCounters counts;
+    std::string last_error;
     {
       std::lock_guard<std::mutex> lock(stats_mutex_);
+      counts = counters_;
+      if (!errors_.empty()) last_error = errors_.back().stage + ": " + errors_.back().what;
       if (recent_display_s_.size() >= 2)
         fps = (recent_display_s_.size() - 1) / std::max(1e-9, recent_display_s_.back() - recent_display_s_.front());
       for (auto it = records_.rbegin(); it != records_.rend(); ++it)
@@ -498,6 +594,13 @@ LiveFrame LivePipeline::Process(Captured captured) {
     std::snprintf(line, sizeof line, "ms: track %.1f  insert %.1f (kappa %.1f)  views %.1f", out.times.track_ms,
                   it.total_ms, it.kappa_ms, out.times.alongside_ms + out.times.layers_ms);
     DrawText(out.ar, line, 4, 17);
+    if (!last_error.empty()) {
+      std::snprintf(line, sizeof line, "errors: %llu frames, %llu source, %llu outputs; last %.60s",
+                    static_cast<unsigned long long>(counts.frame_errors),
+                    static_cast<unsigned long long>(counts.source_errors),
+                    static_cast<unsigned long long>(counts.output_errors), last_error.c_str());
+      DrawText(out.ar, line, 4, 30);
+    }
   }
   out.times.display_ms += MsSince(t0);
   out.times.process_ms = MsSince(t_start);
@@ -535,22 +638,25 @@ void LivePipeline::MarkDisplayed(const LiveFrame& frame) {
     }
 }
 
-std::optional<LiveFrame> LivePipeline::Step() {
-  for (;;) {
+std::optional<LiveFrame> LivePipeline::Step(std::chrono::milliseconds wait) {
+  const auto give_up = LiveClock::now() + wait;
+  do {
     bool end = false;
-    std::optional<Captured> c = Capture(end);
+    std::optional<Captured> c = CaptureGuarded(end);
     if (end) {
       source_ended_.store(true);
       return std::nullopt;
     }
-    if (c) return Process(std::move(*c));
-  }
+    if (c)
+      if (std::optional<LiveFrame> f = ProcessGuarded(std::move(*c))) return f;
+  } while (LiveClock::now() < give_up);
+  return std::nullopt;
 }
 
 void LivePipeline::CaptureLoop() {
   while (!stop_.load()) {
     bool end = false;
-    std::optional<Captured> c = Capture(end);
+    std::optional<Captured> c = CaptureGuarded(end);
     if (end) break;
     if (c) input_.Push(std::move(*c));
   }
@@ -565,7 +671,7 @@ void LivePipeline::ProcessLoop() {
       if (input_.closed()) break;
       continue;
     }
-    output_.Push(Process(std::move(*c)));
+    if (std::optional<LiveFrame> f = ProcessGuarded(std::move(*c))) output_.Push(std::move(*f));
   }
   output_.Close();
 }

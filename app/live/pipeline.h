@@ -5,7 +5,12 @@
 // light sphere) with per-stage milliseconds. Threaded: a capture thread and a
 // processing thread joined by latest-value queues, so capture never waits for
 // a slow stage (stale frames are dropped and counted); or stepped (Step(),
-// every frame processed in order, for files). No GL here. World frame = the
+// every frame processed in order, for files). Nothing a frame or the device
+// does ends the loop: a source that throws or reports a corrupt or lost frame,
+// and a frame whose processing throws, are counted, kept in errors() (shown
+// in the HUD and the session report) and skipped; frames that come back after
+// the source was lost count as a reconnection (ReconnectingSource,
+// tracking/frame_sources.h, reopens a device that is gone). No GL here. World frame = the
 // board's (metres, z up); OpenCV camera axes; frames in the camera's 8-bit
 // display encoding, composited in the scene field's linear radiance units.
 #pragma once
@@ -130,7 +135,17 @@ struct LiveCounters {
   std::uint64_t processed = 0;
   std::uint64_t dropped_before_display = 0;  // processed but superseded before display
   std::uint64_t displayed = 0;
-  std::uint64_t source_errors = 0;  // corrupt / lost frames
+  std::uint64_t source_errors = 0;  // corrupt or lost frames, and failures (exceptions) of the source
+  std::uint64_t reconnects = 0;     // frames arriving again after the source was lost or failed
+  std::uint64_t frame_errors = 0;   // frames whose processing failed (skipped)
+  std::uint64_t output_errors = 0;  // views that could not be written (recording, screenshots, files)
+};
+
+// One failure the loop went on after.
+struct LiveError {
+  std::int64_t frame = -1;  // the frame it happened on (-1: none, e.g. the source)
+  std::string stage;        // "source", "process" or "output"
+  std::string what;         // the message
 };
 
 class LivePipeline {
@@ -150,8 +165,10 @@ class LivePipeline {
   std::optional<LiveFrame> TakeLatest(std::chrono::milliseconds timeout);
   bool finished() const { return source_ended_.load() && output_.closed(); }
   // Stepped mode (no threads): the next frame from the source, processed.
-  // nullopt at the end of the stream.
-  std::optional<LiveFrame> Step();
+  // nullopt at the end of the stream (source_ended()) or when no frame was
+  // processed within `wait` (a lost camera: call again).
+  std::optional<LiveFrame> Step(std::chrono::milliseconds wait = std::chrono::seconds(2));
+  bool source_ended() const { return source_ended_.load(); }
   // The caller showed (or wrote) this frame now: records its latency.
   void MarkDisplayed(const LiveFrame& frame);
 
@@ -177,6 +194,14 @@ class LivePipeline {
 
   LiveCounters counters() const;
   std::vector<LiveFrameRecord> records() const;
+  // The most recent failures (at most kErrorsKept), oldest first.
+  static constexpr size_t kErrorsKept = 32;
+  std::vector<LiveError> errors() const;
+  // True while the source is lost (no frame since it failed).
+  bool source_lost() const { return source_lost_.load(); }
+  // A view the caller could not write (recording, screenshot, session file):
+  // counted with the loop's own failures.
+  void ReportOutputError(const std::string& what);
   const LiveOptions& options() const { return options_; }
   double mean_fps() const;  // displayed frames / seconds since the first capture
 
@@ -188,6 +213,10 @@ class LivePipeline {
   };
   std::optional<Captured> Capture(bool& end);  // one frame from the source (paced)
   LiveFrame Process(Captured captured);
+  // The same behind the per-frame catch: a failure is counted and recorded, nullopt.
+  std::optional<Captured> CaptureGuarded(bool& end);
+  std::optional<LiveFrame> ProcessGuarded(Captured captured);
+  void RecordError(std::int64_t frame, const std::string& stage, const std::string& what);
   void CaptureLoop();
   void ProcessLoop();
 
@@ -223,10 +252,13 @@ class LivePipeline {
   // Pacing and statistics.
   bool have_start_ = false;
   LiveClock::time_point start_;
-  std::int64_t first_t_ns_ = 0;
+  LiveClock::time_point pace_start_;  // pacing anchor: frame time stamp pace_first_t_ns_ is due then
+  std::int64_t pace_first_t_ns_ = 0;
   mutable std::mutex stats_mutex_;
   LiveCounters counters_;
   std::vector<LiveFrameRecord> records_;
+  std::vector<LiveError> errors_;  // the last kErrorsKept
+  std::atomic<bool> source_lost_{false};
   std::vector<double> recent_display_s_;  // display times of the last frames (fps in the HUD)
 
   LatestQueue<Captured> input_;

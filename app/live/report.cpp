@@ -212,6 +212,9 @@ void WriteSession(const std::string& session_dir, const SessionInfo& info, const
     if (i == 0 && info.auto_placed_frame >= 0) j["auto_placed_frame"] = info.auto_placed_frame;
     objects.push_back(j);
   }
+  Json errors = Json::array();
+  for (const LiveError& e : pipeline.errors())
+    errors.push_back({{"frame", e.frame >= 0 ? Json(e.frame) : Json(nullptr)}, {"stage", e.stage}, {"what", e.what}});
   Json session = {{"format", "nerfar-session"},
                   {"version", 1},
                   {"scene", info.scene_dir},
@@ -230,7 +233,11 @@ void WriteSession(const std::string& session_dir, const SessionInfo& info, const
                     {"processed", c.processed},
                     {"dropped_before_display", c.dropped_before_display},
                     {"displayed", c.displayed},
-                    {"source_errors", c.source_errors}}},
+                    {"source_errors", c.source_errors},
+                    {"reconnects", c.reconnects},
+                    {"frame_errors", c.frame_errors},
+                    {"output_errors", c.output_errors}}},
+                  {"errors", errors},
                   {"frames", frames}};
   MakeDirectories(session_dir);
   WriteJsonFile((fs::path(session_dir) / "session.json").string(), session);
@@ -275,6 +282,10 @@ Json BuildReport(const std::string& dir, std::string* report_dir) {
     }
   }
   report["ssdf_error"] = ssdf;
+  std::vector<std::string> inputs = {camera_path, paths.env};
+  if (!session_dir.empty()) inputs.push_back((fs::path(session_dir) / "session.json").string());
+  inputs.insert(inputs.end(), objects.begin(), objects.end());
+  report["inputs"] = inputs;
   if (!session.is_object()) {
     report["note"] = "no session: scene items only (run `nerfar live` for tracking, light and timing figures)";
     return report;
@@ -343,6 +354,12 @@ Json BuildReport(const std::string& dir, std::string* report_dir) {
       {"latency_ms", {{"median", Number(PercentileOf(latencies, 0.5))}, {"p90", Number(PercentileOf(latencies, 0.9))}}},
       {"counters", counters},
       {"stages", stage_json}};
+  // What the loop went on after (a failing frame, camera or recording).
+  report["errors"] = {{"frames", counters.value("frame_errors", 0)},
+                      {"source", counters.value("source_errors", 0)},
+                      {"reconnects", counters.value("reconnects", 0)},
+                      {"outputs", counters.value("output_errors", 0)},
+                      {"recent", session.value("errors", Json::array())}};
   return report;
 }
 
@@ -399,6 +416,13 @@ void WriteReport(const Json& report, const std::string& report_dir) {
                   num(p["latency_ms"], "p90"), p.value("mode", "").c_str());
     lines.push_back(buf);
     lines.push_back("load " + p.value("load", std::string()) + ", threads " + std::to_string(p.value("threads", 0)));
+    if (report.contains("errors")) {
+      const Json& e = report["errors"];
+      std::snprintf(buf, sizeof buf,
+                    "errors               %d frames failed, %d source errors (%d reconnections), %d outputs",
+                    e.value("frames", 0), e.value("source", 0), e.value("reconnects", 0), e.value("outputs", 0));
+      lines.push_back(buf);
+    }
     lines.push_back("stage (ms)           median     p90");
     for (const auto& [name, v] : p["stages"].items()) {
       std::snprintf(buf, sizeof buf, "  %-18s %8.2f %8.2f", name.c_str(), num(v, "median_ms"), num(v, "p90_ms"));

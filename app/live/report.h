@@ -1,5 +1,6 @@
 // The session of a live run and its report. `nerfar live` writes
-// SESSION/session.json (options, counters, one record per processed frame:
+// SESSION/session.json (options, counters, the last errors the loop went on
+// after, one record per processed frame:
 // tracking state, pose, true pose where the source knows it, per-stage ms,
 // capture-to-display latency; the objects as they were at the end: placed,
 // anchor, yaw, scale, material, world pose) and the last views (last_ar.png, ...); the
@@ -36,8 +37,8 @@ struct SessionInfo {
 void WriteSession(const std::string& session_dir, const SessionInfo& info, const LivePipeline& pipeline);
 
 // The report of a session folder (with session.json), or of a SCENE folder
-// (scene items only, plus its newest sessions/* if any). InputError when
-// the folder is neither.
+// (scene items only, plus its newest sessions/* if any); its "inputs" list
+// the files it was computed from. InputError when the folder is neither.
 Json BuildReport(const std::string& dir, std::string* report_dir = nullptr);
 // Writes report.json and report.png into report_dir and prints a table.
 void WriteReport(const Json& report, const std::string& report_dir);

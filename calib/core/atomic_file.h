@@ -1,6 +1,11 @@
 // Files are written as a temporary file beside the target and renamed over it
 // in one step: a reader never sees half a file, a crash leaves the old file
-// whole, and inputs are never overwritten (CheckNotSameFile guards that).
+// whole, and inputs are never overwritten (calib/core/output_guard.h guards
+// that). Commit() makes the write durable: the file's data reaches the disk
+// before the rename and the folder's entry after it, so a power cut leaves
+// the old file or the new one, never an empty one. Temporary files are
+// removed when the write fails, when its owner is destroyed uncommitted, and
+// on SIGINT / SIGTERM (RemoveTemporaryFiles, from the signal handler).
 #pragma once
 
 #include <cstddef>
@@ -10,8 +15,9 @@
 
 namespace nerfar {
 
-// Owns a temporary path next to `target`; Commit() renames it onto the target.
-// If destroyed without Commit() the temporary file is removed.
+// Owns a temporary path next to `target` (".NAME.tmpPID_N.EXT": the target's
+// extension kept, for writers that pick a format by it); Commit() renames it
+// onto the target. If destroyed without Commit() the temporary file is removed.
 class AtomicFile {
  public:
   explicit AtomicFile(std::string target);
@@ -21,24 +27,27 @@ class AtomicFile {
 
   const std::string& temp_path() const { return temp_path_; }
   const std::string& target() const { return target_; }
-  // Throws std::runtime_error naming the target if the rename fails.
+  // Flushes the temporary file to disk, renames it onto the target and
+  // flushes the folder; std::runtime_error naming the target if any step
+  // fails (the temporary file is then removed).
   void Commit();
 
  private:
   std::string target_;
   std::string temp_path_;
+  int registry_slot_ = -1;  // where the signal handler finds temp_path_ (-1: not registered)
   bool committed_ = false;
 };
 
 void WriteFileAtomic(const std::string& path, std::string_view bytes);
 
+// Removes every temporary file of an AtomicFile alive in this process.
+// Async-signal-safe (unlink only): for SIGINT / SIGTERM handlers.
+void RemoveTemporaryFiles();
+
 // Reads a whole file; InputError if it is missing, unreadable, or larger than
 // max_bytes (so a wrong path to a huge file cannot exhaust memory).
 std::string ReadFileBytes(const std::string& path, size_t max_bytes = size_t{1} << 30);
-
-// InputError if `output` names the same file as any of `inputs` (after
-// resolving links), so no command can overwrite what it reads.
-void CheckNotSameFile(const std::string& output, const std::vector<std::string>& inputs);
 
 // Creates a directory and its parents; runtime_error naming it on failure.
 void MakeDirectories(const std::string& path);

@@ -92,7 +92,8 @@ class ByteReader {
     static_assert(std::is_trivially_copyable_v<T>);
     if (count > remaining() / sizeof(T)) Truncated(what, count, sizeof(T));
     std::vector<T> values(count);
-    std::memcpy(values.data(), Take(count * sizeof(T), what).data(), count * sizeof(T));
+    const std::string_view bytes = Take(count * sizeof(T), what);
+    if (count > 0) std::memcpy(values.data(), bytes.data(), count * sizeof(T));  // an empty vector's data() may be null
     return values;
   }
   size_t pos() const { return pos_; }  // bytes read so far

@@ -107,6 +107,11 @@ ImageF ReadChannels(const std::string& path, Imf::InputFile& file, const std::ve
   return image;
 }
 
+bool FitsHalf(const std::vector<float>& values) {
+  const float largest = HALF_MAX;
+  return std::all_of(values.begin(), values.end(), [largest](float v) { return !(std::abs(v) > largest); });
+}
+
 std::vector<std::string> ChannelNames(const Imf::Header& header) {
   std::vector<std::string> names;
   for (auto it = header.channels().begin(); it != header.channels().end(); ++it) names.emplace_back(it.name());
@@ -147,6 +152,8 @@ void WriteExr(const std::string& path, const ImageF& image, const std::vector<st
   NERFAR_CHECK_EQ(static_cast<size_t>(image.channels), names.size());
   NERFAR_CHECK_EQ(image.pixels.size(), image.PixelCount() * image.channels);
   NERFAR_CHECK(image.width > 0 && image.height > 0);
+  // A value beyond half's range would become ±inf, which no reader takes back.
+  if (type == ExrPixelType::kHalf && !FitsHalf(image.pixels)) type = ExrPixelType::kFloat;
   const Imf::PixelType pixel_type = type == ExrPixelType::kHalf ? Imf::HALF : Imf::FLOAT;
   Imf::Header header(image.width, image.height);
   header.compression() = Imf::ZIP_COMPRESSION;

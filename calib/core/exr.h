@@ -28,7 +28,9 @@ ImageF ReadExrRgb(const std::string& path);
 ImageF ReadExrChannel(const std::string& path, const std::string& channel = "");
 
 // Writes image.channels channels named by `names` (atomic). Half stores about
-// 3 significant digits up to 65504; use float for depth and large radiance.
+// 3 significant digits up to 65504; use float for depth. An image holding a
+// value beyond ±65504 (a lamp filament, the sun) is written as float whatever
+// `type` says, so that every finite image round-trips.
 void WriteExr(const std::string& path, const ImageF& image, const std::vector<std::string>& names,
               ExrPixelType type = ExrPixelType::kHalf);
 

@@ -6,6 +6,7 @@
 #include <opencv2/videoio.hpp>
 #include <stdexcept>
 
+#include "calib/core/atomic_file.h"
 #include "calib/core/error.h"
 
 namespace nerfar {
@@ -67,12 +68,13 @@ Image8 ContactSheet(const std::vector<Image8>& tiles, int columns, int tile_widt
 }
 
 struct VideoWriter::Impl {
-  std::string path, temp_path;
+  explicit Impl(const std::string& path) : file(path) {}
+  AtomicFile file;  // OpenCV picks the container from the name: the temporary keeps the extension
   int width = 0, height = 0;
   cv::VideoWriter writer;
 };
 
-VideoWriter::VideoWriter(const std::string& path, int width, int height, double fps) : impl_(std::make_unique<Impl>()) {
+VideoWriter::VideoWriter(const std::string& path, int width, int height, double fps) {
   NERFAR_CHECK(width > 0 && height > 0 && fps > 0);
   const std::string extension = std::filesystem::path(path).extension().string();
   int fourcc = 0;
@@ -83,23 +85,14 @@ VideoWriter::VideoWriter(const std::string& path, int width, int height, double 
   } else {
     ThrowInputError(path, "unknown video extension '" + extension + "' (expected .mp4 or .avi)");
   }
-  impl_->path = path;
+  impl_ = std::make_unique<Impl>(path);
   impl_->width = width;
   impl_->height = height;
-  // Written beside the target and renamed by Close(); OpenCV picks the
-  // container from the name, so the temporary name keeps the extension.
-  const std::filesystem::path target(path);
-  impl_->temp_path = (target.parent_path() / ("." + target.stem().string() + ".partial" + extension)).string();
-  if (!impl_->writer.open(impl_->temp_path, cv::CAP_FFMPEG, fourcc, fps, cv::Size(width, height)))
+  if (!impl_->writer.open(impl_->file.temp_path(), cv::CAP_FFMPEG, fourcc, fps, cv::Size(width, height)))
     throw std::runtime_error(path + ": cannot open a video writer (is OpenCV built with FFmpeg?)");
 }
 
-VideoWriter::~VideoWriter() {
-  if (impl_->writer.isOpened()) {
-    impl_->writer.release();
-    std::filesystem::remove(impl_->temp_path);
-  }
-}
+VideoWriter::~VideoWriter() = default;  // an unclosed video's temporary file goes with its AtomicFile
 
 void VideoWriter::Write(const Image8& frame) {
   NERFAR_CHECK(impl_->writer.isOpened());
@@ -114,9 +107,7 @@ void VideoWriter::Write(const Image8& frame) {
 void VideoWriter::Close() {
   if (!impl_->writer.isOpened()) return;
   impl_->writer.release();
-  std::error_code error;
-  std::filesystem::rename(impl_->temp_path, impl_->path, error);
-  if (error) throw std::runtime_error(impl_->path + ": cannot write video (" + error.message() + ")");
+  impl_->file.Commit();
 }
 
 }  // namespace nerfar

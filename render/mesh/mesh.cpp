@@ -10,8 +10,10 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <limits>
 #include <sstream>
+#include <vector>
 
 #include "calib/core/atomic_file.h"
 
@@ -177,32 +179,125 @@ std::optional<Material> ConvertMaterial(const aiMaterial& in, const std::string&
   return m;
 }
 
-// A PLY header announces its element counts before any data; reject absurd
-// ones before the importer allocates for them (a 4e9-vertex header in a
-// 100-byte file must not take gigabytes).
+bool PlyType(const std::string& type) {
+  static const char* const kTypes[] = {"char", "uchar", "short", "ushort", "int",   "uint",   "float",   "double",
+                                       "int8", "uint8", "int16", "uint16", "int32", "uint32", "float32", "float64"};
+  return std::find(std::begin(kTypes), std::end(kTypes), type) != std::end(kTypes);
+}
+
+// One line of a PLY header checked against the header's grammar (an importer
+// that meets anything else may misread or never finish: a fuzzed header sent
+// assimp into an endless loop). Returns false for end_header.
+bool CheckPlyHeaderLine(const std::string& path, int number, const std::string& line, bool& ascii, bool& in_element,
+                        uintmax_t file_bytes) {
+  std::istringstream words(line);
+  std::string keyword;
+  words >> keyword;
+  std::vector<std::string> rest;
+  for (std::string word; words >> word;) rest.push_back(word);
+  const auto bad = [&](const std::string& expected) {
+    ThrowInputError(
+        path, "line " + std::to_string(number + 1) + " of the PLY header, '" + line + "' (expected " + expected + ")");
+  };
+  if (number == 0) {
+    if (line != "ply") bad("'ply'");
+  } else if (keyword == "format") {
+    const bool known =
+        rest.size() == 2 && (rest[0] == "ascii" || rest[0] == "binary_little_endian" || rest[0] == "binary_big_endian");
+    if (!known || number != 1) bad("'format ascii|binary_little_endian|binary_big_endian 1.0' as the second line");
+    ascii = rest[0] == "ascii";
+  } else if (keyword == "comment" || keyword == "obj_info") {
+  } else if (keyword == "element") {
+    long double count = -1;
+    if (rest.size() != 2 || !(std::istringstream(rest[1]) >> count) || count < 0) bad("'element NAME COUNT'");
+    const size_t limit = rest[0] == "face" ? kMaxMeshTriangles : kMaxMeshVertices;
+    // Each element takes at least 1 byte in binary and 2 ('0\n') in ASCII:
+    // absurd counts are refused before the importer allocates for them.
+    if (count > static_cast<long double>(limit) || count * (ascii ? 2 : 1) > static_cast<long double>(file_bytes))
+      ThrowInputError(path, "PLY header announces " + std::to_string(static_cast<unsigned long long>(count)) + " " +
+                                rest[0] + " elements in a " + std::to_string(file_bytes) +
+                                "-byte file (expected at most " + std::to_string(limit) +
+                                " and a file large enough to hold them)");
+    in_element = true;
+  } else if (keyword == "property") {
+    const bool scalar = rest.size() == 2 && PlyType(rest[0]);
+    const bool list = rest.size() == 4 && rest[0] == "list" && PlyType(rest[1]) && PlyType(rest[2]);
+    if (!in_element || !(scalar || list))
+      bad("'property TYPE NAME' or 'property list TYPE TYPE NAME' after an element");
+  } else if (keyword == "end_header" && rest.empty()) {
+    return false;
+  } else {
+    bad("format, comment, element, property or end_header");
+  }
+  return true;
+}
+
+// The header of a PLY file, line by line, up to end_header.
 void CheckPlyHeader(const std::string& path, uintmax_t file_bytes) {
   std::ifstream in(path, std::ios::binary);
   std::string line;
-  bool ascii = false;
-  for (int lines = 0; lines < 1000 && std::getline(in, line); ++lines) {
+  bool ascii = false, in_element = false;
+  constexpr int kMaxHeaderLines = 1000;
+  for (int number = 0; number < kMaxHeaderLines && std::getline(in, line); ++number) {
     if (!line.empty() && line.back() == '\r') line.pop_back();
-    if (line.rfind("format ascii", 0) == 0) ascii = true;
-    if (line == "end_header") return;
-    std::istringstream words(line);
-    std::string keyword, name;
-    long double count = -1;
-    if (!(words >> keyword) || keyword != "element") continue;
-    if (!(words >> name >> count) || count < 0)
-      ThrowInputError(path, "bad PLY element line '" + line + "' (expected 'element NAME COUNT')");
-    const size_t limit = name == "face" ? kMaxMeshTriangles : kMaxMeshVertices;
-    // Each element takes at least 1 byte in binary and 2 ('0\n') in ASCII.
-    const long double min_bytes = count * (ascii ? 2 : 1);
-    if (count > static_cast<long double>(limit) || min_bytes > static_cast<long double>(file_bytes))
-      ThrowInputError(path, "PLY header announces " + std::to_string(static_cast<unsigned long long>(count)) + " " +
-                                name + " elements in a " + std::to_string(file_bytes) +
-                                "-byte file (expected at most " + std::to_string(limit) +
-                                " and a file large enough to hold them)");
+    if (!CheckPlyHeaderLine(path, number, line, ascii, in_element, file_bytes)) return;
   }
+  ThrowInputError(path, "PLY header without end_header in its first " + std::to_string(kMaxHeaderLines) +
+                            " lines (expected a header ending with the line 'end_header')");
+}
+
+// What assimp's importers made, checked before its post-processing steps run
+// on it: they take the scene as valid, and abort the process on face indices
+// past the vertices or nodes naming meshes that are not there (a fuzzed
+// binary PLY did).
+void CheckImportedScene(const aiScene& scene, const std::string& path) {
+  const auto bad = [&](const std::string& what) {
+    ThrowInputError(path, "cannot read the mesh: " + what + " (expected a valid OBJ, PLY or glTF 2.0 file)");
+  };
+  for (unsigned m = 0; m < scene.mNumMeshes; ++m) {
+    const aiMesh* mesh = scene.mMeshes[m];
+    if (mesh == nullptr || (mesh->mNumVertices > 0 && mesh->mVertices == nullptr)) bad("a mesh without vertices");
+    if (mesh->mNumFaces > 0 && mesh->mFaces == nullptr) bad("a mesh without its faces");
+    if (scene.mNumMaterials > 0 && mesh->mMaterialIndex >= scene.mNumMaterials) bad("a material index out of range");
+    for (unsigned f = 0; f < mesh->mNumFaces; ++f) {
+      const aiFace& face = mesh->mFaces[f];
+      if (face.mNumIndices == 0 || face.mIndices == nullptr) bad("face " + std::to_string(f) + " has no vertices");
+      for (unsigned k = 0; k < face.mNumIndices; ++k)
+        if (face.mIndices[k] >= mesh->mNumVertices)
+          bad("face " + std::to_string(f) + " names vertex " + std::to_string(face.mIndices[k]) + " of " +
+              std::to_string(mesh->mNumVertices));
+    }
+  }
+  // The node tree (PreTransformVertices walks it), without recursion: depth is the file's to choose.
+  std::vector<const aiNode*> nodes = {scene.mRootNode};
+  for (size_t visited = 0; !nodes.empty(); ++visited) {
+    const aiNode* node = nodes.back();
+    nodes.pop_back();
+    if (node == nullptr || visited > kMaxMeshTriangles) bad("a broken node tree");
+    for (unsigned i = 0; i < node->mNumMeshes; ++i)
+      if (node->mMeshes[i] >= scene.mNumMeshes) bad("a node names mesh " + std::to_string(node->mMeshes[i]));
+    for (unsigned i = 0; i < node->mNumChildren; ++i) nodes.push_back(node->mChildren[i]);
+  }
+}
+
+// The file through assimp: imported as it is, checked, then post-processed
+// into triangles with shared vertices and the node transforms applied.
+const aiScene* ImportScene(Assimp::Importer& importer, const std::string& path) {
+  const auto failed = [&] {
+    std::string why = importer.GetErrorString();
+    if (why.empty()) why = "unknown reason";
+    ThrowInputError(path, "cannot read the mesh: " + why + " (expected a valid OBJ, PLY or glTF 2.0 file)");
+  };
+  const aiScene* imported = importer.ReadFile(path, 0);
+  if (imported == nullptr) failed();
+  CheckImportedScene(*imported, path);
+  // Drop lines and points so that Triangulate leaves triangles only.
+  importer.SetPropertyInteger(AI_CONFIG_PP_SBP_REMOVE, aiPrimitiveType_LINE | aiPrimitiveType_POINT);
+  const aiScene* scene = importer.ApplyPostProcessing(aiProcess_ValidateDataStructure | aiProcess_Triangulate |
+                                                      aiProcess_JoinIdenticalVertices | aiProcess_PreTransformVertices |
+                                                      aiProcess_SortByPType);
+  if (scene == nullptr) failed();
+  return scene;
 }
 
 }  // namespace
@@ -225,16 +320,7 @@ TriangleMesh ReadMesh(const std::string& path) {
   if (extension == ".ply") CheckPlyHeader(path, bytes);
 
   Assimp::Importer importer;
-  // Drop lines and points so that Triangulate leaves triangles only.
-  importer.SetPropertyInteger(AI_CONFIG_PP_SBP_REMOVE, aiPrimitiveType_LINE | aiPrimitiveType_POINT);
-  const unsigned flags = aiProcess_Triangulate | aiProcess_JoinIdenticalVertices | aiProcess_PreTransformVertices |
-                         aiProcess_SortByPType | aiProcess_ValidateDataStructure;
-  const aiScene* scene = importer.ReadFile(path, flags);
-  if (scene == nullptr) {
-    std::string why = importer.GetErrorString();
-    if (why.empty()) why = "unknown reason";
-    ThrowInputError(path, "cannot read the mesh: " + why + " (expected a valid OBJ, PLY or glTF 2.0 file)");
-  }
+  const aiScene* scene = ImportScene(importer, path);
   if (scene->mNumMeshes == 0) ThrowInputError(path, "the file holds no mesh (expected at least one triangle)");
 
   size_t total_vertices = 0, total_faces = 0;

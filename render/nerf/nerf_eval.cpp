@@ -99,7 +99,6 @@ NerfEvaluation EvaluateNerf(const NerfField& field, const std::string& dataset_d
     if (!options.output_dir.empty()) {
       const fs::path out(options.output_dir);
       const std::string color_path = (out / (score.name + ".exr")).string();
-      CheckNotSameFile(color_path, {frame.image_path});
       WriteExrRgb(color_path, images.color, ExrPixelType::kFloat);
       WriteExr((out / (score.name + "_depth.exr")).string(), images.depth, {"Y"}, ExrPixelType::kFloat);
       WriteExr((out / (score.name + "_surface_depth.exr")).string(), images.surface_depth, {"Y"}, ExrPixelType::kFloat);

@@ -22,11 +22,27 @@ constexpr uint8_t kCompressionNone = 0, kCompressionZlib = 1;
 constexpr uint64_t kMaxPayloadBytes = uint64_t{1} << 33;
 // Largest brick table the reader allocates (512 MB; a 2.5 mm grid over a 5 m cube needs 2^27).
 constexpr size_t kMaxBrickTable = size_t{1} << 27;
+// Deflate packs at most about 1032:1 (zlib's technical notes): a stated payload
+// larger than that over the stored bytes is a corrupt size, refused before it
+// is allocated.
+constexpr uint64_t kDeflateMaxRatio = 1032;
+// Bytes of a version-2 brick besides its codes: coordinates, stored-vertex mask
+// and occupancy (28), then per channel a quantiser (i8 exponent, i32 base).
+constexpr uint64_t kBrickBytes = 28 + kValuesPerVertex * 5;
 
+// IEEE 754 binary16 to float, exactly (in plain arithmetic: not every
+// compiler has a half type on every target).
 float FromHalfBits(uint16_t bits) {
-  _Float16 h;
-  std::memcpy(&h, &bits, 2);
-  return static_cast<float>(h);
+  const int exponent = (bits >> 10) & 0x1f;
+  const int mantissa = bits & 0x3ff;
+  float magnitude;
+  if (exponent == 0)
+    magnitude = std::ldexp(static_cast<float>(mantissa), -24);  // zero and subnormals: m · 2^-24
+  else if (exponent == 31)
+    magnitude = mantissa != 0 ? std::numeric_limits<float>::quiet_NaN() : std::numeric_limits<float>::infinity();
+  else
+    magnitude = std::ldexp(static_cast<float>(mantissa | 0x400), exponent - 25);  // (1 + m/1024) · 2^(e-15)
+  return (bits & 0x8000) != 0 ? -magnitude : magnitude;
 }
 
 // Which vertices of each brick some occupied cell needs (bit per local vertex).
@@ -367,6 +383,17 @@ NerfField ParseNerf(const std::string& bytes, const std::string& source) {
       ThrowInputError(source, "compression " + std::to_string(compression) + " (expected 0 none or 1 zlib)");
     if (payload_size > kMaxPayloadBytes || (compression == kCompressionNone && payload_size != stored_size))
       ThrowInputError(source, "payload size " + std::to_string(payload_size) + " does not match the file");
+    // The bricks' codes: the header's vertices at their bits, padded to a byte per brick and channel.
+    uint64_t bits_per_vertex = 0;
+    for (const uint8_t b : bits) bits_per_vertex += b;
+    const uint64_t least = uint64_t(h.brick_count) * kBrickBytes + h.vertex_count * bits_per_vertex / 8;
+    const uint64_t most = least + uint64_t(h.brick_count) * kValuesPerVertex + 1;
+    if (payload_size < least || payload_size > most ||
+        (compression == kCompressionZlib && payload_size > kDeflateMaxRatio * stored_size + 64))
+      ThrowInputError(source, "payload size " + std::to_string(payload_size) + " does not fit " +
+                                  std::to_string(h.brick_count) + " bricks of " + std::to_string(h.vertex_count) +
+                                  " stored vertices in " + std::to_string(stored_size) +
+                                  " stored bytes (the file is corrupt)");
     const std::string_view stored = r.Take(stored_size, "payload");
     std::string inflated;
     if (compression == kCompressionZlib) {

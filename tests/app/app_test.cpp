@@ -147,6 +147,26 @@ TEST(App, LiveHeadlessWritesVideoSheetSessionAndReport) {
   EXPECT_TRUE(std::filesystem::is_regular_file(dir.File("report.png")));
 }
 
+// A video that cannot be written (its folder is a file) is reported and the
+// run goes on: the session and report are written, the exit code is 1.
+TEST(App, LiveHeadlessReportsAVideoItCannotWriteAndStillWritesTheSession) {
+  testing::TempDir dir;
+  WriteTinyScene(dir.path());
+  testing::WriteText(dir.File("a_file"), "not a folder");
+  const std::string session = dir.File("session");
+  const std::string video = dir.File("a_file/live.mp4");
+  const Result r = RunNerfar(
+      "live --headless --threads 2 --source synthetic:lamps,size=640x480,spp=1,frames=40 --scene " + dir.path() +
+      " --object " + dir.File("cube.obj") + " -o " + session + " --frames 3 --views ar --video " + video);
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find(video), std::string::npos) << r.output;
+  for (const char* name : {"session.json", "report.json", "report.png", "last_ar.png"})
+    EXPECT_TRUE(std::filesystem::is_regular_file(session + "/" + name)) << name << "\n" << r.output;
+  const Json report = ReadJsonFile(session + "/report.json");
+  EXPECT_EQ(report.at("errors").at("outputs").get<int>(), 1) << report.dump();
+  EXPECT_EQ(report.at("tracking").at("frames").get<int>(), 3);
+}
+
 // `nerfar env` on the tiny scene's slab: bad --truth or --report are usage
 // errors (exit 2, the file named) found before the estimate runs; a small
 // estimate with a truth states the fit residual and the irradiance error and

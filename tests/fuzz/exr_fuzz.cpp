@@ -1,24 +1,17 @@
 // Fuzzes the EXR reader through a real file (OpenEXR reads paths): any input
 // must be read or rejected with InputError; no crash, no hang, no huge alloc.
-#include <unistd.h>
-
 #include <cstdint>
-#include <cstdio>
 #include <string>
 
 #include "calib/core/error.h"
 #include "calib/core/exr.h"
+#include "tests/fuzz/fuzz_support.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, size_t size) {
-  static const std::string path = "/tmp/nerfar_fuzz_exr_" + std::to_string(::getpid()) + ".exr";
-  FILE* file = std::fopen(path.c_str(), "wb");
-  if (file == nullptr) return 0;
-  std::fwrite(data, 1, size, file);
-  std::fclose(file);
-  try {
-    nerfar::ReadExrRgb(path);
-  } catch (const nerfar::InputError&) {
-  }
-  std::remove(path.c_str());
+  using namespace nerfar;
+  static const std::string path = fuzz::ScratchFile("image.exr");
+  if (!fuzz::WriteBytes(path, std::string(reinterpret_cast<const char*>(data), size))) return 0;
+  fuzz::Expect([&] { ReadExrRgb(path); });
+  fuzz::Expect([&] { ReadExrChannel(path, "Y"); });
   return 0;
 }

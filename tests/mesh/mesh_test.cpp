@@ -217,6 +217,33 @@ TEST(ReadMesh, BadFilesAreInputErrorsNamingTheFile) {
   ExpectInputErrorNaming(dir.File("folder.obj"));
 }
 
+// PLY headers outside the grammar are refused by our check, before assimp:
+// the fuzzer's input (a header that never ends, with a property line of four
+// words) kept assimp 5.2 busy for minutes.
+TEST(ReadMesh, PlyHeadersOutsideTheGrammarAndBadFaceIndicesAreRefused) {
+  ExpectInputErrorNaming(testing::TestDataPath("../fuzz/regressions/mesh/ply_without_end_header.ply"), "line 7");
+  TempDir dir;
+  const std::string good = testing::ReadText(TestDataPath("mesh/tetra.ply"));
+  const std::string header_end = "end_header\n";
+  ASSERT_NE(good.find(header_end), std::string::npos);
+  testing::WriteText(dir.File("no_end.ply"), good.substr(0, good.find(header_end)));
+  ExpectInputErrorNaming(dir.File("no_end.ply"), "without end_header");
+  testing::WriteText(dir.File("type.ply"), "ply\nformat ascii 1.0\nelement vertex 1\nproperty real x\nend_header\n0\n");
+  ExpectInputErrorNaming(dir.File("type.ply"), "line 4");
+  testing::WriteText(dir.File("orphan.ply"), "ply\nformat ascii 1.0\nproperty float x\nend_header\n");
+  ExpectInputErrorNaming(dir.File("orphan.ply"), "after an element");
+  testing::WriteText(dir.File("format.ply"), "ply\nformat utf8 1.0\nend_header\n");
+  ExpectInputErrorNaming(dir.File("format.ply"), "line 2");
+  // A binary PLY whose first face lists no vertex (and others past the four
+  // it has): refused before assimp's post-processing, which aborted on it.
+  ExpectInputErrorNaming(testing::TestDataPath("../fuzz/regressions/mesh/binary_ply_bad_faces.ply"), "face 0");
+  // A valid header with comments passes on to the importer.
+  const std::string commented =
+      "ply\nformat ascii 1.0\ncomment made by hand\nobj_info x" + good.substr(good.find("\nelement"));
+  testing::WriteText(dir.File("commented.ply"), commented);
+  EXPECT_EQ(ReadMesh(dir.File("commented.ply")).triangles.size(), 4u);
+}
+
 TEST(ValidateMesh, ListsEveryProblem) {
   TriangleMesh mesh = MakeBox({1, 1, 1});
   EXPECT_TRUE(ValidateMesh(mesh, "box").empty());

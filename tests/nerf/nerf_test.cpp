@@ -478,6 +478,31 @@ TEST(NerfFile, ReadsVersion1Files) {
   }
 }
 
+// The fuzzer's input: a 300-byte file whose header states a 4 GB deflated
+// payload. The reader refuses the size against the header's bricks and the
+// stored bytes (deflate packs at most ~1032:1) before allocating anything.
+TEST(NerfFile, APayloadSizeTheFileCannotHoldIsRefusedBeforeAllocating) {
+  std::string bytes = testing::ReadText(testing::TestDataPath("../fuzz/regressions/nerf/payload_size_4gb.bin"));
+  ASSERT_GT(bytes.size(), 100u);
+  PutForTest(bytes, BinaryChecksum(bytes));
+  try {
+    ParseNerf(bytes, "bomb.nerf");
+    ADD_FAILURE() << "accepted the file";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("bomb.nerf: payload size"), std::string::npos) << e.what();
+  }
+  // Every real file passes the same bound: the defaults and the extreme bit depths, deflated or not.
+  const NerfField field = TexturedBall(1.0 / 16, 5);
+  for (const int bits : {4, 16})
+    for (const bool compress : {false, true}) {
+      NerfFileOptions options;
+      options.density_bits = std::max(8, bits);
+      options.color_base_bits = options.color_slope_bits = bits;
+      options.compress = compress;
+      EXPECT_NO_THROW(ParseNerf(SerializeNerf(field, options), "ok.nerf")) << bits << " bits";
+    }
+}
+
 TEST(NerfFile, CorruptPayloadWithAValidChecksumIsRejected) {
   const std::string good = Bytes(TexturedBall(1.0 / 16, 5));
   // Bytes in the middle of the deflated payload changed and the checksum recomputed:

@@ -5,7 +5,9 @@
 
 #include <gtest/gtest.h>
 
+#include <functional>
 #include <string>
+#include <vector>
 
 namespace nerfar::testing {
 
@@ -42,6 +44,33 @@ struct CommandResult {
 // Runs `command_line` through the shell and waits for it (for tests of the
 // `nerfar` binary's exit codes and messages).
 CommandResult RunCommand(const std::string& command_line);
+
+// A child process (no shell) whose stdout and stderr are read into one text,
+// for tests that signal a command while it runs. The destructor kills
+// (SIGKILL) and reaps a child still running.
+class ChildProcess {
+ public:
+  explicit ChildProcess(const std::vector<std::string>& argv);
+  ~ChildProcess();
+  ChildProcess(const ChildProcess&) = delete;
+  ChildProcess& operator=(const ChildProcess&) = delete;
+
+  // Reads the output until `text` appears in it (true) or timeout_s passes.
+  bool WaitForOutput(const std::string& text, double timeout_s);
+  void Signal(int signal);
+  // Waits for the end (at most timeout_s, then kills it): the exit code,
+  // 128 + n when a signal n ended it, -1 when it had to be killed.
+  int Wait(double timeout_s);
+  const std::string& output() const { return output_; }
+
+ private:
+  bool ReadSome(int timeout_ms);  // false at the end of the output
+  int pid_ = -1, fd_ = -1;
+  std::string output_;
+};
+
+// Polls `done` every 20 ms for at most timeout_s; its last value.
+bool WaitUntil(const std::function<bool()>& done, double timeout_s);
 
 }  // namespace nerfar::testing
 
