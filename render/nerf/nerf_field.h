@@ -23,6 +23,9 @@ namespace nerfar {
 inline constexpr int kNerfBrickSide = 4;                                                  // vertices per brick side
 inline constexpr int kNerfBrickSlots = kNerfBrickSide * kNerfBrickSide * kNerfBrickSide;  // 64
 inline constexpr int kNerfColorCoeffs = 12;  // per vertex: 3 channels x (a, bx, by, bz)
+// Largest brick table a reader allocates from a file's stated grid (512 MB; a 2.5 mm grid over a
+// 5 m cube needs 2^27): a corrupt resolution fails instead of allocating tens of gigabytes.
+inline constexpr size_t kNerfMaxBrickTable = size_t{1} << 27;
 // Raw log-density of vertices in unallocated bricks (σ ≈ 1e-13 / m).
 inline constexpr float kNerfEmptyDensityRaw = -30.0f;
 // Raw values are clamped to these ranges by the trainer and the file reader.

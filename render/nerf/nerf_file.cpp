@@ -20,8 +20,6 @@ constexpr int kValuesPerVertex = 1 + kNerfColorCoeffs;  // channels: density, co
 constexpr uint8_t kCompressionNone = 0, kCompressionZlib = 1;
 // Largest payload the reader inflates (a corrupt size field fails fast).
 constexpr uint64_t kMaxPayloadBytes = uint64_t{1} << 33;
-// Largest brick table the reader allocates (512 MB; a 2.5 mm grid over a 5 m cube needs 2^27).
-constexpr size_t kMaxBrickTable = size_t{1} << 27;
 // Deflate packs at most about 1032:1 (zlib's technical notes): a stated payload
 // larger than that over the stored bytes is a corrupt size, refused before it
 // is allocated.
@@ -180,10 +178,10 @@ Header ReadHeader(ByteReader& r, const std::string& source, NerfField& f) {
     f.bricks[a] = (f.res[a] + 3) / 4;
   }
   const size_t table = size_t(f.bricks[0]) * f.bricks[1] * f.bricks[2];
-  if (table > kMaxBrickTable)
+  if (table > kNerfMaxBrickTable)
     ThrowInputError(source, "resolution " + std::to_string(f.res[0]) + "x" + std::to_string(f.res[1]) + "x" +
                                 std::to_string(f.res[2]) + " needs a brick table of " + std::to_string(table) +
-                                " entries (expected at most " + std::to_string(kMaxBrickTable) + ")");
+                                " entries (expected at most " + std::to_string(kNerfMaxBrickTable) + ")");
   if (h.brick_count > table)
     ThrowInputError(source, std::to_string(h.brick_count) + " bricks (expected at most " + std::to_string(table) + ")");
   if (h.vertex_count > uint64_t(h.brick_count) * kNerfBrickSlots)

@@ -1116,6 +1116,9 @@ void NerfTrainer::LoadCheckpoint(const std::string& path) {
     if (f.res[a] < 2 || f.res[a] > 8192) ThrowInputError(path, "checkpoint grid resolution out of range");
     f.bricks[a] = (f.res[a] + 3) / 4;
   }
+  if (size_t(f.bricks[0]) * f.bricks[1] * f.bricks[2] > kNerfMaxBrickTable)
+    ThrowInputError(path, "checkpoint grid " + std::to_string(f.res[0]) + "x" + std::to_string(f.res[1]) + "x" +
+                              std::to_string(f.res[2]) + " is larger than any trainer makes (the file is corrupt)");
   const uint64_t n_coords = r.Get<uint64_t>("brick list");
   if (n_coords % 3 != 0 || n_coords / 3 > size_t(f.bricks[0]) * f.bricks[1] * f.bricks[2])
     ThrowInputError(path, "checkpoint brick list is inconsistent");
