@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
@@ -12,16 +13,29 @@
 
 namespace nerfar {
 
+void CheckPngOrJpegSignature(const std::string& path) {
+  static constexpr unsigned char kPng[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
+  static constexpr unsigned char kJpeg[3] = {0xff, 0xd8, 0xff};
+  unsigned char head[8] = {};
+  std::ifstream file(path, std::ios::binary);
+  file.read(reinterpret_cast<char*>(head), sizeof head);
+  const std::streamsize got = file.gcount();
+  if (got == 8 && std::equal(kPng, kPng + 8, head)) return;
+  if (got >= 3 && std::equal(kJpeg, kJpeg + 3, head)) return;
+  ThrowInputError(path, "not a PNG or JPEG file (its first bytes are neither signature)");
+}
+
 Image8 ReadImage8(const std::string& path) {
   std::error_code error;
   if (!std::filesystem::is_regular_file(path, error)) ThrowInputError(path, "no such file (expected an image)");
+  CheckPngOrJpegSignature(path);
   cv::Mat mat;
   try {
     mat = cv::imread(path, cv::IMREAD_UNCHANGED);
   } catch (const cv::Exception& e) {
     ThrowInputError(path, std::string("cannot decode image (") + e.what() + ")");
   }
-  if (mat.empty()) ThrowInputError(path, "cannot decode image (expected PNG, JPEG or another 8-bit format)");
+  if (mat.empty()) ThrowInputError(path, "cannot decode image (expected PNG or JPEG)");
   if (mat.depth() != CV_8U) {
     if (mat.depth() != CV_16U) ThrowInputError(path, "pixel type is not 8 or 16 bit (expected an 8-bit image)");
     mat.convertTo(mat, CV_8U, 1.0 / 257.0);

@@ -1,4 +1,4 @@
-// 8-bit images (PNG, JPEG, anything OpenCV reads) and display tone mapping.
+// 8-bit images (PNG and JPEG) and display tone mapping.
 // Channel order in memory is R,G,B (OpenCV's BGR is converted at this edge).
 // Tone mapping (DESIGN.md): Reinhard x/(1+x) after an exposure scale, then the
 // sRGB transfer curve; only for display and PNG, never for data.
@@ -11,8 +11,13 @@
 namespace nerfar {
 
 // Reads an 8-bit image with 1 (grey) or 3 (RGB) channels as stored; alpha is
-// dropped. InputError naming the file if it is missing or not an image.
+// dropped. InputError naming the file if it is missing or not a PNG or JPEG.
 Image8 ReadImage8(const std::string& path);
+// InputError naming the file unless it starts as a PNG or a JPEG does. Files
+// are checked before OpenCV decodes them: OpenCV picks a decoder by content
+// among every format it was built with, and some of those libraries abort
+// the process on a malformed file (a DICOM header in a corrupt frame).
+void CheckPngOrJpegSignature(const std::string& path);
 // Writes PNG or JPEG by extension (atomic). 1, 3 or 4 channels.
 void WriteImage8(const std::string& path, const Image8& image);
 

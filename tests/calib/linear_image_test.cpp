@@ -128,7 +128,16 @@ TEST(LinearImage, BadFilesAreNamed) {
   } catch (const InputError& e) {
     m = e.what();
   }
-  EXPECT_NE(m.find(tmp.File("a.jpg") + ": cannot decode image"), std::string::npos) << m;
+  EXPECT_NE(m.find(tmp.File("a.jpg") + ": not a PNG or JPEG file"), std::string::npos) << m;
+  // A JPEG's signature over a broken body reaches the decoder, which refuses it.
+  WriteText(tmp.File("b.jpg"), std::string("\xff\xd8\xff\xe0") + "truncated");
+  m.clear();
+  try {
+    ReadLinearImage(tmp.File("b.jpg"), Linearisation{});
+  } catch (const InputError& e) {
+    m = e.what();
+  }
+  EXPECT_NE(m.find(tmp.File("b.jpg") + ": cannot decode image"), std::string::npos) << m;
   cv::Mat mask(3, 5, CV_8UC1, cv::Scalar(0));
   ASSERT_TRUE(cv::imwrite(tmp.File("m.png"), mask));
   EXPECT_EQ(ReadMask(tmp.File("m.png"), 5, 3).width, 5);
