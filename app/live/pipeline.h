@@ -25,6 +25,7 @@
 #include <thread>
 #include <vector>
 
+#include "app/live/display.h"
 #include "app/live/latest_queue.h"
 #include "calib/board.h"
 #include "calib/camera.h"
@@ -110,6 +111,7 @@ struct LiveFrame {
   TrackingState state = TrackingState::kLost;
   int tags_used = 0;
   double exposure_gain = 1;  // camera linear / scene-field radiance
+  size_t pixels_rewritten = 0;  // AR pixels the insertion changed (the rest are the camera's own)
   LiveStageTimes times;
   LiveClock::time_point captured;  // when the frame arrived from the source
   LiveClock::time_point finished;  // when its views were done
@@ -127,6 +129,7 @@ struct LiveFrameRecord {
   double latency_ms = -1;      // capture to display (-1: never displayed)
   double t_s = 0;              // capture time since the start
   double light_fit_loss = -1;  // SG fit loss of object 0's light when it was refitted this frame (-1: not)
+  size_t pixels_rewritten = 0;  // AR pixels re-encoded by the display path
 };
 
 struct LiveCounters {
@@ -217,6 +220,12 @@ class LivePipeline {
   std::optional<Captured> CaptureGuarded(bool& end);
   std::optional<LiveFrame> ProcessGuarded(Captured captured);
   void RecordError(std::int64_t frame, const std::string& stage, const std::string& what);
+  // Steps of Process (processing thread only).
+  void UpdateGain(const LiveFrame& frame);  // every gain_every frames, from the frame's codes
+  std::vector<InsertObject> PlaceObjects(const std::vector<LiveObjectState>& states);
+  void MakeSideViews(LiveFrame& out, const std::vector<InsertObject>& objects, const InsertLayers& layers,
+                     int views);
+  void DrawHud(LiveFrame& out);
   void CaptureLoop();
   void ProcessLoop();
 
@@ -225,6 +234,7 @@ class LivePipeline {
   const SceneField& scene_;
   std::vector<LiveAsset> assets_;
   LiveOptions options_;
+  DisplayCodec codec_;
   std::unique_ptr<Tracker> tracker_;
   std::unique_ptr<Inserter> inserter_;
 
@@ -243,6 +253,10 @@ class LivePipeline {
     double scale = 1;
   };
   std::vector<PosedField> visibility_;
+
+  // The linear frame the insertion composites into, kept between frames
+  // (processing thread only: no 11 MB allocation per 1280x720 frame).
+  ImageF composite_;
 
   // Exposure gain (processing thread only).
   double gain_ = 1;

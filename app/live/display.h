@@ -1,0 +1,54 @@
+// The live display path: 8-bit camera codes <-> linear light under the
+// camera's response ("display": the synthetic camera's sRGB of Reinhard
+// x/(1+x), inverted; "srgb": a plain sRGB camera), and the AR view made by
+// re-encoding only the pixels the insertion changed. Linear values are in
+// the scene field's radiance units (camera linear / exposure gain).
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include "calib/core/image.h"
+#include "render/insert/rasterizer.h"
+
+namespace nerfar {
+
+class DisplayCodec {
+ public:
+  explicit DisplayCodec(bool display_response);
+
+  // Linear camera value of an 8-bit code (before the exposure gain).
+  float Linear(std::uint8_t code) const { return linear_[code]; }
+  // The code of a linear camera value: exactly EncodeReference(x) for every
+  // float (a search over the 255 code boundaries instead of a pow per value).
+  std::uint8_t Encode(float x) const;
+  // The defining formula (lround of the sRGB of the response's display
+  // value); 0 for NaN and infinities.
+  static std::uint8_t EncodeReference(float x, bool display_response);
+  bool display_response() const { return display_response_; }
+
+  // out = Linear(frame) / gain, RGB (grey frames repeated); out is resized
+  // only when its size differs (the live loop reuses one buffer).
+  void Linearise(const Image8& frame, double gain, ImageF& out) const;
+  // Linear (scene units, 1 or 3 channels) × gain -> RGB codes.
+  Image8 ToDisplay(const ImageF& linear, double gain) const;
+
+ private:
+  bool display_response_;
+  std::array<float, 256> linear_{};
+  // upper_[k]: the smallest float whose code is k + 1 (codes grow with x).
+  std::array<float, 255> upper_{};
+};
+
+// The AR view from the composite: `ar` holds the camera frame (RGB, the size
+// of `composite`) and keeps it wherever the composite still holds that
+// frame's own linear value (Linearise with this gain); within `touched` (the
+// insertion's boxes) every other pixel is re-encoded from composite × gain.
+// Returns the number of pixels rewritten. Pixel for pixel the same as
+// re-encoding the whole frame under that rule; reads 1/4 of the float frame
+// where the object covers 1/10 of it and its shadow box as much again.
+size_t CompositeToDisplay(const DisplayCodec& codec, const ImageF& composite, double gain, const PixelRect& touched,
+                          Image8& ar);
+
+}  // namespace nerfar
