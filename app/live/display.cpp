@@ -6,6 +6,7 @@
 
 #include "calib/core/error.h"
 #include "calib/core/image_io.h"
+#include "calib/core/parallel.h"
 
 namespace nerfar {
 
@@ -56,11 +57,20 @@ DisplayCodec::DisplayCodec(bool display_response) : display_response_(display_re
     }
     upper_[k] = FromBits(hi);
   }
+  bucket_code_.resize((top >> 16) + 1);
+  for (std::uint32_t b = 0; b < bucket_code_.size(); ++b)
+    bucket_code_[b] =
+        static_cast<std::uint8_t>(std::upper_bound(upper_.begin(), upper_.end(), FromBits(b << 16)) - upper_.begin());
 }
 
 std::uint8_t DisplayCodec::Encode(float x) const {
   if (!std::isfinite(x)) return 0;
-  return static_cast<std::uint8_t>(std::upper_bound(upper_.begin(), upper_.end(), x) - upper_.begin());
+  if (!(x > 0.0f)) return bucket_code_[0];  // ±0 and negatives encode as 0 does
+  std::uint32_t bits;
+  std::memcpy(&bits, &x, sizeof bits);
+  int code = bucket_code_[bits >> 16];
+  while (code < 255 && x >= upper_[code]) ++code;
+  return static_cast<std::uint8_t>(code);
 }
 
 void DisplayCodec::Linearise(const Image8& frame, double gain, ImageF& out) const {
@@ -103,17 +113,23 @@ size_t CompositeToDisplay(const DisplayCodec& codec, const ImageF& composite, do
   float background[256];
   for (int i = 0; i < 256; ++i) background[i] = codec.Linear(static_cast<std::uint8_t>(i)) * inv_gain;
   const PixelRect r = ClipToImage(touched, ar.width, ar.height);
-  size_t rewritten = 0;
-  for (int y = r.y0; y < r.y1; ++y) {
-    std::uint8_t* out = ar.Pixel(r.x0, y);
-    const float* in = composite.Pixel(r.x0, y);
-    for (int x = r.x0; x < r.x1; ++x, out += 3, in += 3) {
-      if (in[0] == background[out[0]] && in[1] == background[out[1]] && in[2] == background[out[2]]) continue;
-      for (int c = 0; c < 3; ++c) out[c] = codec.Encode(static_cast<float>(in[c] * gain));
-      ++rewritten;
-    }
-  }
-  return rewritten;
+  std::vector<size_t> rewritten(static_cast<size_t>(r.height()), 0);
+  ParallelFor(
+      rewritten.size(),
+      [&](size_t row) {
+        const int y = r.y0 + static_cast<int>(row);
+        std::uint8_t* out = ar.Pixel(r.x0, y);
+        const float* in = composite.Pixel(r.x0, y);
+        for (int x = r.x0; x < r.x1; ++x, out += 3, in += 3) {
+          if (in[0] == background[out[0]] && in[1] == background[out[1]] && in[2] == background[out[2]]) continue;
+          for (int c = 0; c < 3; ++c) out[c] = codec.Encode(static_cast<float>(in[c] * gain));
+          ++rewritten[row];
+        }
+      },
+      16);
+  size_t total = 0;
+  for (const size_t n : rewritten) total += n;
+  return total;
 }
 
 }  // namespace nerfar
