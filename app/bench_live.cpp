@@ -16,6 +16,7 @@
 #include <memory>
 
 #include "app/bench.h"
+#include "app/live/display.h"
 #include "app/live/pipeline.h"
 #include "app/live/report.h"
 #include "calib/core/log.h"
@@ -177,14 +178,29 @@ void AddRunFigures(const std::string& label, const std::string& note, const std:
 }
 
 // The floor: one 1280x720 RGB frame (2.76 MB) read and written once, as
-// the cheapest display path that hands out a new frame would.
-void AddFloor(int width, int height, std::vector<BenchFigure>& figures) {
+// the cheapest display path that hands out a new frame would; and the HUD.
+void AddFloorAndHud(int width, int height, std::vector<BenchFigure>& figures) {
   const size_t bytes = size_t(width) * height * 3;
   std::vector<std::uint8_t> a(bytes, 7), b(bytes, 0);
   const double copy = MedianMilliseconds([&] { std::memcpy(b.data(), a.data(), bytes); }, 20);
   figures.push_back(
       {"floor_frame_copy_ms", copy, "ms",
        std::to_string(bytes) + " B read + written (" + std::to_string(width) + "x" + std::to_string(height) + " RGB)"});
+  // The HUD's share of the display stage: renewing its two lines of text
+  // (drawn over black and white, at most 4 times a second) and blending the
+  // cached text into a frame (every frame).
+  TextOverlay hud;
+  int renewals = 0;
+  const double renew = MedianMilliseconds(
+      [&] {
+        const std::string fps = std::to_string(20 + renewals++ % 10) + ".0 fps  latency 29 ms  tracking  tags 2";
+        hud.Set({fps, "ms: track 2.8  insert 19.7 (kappa 8.1)  views 0.0"}, width);
+      },
+      20);
+  Image8 frame(width, height, 3, 128);
+  const double blend = MedianMilliseconds([&] { hud.Draw(frame); }, 20);
+  figures.push_back({"hud_renew_ms", renew, "ms", "new HUD text drawn (at most every 250 ms)"});
+  figures.push_back({"hud_blend_ms", blend, "ms", "the cached HUD blended into a frame (every frame)"});
 }
 
 }  // namespace
@@ -210,7 +226,7 @@ std::vector<BenchFigure> BenchLive(const BenchOptions& options) {
   t = NowSeconds();
   const SsdfField field = BakeSsdf(mesh, bake, std::nullopt);
   LogInfo("bench live: baked the object's SSDF in " + FormatDuration(NowSeconds() - t));
-  AddFloor(width, height, figures);
+  AddFloorAndHud(width, height, figures);
 
   const int threads_before = ThreadCount();
   struct Motion {

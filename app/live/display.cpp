@@ -6,6 +6,7 @@
 
 #include "calib/core/error.h"
 #include "calib/core/image_io.h"
+#include "calib/core/media.h"
 #include "calib/core/parallel.h"
 
 namespace nerfar {
@@ -130,6 +131,38 @@ size_t CompositeToDisplay(const DisplayCodec& codec, const ImageF& composite, do
   size_t total = 0;
   for (const size_t n : rewritten) total += n;
   return total;
+}
+
+void TextOverlay::Set(const std::vector<std::string>& lines, int width) {
+  if (lines == lines_ && width == width_) return;
+  lines_ = lines;
+  width_ = width;
+  const int height = 4 + 13 * static_cast<int>(lines.size()) + 6;
+  Image8 black(width, height, 3, 0), white(width, height, 3, 255);
+  for (size_t i = 0; i < lines.size(); ++i) {
+    DrawText(black, lines[i], 4, 4 + 13 * static_cast<int>(i));
+    DrawText(white, lines[i], 4, 4 + 13 * static_cast<int>(i));
+  }
+  offsets_.clear();
+  over_black_.clear();
+  spread_.clear();
+  for (size_t i = 0; i < black.pixels.size(); ++i) {
+    if (black.pixels[i] == 0 && white.pixels[i] == 255) continue;  // untouched: the frame shows through
+    offsets_.push_back(static_cast<std::uint32_t>(i));
+    over_black_.push_back(black.pixels[i]);
+    spread_.push_back(static_cast<std::uint8_t>(std::max(0, white.pixels[i] - black.pixels[i])));
+  }
+}
+
+void TextOverlay::Draw(Image8& image) const {
+  NERFAR_CHECK_EQ(image.channels, 3);
+  if (image.width != width_) return;
+  const size_t size = image.pixels.size();
+  for (size_t k = 0; k < offsets_.size(); ++k) {
+    if (offsets_[k] >= size) break;  // offsets grow: the rest lies below the image
+    std::uint8_t& v = image.pixels[offsets_[k]];
+    v = static_cast<std::uint8_t>(std::min(255, over_black_[k] + (spread_[k] * v + 127) / 255));
+  }
 }
 
 }  // namespace nerfar

@@ -27,6 +27,9 @@ double MsSince(LiveClock::time_point t0) {
 // only ~0.6 on its solid table top, so 0.5 would miss half of it.
 constexpr float kSurfaceOpacity = 0.3f;
 
+// How often the HUD's text is renewed (its numbers are read, not watched).
+constexpr auto kHudRefresh = std::chrono::milliseconds(250);
+
 // After the source threw: a device that fails at once on every call must not
 // make the capture loop spin (ReconnectingSource paces its own reopening).
 constexpr auto kFailedSourcePause = std::chrono::milliseconds(50);
@@ -188,7 +191,7 @@ LivePipeline::LivePipeline(FrameSource& source, const Board& board, const Camera
   tracker_ = std::make_unique<Tracker>(board, camera_, options_.tracker);
   inserter_ = std::make_unique<Inserter>(scene_, std::move(environment), InsertOptions::Preset(options_.preset));
   preset_ = options_.preset;
-  hud_.store(options_.hud);
+  hud_on_.store(options_.hud);
   for (const LiveAsset& a : assets_) {
     LiveObjectState s;
     s.material = a.material;
@@ -486,36 +489,56 @@ void LivePipeline::MakeSideViews(LiveFrame& out, const std::vector<InsertObject>
 }
 
 void LivePipeline::DrawHud(LiveFrame& out) {
-  double fps = 0, latency = -1;
-  LiveCounters counts;
-  std::string last_error;
+  // The numbers change every frame, but nobody reads them faster than a few
+  // times a second: the text is renewed every kHudRefresh, and at once when
+  // the tracking state or the error count changes, and drawn from the
+  // overlay's cache in between (a blend of its pixels).
+  std::uint64_t errors = 0;
   {
     std::lock_guard<std::mutex> lock(stats_mutex_);
-    counts = counters_;
-    if (!errors_.empty()) last_error = errors_.back().stage + ": " + errors_.back().what;
-    if (recent_display_s_.size() >= 2)
-      fps = (recent_display_s_.size() - 1) / std::max(1e-9, recent_display_s_.back() - recent_display_s_.front());
-    for (auto it = records_.rbegin(); it != records_.rend(); ++it)
-      if (it->latency_ms >= 0) {
-        latency = it->latency_ms;
-        break;
-      }
+    errors = counters_.frame_errors + counters_.source_errors + counters_.output_errors;
   }
-  char line[256];
-  std::snprintf(line, sizeof line, "%.1f fps  latency %.0f ms  %s  tags %d", fps, latency, TrackingStateName(out.state),
-                out.tags_used);
-  DrawText(out.ar, line, 4, 4);
-  const InsertTimings& it = out.times.insert;
-  std::snprintf(line, sizeof line, "ms: track %.1f  insert %.1f (kappa %.1f)  views %.1f", out.times.track_ms,
-                it.total_ms, it.kappa_ms, out.times.alongside_ms + out.times.layers_ms);
-  DrawText(out.ar, line, 4, 17);
-  if (!last_error.empty()) {
-    std::snprintf(line, sizeof line, "errors: %llu frames, %llu source, %llu outputs; last %.60s",
-                  static_cast<unsigned long long>(counts.frame_errors),
-                  static_cast<unsigned long long>(counts.source_errors),
-                  static_cast<unsigned long long>(counts.output_errors), last_error.c_str());
-    DrawText(out.ar, line, 4, 30);
+  const auto now = LiveClock::now();
+  if (now - hud_updated_ >= kHudRefresh || out.ar.width != hud_width_ || out.state != hud_state_ ||
+      errors != hud_errors_) {
+    hud_updated_ = now;
+    hud_width_ = out.ar.width;
+    hud_state_ = out.state;
+    hud_errors_ = errors;
+    double fps = 0, latency = -1;
+    LiveCounters counts;
+    std::string last_error;
+    {
+      std::lock_guard<std::mutex> lock(stats_mutex_);
+      counts = counters_;
+      if (!errors_.empty()) last_error = errors_.back().stage + ": " + errors_.back().what;
+      if (recent_display_s_.size() >= 2)
+        fps = (recent_display_s_.size() - 1) / std::max(1e-9, recent_display_s_.back() - recent_display_s_.front());
+      for (auto it = records_.rbegin(); it != records_.rend(); ++it)
+        if (it->latency_ms >= 0) {
+          latency = it->latency_ms;
+          break;
+        }
+    }
+    std::vector<std::string> lines;
+    char line[256];
+    std::snprintf(line, sizeof line, "%.1f fps  latency %.0f ms  %s  tags %d", fps, latency,
+                  TrackingStateName(out.state), out.tags_used);
+    lines.push_back(line);
+    const InsertTimings& it = out.times.insert;
+    std::snprintf(line, sizeof line, "ms: track %.1f  insert %.1f (kappa %.1f)  views %.1f", out.times.track_ms,
+                  it.total_ms, it.kappa_ms, out.times.alongside_ms + out.times.layers_ms);
+    lines.push_back(line);
+    if (!last_error.empty()) {
+      std::snprintf(line, sizeof line, "errors: %llu frames, %llu source, %llu outputs; last %.60s",
+                    static_cast<unsigned long long>(counts.frame_errors),
+                    static_cast<unsigned long long>(counts.source_errors),
+                    static_cast<unsigned long long>(counts.output_errors), last_error.c_str());
+      lines.push_back(line);
+    }
+    hud_.Set(lines, out.ar.width);
   }
+  hud_.Draw(out.ar);
 }
 
 LiveFrame LivePipeline::Process(Captured captured) {
@@ -579,7 +602,7 @@ LiveFrame LivePipeline::Process(Captured captured) {
 
   // HUD (in the image itself, so the window and the files show the same).
   t0 = LiveClock::now();
-  if (hud_.load()) DrawHud(out);
+  if (hud_on_.load()) DrawHud(out);
   out.times.display_ms += MsSince(t0);
   out.times.process_ms = MsSince(t_start);
   out.finished = LiveClock::now();

@@ -110,7 +110,7 @@ struct LiveFrame {
   std::optional<Pose> T_world_camera_true;  // synthetic sources
   TrackingState state = TrackingState::kLost;
   int tags_used = 0;
-  double exposure_gain = 1;  // camera linear / scene-field radiance
+  double exposure_gain = 1;     // camera linear / scene-field radiance
   size_t pixels_rewritten = 0;  // AR pixels the insertion changed (the rest are the camera's own)
   LiveStageTimes times;
   LiveClock::time_point captured;  // when the frame arrived from the source
@@ -126,9 +126,9 @@ struct LiveFrameRecord {
   Pose T_world_camera;
   std::optional<Pose> T_world_camera_true;
   LiveStageTimes times;
-  double latency_ms = -1;      // capture to display (-1: never displayed)
-  double t_s = 0;              // capture time since the start
-  double light_fit_loss = -1;  // SG fit loss of object 0's light when it was refitted this frame (-1: not)
+  double latency_ms = -1;       // capture to display (-1: never displayed)
+  double t_s = 0;               // capture time since the start
+  double light_fit_loss = -1;   // SG fit loss of object 0's light when it was refitted this frame (-1: not)
   size_t pixels_rewritten = 0;  // AR pixels re-encoded by the display path
 };
 
@@ -190,7 +190,7 @@ class LivePipeline {
   std::string preset() const;
   void set_views(int views) { views_.store(views); }
   int views() const { return views_.load(); }
-  void set_hud(bool on) { hud_.store(on); }
+  void set_hud(bool on) { hud_on_.store(on); }
 
   // World pose of object i for a state (lowest point on the anchor, yaw about z).
   Pose ObjectPose(size_t i, const LiveObjectState& state) const;
@@ -223,8 +223,7 @@ class LivePipeline {
   // Steps of Process (processing thread only).
   void UpdateGain(const LiveFrame& frame);  // every gain_every frames, from the frame's codes
   std::vector<InsertObject> PlaceObjects(const std::vector<LiveObjectState>& states);
-  void MakeSideViews(LiveFrame& out, const std::vector<InsertObject>& objects, const InsertLayers& layers,
-                     int views);
+  void MakeSideViews(LiveFrame& out, const std::vector<InsertObject>& objects, const InsertLayers& layers, int views);
   void DrawHud(LiveFrame& out);
   void CaptureLoop();
   void ProcessLoop();
@@ -243,7 +242,13 @@ class LivePipeline {
   std::string preset_;
   bool preset_changed_ = false;
   std::atomic<int> views_{kViewAr};
-  std::atomic<bool> hud_{true};
+  std::atomic<bool> hud_on_{true};
+  // The HUD's text and when it was last renewed (processing thread only).
+  TextOverlay hud_;
+  LiveClock::time_point hud_updated_;
+  int hud_width_ = 0;
+  TrackingState hud_state_ = TrackingState::kLost;
+  std::uint64_t hud_errors_ = 0;
 
   // Posed SSDF fields of the objects, kept while each stands still
   // (processing thread only).

@@ -560,7 +560,8 @@ void WritePng(const std::string& path, const std::vector<std::pair<std::string, 
   }
   Image8 sheet = tiles.empty() ? Image8()
                                : ContactSheet(tiles, static_cast<int>(tiles.size()),
-                                              (kPageWidth - 16) / static_cast<int>(tiles.size()), captions);
+                                              std::min(480, (kPageWidth - 16) / static_cast<int>(tiles.size())),
+                                              captions);
   const int plots_h = kPlotHeight * static_cast<int>(plots.size());
   const int text_y = sheet.height + plots_h + 8;
   Image8 page(kPageWidth, text_y + 16 * static_cast<int>(rows.size()) + 8, 3, 24);

@@ -2,7 +2,8 @@
 // pictures (app/live/report.h): the table-driven encoder gives the
 // defining formula's code for every float tried; re-encoding only the
 // pixels the insertion changed gives, pixel for pixel, what re-encoding the
-// whole frame under the same rule gives; the report's PNG and one-file HTML
+// whole frame under the same rule gives; the HUD's cached text blends to
+// what drawing it gives; the report's PNG and one-file HTML
 // page exist and carry the session's series (stages, latency, jitter with
 // the value the poses imply, tracking state, light refits).
 #include <gtest/gtest.h>
@@ -12,8 +13,8 @@
 #include <filesystem>
 #include <fstream>
 #include <limits>
-#include <sstream>
 #include <nlohmann/json.hpp>
+#include <sstream>
 #include <string>
 
 #include "app/live/display.h"
@@ -21,6 +22,7 @@
 #include "app/live/report_plots.h"
 #include "calib/core/image_io.h"
 #include "calib/core/json.h"
+#include "calib/core/media.h"
 #include "calib/core/random.h"
 #include "tests/support/support.h"
 
@@ -120,6 +122,43 @@ TEST(LiveDisplay, GreyFramesLineariseAsRgb) {
   codec.Linearise(grey, 2.0, linear);
   ASSERT_EQ(linear.channels, 3);
   for (int c = 0; c < 3; ++c) EXPECT_FLOAT_EQ(linear.at(3, 1, c), codec.Linear(210) * 0.5f);
+}
+
+// The HUD's cached text blends to what drawing it directly gives, over any
+// background, within the roundings of OpenCV's stroke-by-stroke blends.
+TEST(LiveDisplay, TextOverlayMatchesDrawingTheText) {
+  Rng rng(5, 1, 0, 0);
+  Image8 frame(320, 60, 3);
+  for (auto& v : frame.pixels) v = static_cast<std::uint8_t>(rng.Uniform(0, 256));
+  const std::vector<std::string> lines = {"29.9 fps  latency 31 ms  tracking  tags 2",
+                                          "ms: track 2.8  insert 19.7 (kappa 8.1)  views 0.0", "errors: (gj|)"};
+  Image8 direct = frame;
+  for (size_t i = 0; i < lines.size(); ++i) DrawText(direct, lines[i], 4, 4 + 13 * static_cast<int>(i));
+  TextOverlay overlay;
+  overlay.Set(lines, frame.width);
+  Image8 cached = frame;
+  overlay.Draw(cached);
+  int worst = 0;
+  size_t changed = 0;
+  double sum = 0;
+  for (size_t i = 0; i < frame.pixels.size(); ++i) {
+    const int d = std::abs(int(cached.pixels[i]) - int(direct.pixels[i]));
+    worst = std::max(worst, d);
+    if (direct.pixels[i] != frame.pixels[i]) {
+      ++changed;
+      sum += d;
+    }
+  }
+  // Each of OpenCV's overlapping anti-aliased strokes rounds its blend to a
+  // level, the cached A + B·frame once: a few levels at worst where strokes
+  // pile up, well under one on average over the text.
+  EXPECT_LE(worst, 8);
+  ASSERT_GT(changed, 1000u);  // the text is there
+  EXPECT_LT(sum / changed, 0.5) << "mean |difference| over the text's " << changed << " channel values";
+  // A frame of another width is left alone (the cache is for its width).
+  Image8 other(200, 60, 3, 77);
+  overlay.Draw(other);
+  for (const auto v : other.pixels) ASSERT_EQ(v, 77);
 }
 
 std::string ReadAll(const std::string& path) {
