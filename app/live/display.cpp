@@ -1,8 +1,10 @@
 #include "app/live/display.h"
 
 #include <algorithm>
+#include <cfloat>
 #include <cmath>
 #include <cstring>
+#include <limits>
 
 #include "calib/core/error.h"
 #include "calib/core/image_io.h"
@@ -57,6 +59,10 @@ DisplayCodec::DisplayCodec(bool display_response) : display_response_(display_re
       (EncodeReference(FromBits(mid), display_response) > k ? hi : lo) = mid;
     }
     upper_[k] = FromBits(hi);
+  }
+  for (int k = 0; k < 256; ++k) {
+    lower_[k] = k == 0 ? -FLT_MAX : upper_[k - 1];
+    upper_open_[k] = k == 255 ? std::numeric_limits<float>::infinity() : upper_[k];
   }
   bucket_code_.resize((top >> 16) + 1);
   for (std::uint32_t b = 0; b < bucket_code_.size(); ++b)
@@ -123,7 +129,8 @@ size_t CompositeToDisplay(const DisplayCodec& codec, const ImageF& composite, do
         const float* in = composite.Pixel(r.x0, y);
         for (int x = r.x0; x < r.x1; ++x, out += 3, in += 3) {
           if (in[0] == background[out[0]] && in[1] == background[out[1]] && in[2] == background[out[2]]) continue;
-          for (int c = 0; c < 3; ++c) out[c] = codec.Encode(static_cast<float>(in[c] * gain));
+          // Mostly κ slightly below 1 over the camera's value: the code often stays.
+          for (int c = 0; c < 3; ++c) out[c] = codec.EncodeNear(static_cast<float>(in[c] * gain), out[c]);
           ++rewritten[row];
         }
       },

@@ -52,10 +52,17 @@ TEST(LiveDisplay, EncoderMatchesTheFormulaEverywhere) {
     }
     for (int v = 0; v < 256; ++v) xs.push_back(codec.Linear(static_cast<std::uint8_t>(v)));
     size_t wrong = 0;
-    for (const float x : xs)
-      if (codec.Encode(x) != DisplayCodec::EncodeReference(x, display) && ++wrong <= 5)
-        ADD_FAILURE() << "display=" << display << " x=" << x << ": " << int(codec.Encode(x)) << " vs "
-                      << int(DisplayCodec::EncodeReference(x, display));
+    size_t k = 0;
+    for (const float x : xs) {
+      const std::uint8_t truth = DisplayCodec::EncodeReference(x, display);
+      // EncodeNear with hints at, next to and far from the right code.
+      const std::uint8_t hints[] = {truth, static_cast<std::uint8_t>(truth + 1), static_cast<std::uint8_t>(truth - 1),
+                                    static_cast<std::uint8_t>(k++ * 37)};
+      bool ok = codec.Encode(x) == truth;
+      for (const std::uint8_t h : hints) ok = ok && codec.EncodeNear(x, h) == truth;
+      if (!ok && ++wrong <= 5)
+        ADD_FAILURE() << "display=" << display << " x=" << x << ": " << int(codec.Encode(x)) << " vs " << int(truth);
+    }
     EXPECT_EQ(wrong, 0u);
   }
 }
