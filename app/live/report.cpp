@@ -558,10 +558,10 @@ void WritePng(const std::string& path, const std::vector<std::pair<std::string, 
     } catch (const std::exception&) {  // an unreadable view leaves a gap, not a failed report
     }
   }
-  Image8 sheet = tiles.empty() ? Image8()
-                               : ContactSheet(tiles, static_cast<int>(tiles.size()),
-                                              std::min(480, (kPageWidth - 16) / static_cast<int>(tiles.size())),
-                                              captions);
+  Image8 sheet = tiles.empty()
+                     ? Image8()
+                     : ContactSheet(tiles, static_cast<int>(tiles.size()),
+                                    std::min(480, (kPageWidth - 16) / static_cast<int>(tiles.size())), captions);
   const int plots_h = kPlotHeight * static_cast<int>(plots.size());
   const int text_y = sheet.height + plots_h + 8;
   Image8 page(kPageWidth, text_y + 16 * static_cast<int>(rows.size()) + 8, 3, 24);
