@@ -315,6 +315,10 @@ int RunLive(const CommandArgs& args) {
   // frame composites at its own size within the frame budget (bench live).
   options.render_divisor =
       a.render_divisor > 0 ? a.render_divisor : (camera.width > 1280 || camera.height > 720 ? 2 : 1);
+  // The alongside and layers views (a NeRF rendering: its cost grows with
+  // its pixels) keep the size they had when frames wider than 480 px were
+  // composited at half size: a quarter of the frame, not half of it.
+  if (a.render_divisor == 0 && options.render_divisor == 1 && camera.width > 480) options.alongside_scale = 0.25;
   std::vector<LiveAsset> assets;
   for (const LiveObjectAsset& o : objects)
     assets.push_back({o.name, &o.mesh, o.field ? &*o.field : nullptr, o.material});

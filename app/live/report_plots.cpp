@@ -83,13 +83,18 @@ std::vector<const PlotSeries*> LegendOf(const Plot& plot) {
 
 double PlotTop(const Plot& plot) {
   if (plot.y_max > 0) return plot.y_max;
-  double top = 0;
-  for (const std::vector<double>& t : StackTops(plot))
-    for (double v : t) top = std::max(top, v);
+  std::vector<double> values;
+  for (const std::vector<double>& t : StackTops(plot)) values.insert(values.end(), t.begin(), t.end());
   for (const auto* list : {&plot.lines, &plot.markers})
     for (const PlotSeries& s : *list)
       for (double v : s.y)
-        if (std::isfinite(v)) top = std::max(top, v);
+        if (std::isfinite(v)) values.push_back(v);
+  if (values.empty()) return 1.0;
+  // A cold first frame can take ten times the rest: the range stops at twice
+  // the 95th percentile, and what lies above runs off the top.
+  std::sort(values.begin(), values.end());
+  const double p95 = values[static_cast<size_t>(0.95 * (values.size() - 1))];
+  const double top = std::min(values.back(), 2 * p95);
   return top > 0 ? top * 1.1 : 1.0;
 }
 

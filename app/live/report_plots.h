@@ -3,7 +3,8 @@
 // is series over one x axis (seconds of the session): bars stacked per x
 // (frame time by stage, tracking state as a strip), polylines (latency,
 // jitter; NaN leaves a gap) and markers (light refits). Values are in the
-// plot's unit; y runs from 0 to y_max (0: the data's maximum with 10 % room).
+// plot's unit; y runs from 0 to y_max (0: the data's maximum with 10 % room,
+// at most 2.2 × its 95th percentile: outliers run off the top).
 #pragma once
 
 #include <array>
@@ -29,7 +30,7 @@ struct Plot {
   bool y_axis = true;  // false for strips whose height means nothing (tracking state)
 };
 
-// The y range the plot is drawn over (y_max, or the data's maximum + 10 %).
+// The y range the plot is drawn over (y_max, or from the data as above).
 double PlotTop(const Plot& plot);
 
 // <svg> element of the plot, width x height px, with a legend of every series.
