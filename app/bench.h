@@ -7,7 +7,12 @@
 #include <string>
 #include <vector>
 
+#include "render/sg/sg.h"
+
 namespace nerfar {
+
+class NerfField;
+struct TriangleMesh;
 
 struct BenchFigure {
   std::string name;  // snake_case with its unit as suffix: fit_warm_ms, psnr_tm_db
@@ -49,6 +54,13 @@ double MedianMilliseconds(Body&& body, int min_repeats, double min_seconds) {
   return MedianOf(times);
 }
 
+// The insertion benches' scene (bench_insert.cpp), shared by bench live:
+// the shared scenes' box holding a 4 cm table slab (top at z = 0) and a
+// sphere as a 1 cm NeRF grid; the object; the distant light.
+NerfField BenchTabletopNerf();
+TriangleMesh BenchObjectMesh(const std::string& scenes_dir, std::string* name);
+SgMixture BenchEnvironment();
+
 // Stage entry points (one bench_NAME.cpp each).
 std::vector<BenchFigure> BenchCore(const BenchOptions& options);
 std::vector<BenchFigure> BenchTracking(const BenchOptions& options);
@@ -58,5 +70,6 @@ std::vector<BenchFigure> BenchSsdf(const BenchOptions& options);
 std::vector<BenchFigure> BenchSynth(const BenchOptions& options);
 std::vector<BenchFigure> BenchSg(const BenchOptions& options);
 std::vector<BenchFigure> BenchNerf(const BenchOptions& options);
+std::vector<BenchFigure> BenchLive(const BenchOptions& options);
 
 }  // namespace nerfar

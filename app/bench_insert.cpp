@@ -36,11 +36,9 @@ namespace nerfar {
 
 namespace fs = std::filesystem;
 
-namespace {
-
 // The shared scenes' box, a 4 cm table slab (albedo-like radiance 0.4) and a
 // sphere (r = 8 cm) standing on it, as a 1 cm NeRF grid.
-NerfField TabletopNerf() {
+NerfField BenchTabletopNerf() {
   const Aabb box{{-0.62, -0.42, -0.05}, {0.62, 0.42, 0.60}};
   NerfField field =
       NerfField::Dense(box, 0.01, kNerfEmptyDensityRaw, {std::log(0.4f), std::log(0.35f), std::log(0.3f)});
@@ -60,7 +58,8 @@ NerfField TabletopNerf() {
   return field;
 }
 
-TriangleMesh BenchMesh(const std::string& scenes_dir, std::string* name) {
+// The shared scenes' monkey where present, else a torus (4 cm ring).
+TriangleMesh BenchObjectMesh(const std::string& scenes_dir, std::string* name) {
   if (!scenes_dir.empty()) {
     const std::string path = scenes_dir + "/objects/monkey_diffuse.obj";
     std::error_code error;
@@ -72,6 +71,33 @@ TriangleMesh BenchMesh(const std::string& scenes_dir, std::string* name) {
   *name = "torus (2304 triangles)";
   return MakeTorus(0.04, 0.015, 48, 24);
 }
+
+// A sky from above and a bright window lobe.
+SgMixture BenchEnvironment() {
+  Sg sky;
+  sky.axis = {0, 0, 1};
+  sky.sharpness = 1.0;
+  sky.amplitude = {0.3, 0.35, 0.4};
+  Sg window;
+  window.axis = Normalized(Vec3{0.6, 0.5, 0.6});
+  window.sharpness = 60.0;
+  window.amplitude = {30.0, 28.0, 25.0};
+  SgMixture environment = {sky, window};
+  // NERFAR_BENCH_INSERT_SUN=λ: also a small, very bright sun of that
+  // sharpness (the sunroom's energy), which the incident light passes on
+  // analytically when it is sharper than its directions resolve.
+  if (const char* sun_env = std::getenv("NERFAR_BENCH_INSERT_SUN")) {
+    Sg sun;
+    sun.axis = Normalized(Vec3{-0.66, -0.36, 0.65});
+    sun.sharpness = std::clamp(std::atof(sun_env), 1.0, 1e4);
+    const double mu = 8.7 / SgUnitIntegral(sun.sharpness);
+    sun.amplitude = {mu, 0.93 * mu, 0.83 * mu};
+    environment.push_back(sun);
+  }
+  return environment;
+}
+
+namespace {
 
 struct StageMedians {
   double light = 0, fit_warm = 0, raster = 0, shade = 0, occlusion = 0, kappa = 0, frame_still = 0, frame_moving = 0;
@@ -100,7 +126,7 @@ struct StageMedians {
   double handheld_truth_preset_mean = 0, handheld_truth_exact_mean = 0;
 };
 
-// The bench NeRF's geometry (TabletopNerf) as true receivers: ray distance
+// The bench NeRF's geometry (BenchTabletopNerf) as true receivers: ray distance
 // and world normal per pixel (table top z = 0 within |x| ≤ 0.6, |y| ≤ 0.4, the
 // sphere of 8 cm), 0 where a ray meets neither.
 void TabletopReceivers(const CameraIntrinsics& camera, const Pose& T_world_camera, ImageF& distance, ImageF& normal) {
@@ -399,33 +425,11 @@ std::vector<BenchFigure> BenchInsert(const BenchOptions& options) {
   }
   const int width = options.quick ? 320 : 1280, height = options.quick ? 180 : 720;
   const int repeats = options.quick ? 2 : 3;
-  const NerfField nerf = TabletopNerf();
+  const NerfField nerf = BenchTabletopNerf();
   const NerfScene scene(nerf);
-  SgMixture environment;
-  {
-    Sg sky;
-    sky.axis = {0, 0, 1};
-    sky.sharpness = 1.0;
-    sky.amplitude = {0.3, 0.35, 0.4};
-    Sg window;
-    window.axis = Normalized(Vec3{0.6, 0.5, 0.6});
-    window.sharpness = 60.0;
-    window.amplitude = {30.0, 28.0, 25.0};
-    environment = {sky, window};
-    // NERFAR_BENCH_INSERT_SUN=λ: also a small, very bright sun of that
-    // sharpness (the sunroom's energy), which the incident light passes on
-    // analytically when it is sharper than its directions resolve.
-    if (const char* sun_env = std::getenv("NERFAR_BENCH_INSERT_SUN")) {
-      Sg sun;
-      sun.axis = Normalized(Vec3{-0.66, -0.36, 0.65});
-      sun.sharpness = std::clamp(std::atof(sun_env), 1.0, 1e4);
-      const double mu = 8.7 / SgUnitIntegral(sun.sharpness);
-      sun.amplitude = {mu, 0.93 * mu, 0.83 * mu};
-      environment.push_back(sun);
-    }
-  }
+  const SgMixture environment = BenchEnvironment();
   std::string mesh_name;
-  const TriangleMesh mesh = BenchMesh(options.scenes_dir, &mesh_name);
+  const TriangleMesh mesh = BenchObjectMesh(options.scenes_dir, &mesh_name);
   const double t_bake = NowSeconds();
   // NERFAR_BENCH_INSERT_SSDF_CACHE=PATH (for profiling under valgrind): the
   // object's SSDF read from PATH when it exists, else baked and written there.

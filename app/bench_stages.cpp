@@ -11,6 +11,7 @@ const std::vector<BenchStage>& AllBenchStages() {
       {"synth", "synthetic scenes: scene build, one view per scene and preset, camera-stream frame, SG accuracy", BenchSynth},
       {"ssdf", "SSDF bake time, file size, SSD error per preset, query cost", BenchSsdf},
       {"sg", "SG shading cost, fit time cold/warm and optimisers, fitted-light error vs lobe count", BenchSg},
+      {"live", "the live pipeline on pre-rendered 1280x720 frames at 30/s: fps, drops, stages, latency per motion, preset and thread count", BenchLive},
       {"nerf", "NeRF training per preset (time, psnr_tm vs insert/bg, depth error, size), query throughput", BenchNerf},
   };
   return stages;

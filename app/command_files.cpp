@@ -83,8 +83,8 @@ PathList CaptureOutputs(const std::string& folder, int views) {
 }
 
 PathList LiveSessionOutputs(const std::string& session_dir) {
-  return FilesIn(session_dir, {"session.json", "report.json", "report.png", "last_ar.png", "last_alongside.png",
-                               "last_layers.png", "recording.mp4"});
+  return FilesIn(session_dir, {"session.json", "report.json", "report.png", "report.html", "last_ar.png",
+                               "last_alongside.png", "last_layers.png", "recording.mp4"});
 }
 
 }  // namespace nerfar

@@ -59,7 +59,7 @@ PathList RenderReferenceInputs(const std::string& dataset_dir);
 // files, capture_log.json and {train,test}/r_NNN.exr.
 PathList CaptureOutputs(const std::string& folder, int views);
 
-// `nerfar live`'s session folder: session.json, report.json, report.png,
+// `nerfar live`'s session folder: session.json, report.json, report.png, report.html,
 // last_ar.png, last_alongside.png, last_layers.png, recording.mp4.
 PathList LiveSessionOutputs(const std::string& session_dir);
 

@@ -23,14 +23,12 @@ double MsSince(LiveClock::time_point t0) {
   return std::chrono::duration<double, std::milli>(LiveClock::now() - t0).count();
 }
 
-// The display value a linear value stands for under the "display" response
-// is capped here: y/(1 − y) diverges at white, and a clipped pixel says only
-// "at least this bright".
-constexpr float kDisplayCap = 0.995f;
-
 // A ray "meets a surface" at this scene opacity: a fast-preset NeRF reaches
 // only ~0.6 on its solid table top, so 0.5 would miss half of it.
 constexpr float kSurfaceOpacity = 0.3f;
+
+// How often the HUD's text is renewed (its numbers are read, not watched).
+constexpr auto kHudRefresh = std::chrono::milliseconds(250);
 
 // After the source threw: a device that fails at once on every call must not
 // make the capture loop spin (ReconnectingSource paces its own reopening).
@@ -49,42 +47,6 @@ std::string ExceptionText(const std::exception_ptr& error) {
   } catch (...) {
     return "unknown exception";
   }
-}
-
-// 8-bit frame (grey or RGB) -> linear RGB under the response.
-ImageF Linearise(const Image8& image, bool display_response) {
-  float table[256];
-  for (int i = 0; i < 256; ++i) {
-    float v = SrgbToLinear(static_cast<float>(i) / 255.0f);
-    if (display_response) {
-      v = std::min(v, kDisplayCap);
-      v = v / (1.0f - v);
-    }
-    table[i] = v;
-  }
-  ImageF out(image.width, image.height, 3);
-  const int channels = image.channels;
-  for (size_t p = 0; p < image.PixelCount(); ++p)
-    for (int c = 0; c < 3; ++c) out.pixels[p * 3 + c] = table[image.pixels[p * channels + (channels >= 3 ? c : 0)]];
-  return out;
-}
-
-std::uint8_t ToDisplayValue(float x, bool display_response) {
-  if (!std::isfinite(x)) return 0;
-  x = std::max(0.0f, x);
-  if (display_response) x = x / (1.0f + x);
-  return static_cast<std::uint8_t>(std::lround(LinearToSrgb(std::min(1.0f, x)) * 255.0f));
-}
-
-// Linear (scene units) -> the camera's display encoding, times `gain`.
-Image8 ToDisplay(const ImageF& linear, double gain, bool display_response) {
-  Image8 out(linear.width, linear.height, 3);
-  for (size_t p = 0; p < linear.PixelCount(); ++p)
-    for (int c = 0; c < 3; ++c)
-      out.pixels[p * 3 + c] = ToDisplayValue(
-          static_cast<float>(linear.pixels[p * linear.channels + std::min(c, linear.channels - 1)] * gain),
-          display_response);
-  return out;
 }
 
 // Box-filtered 1/divisor size (edges that do not fill a box are dropped).
@@ -173,6 +135,14 @@ Image8 SideBySide(const std::vector<Image8>& tiles) {
   return out;
 }
 
+// The camera frame as the AR view's starting point: at divisor 1 the frame
+// itself (moved, not copied: the display path rewrites only what the
+// insertion changed), else box-filtered; always RGB.
+Image8 ArBase(Image8 frame, int divisor) {
+  if (divisor != 1) frame = Downsample(frame, divisor);
+  return frame.channels == 3 ? std::move(frame) : ToRgb(frame);
+}
+
 }  // namespace
 
 std::vector<std::string> LiveOptions::Validate() const {
@@ -205,7 +175,12 @@ std::vector<std::pair<std::string, double>> StageList(const LiveStageTimes& t) {
 LivePipeline::LivePipeline(FrameSource& source, const Board& board, const CameraIntrinsics& camera,
                            const SceneField& scene, SgMixture environment, std::vector<LiveAsset> assets,
                            LiveOptions options)
-    : source_(source), camera_(camera), scene_(scene), assets_(std::move(assets)), options_(std::move(options)) {
+    : source_(source),
+      camera_(camera),
+      scene_(scene),
+      assets_(std::move(assets)),
+      options_(std::move(options)),
+      codec_(options_.response == "display") {
   {
     Problems problems("live options");
     for (const std::string& p : options_.Validate()) problems.Add("", p);
@@ -216,7 +191,7 @@ LivePipeline::LivePipeline(FrameSource& source, const Board& board, const Camera
   tracker_ = std::make_unique<Tracker>(board, camera_, options_.tracker);
   inserter_ = std::make_unique<Inserter>(scene_, std::move(environment), InsertOptions::Preset(options_.preset));
   preset_ = options_.preset;
-  hud_.store(options_.hud);
+  hud_on_.store(options_.hud);
   for (const LiveAsset& a : assets_) {
     LiveObjectState s;
     s.material = a.material;
@@ -408,93 +383,56 @@ std::vector<LiveError> LivePipeline::errors() const {
   return errors_;
 }
 
-LiveFrame LivePipeline::Process(Captured captured) {
-  const auto t_start = LiveClock::now();
-  const bool display_response = options_.response == "display";
-  LiveFrame out;
-  out.index = captured.frame.index;
-  out.captured = captured.captured;
-  out.times.capture_ms = captured.capture_ms;
-  out.T_world_camera_true = captured.frame.T_world_camera_true;
-  // Tracking: the pose of this very frame (at its full size).
-  auto t0 = LiveClock::now();
-  const TrackResult track = tracker_->Process(captured.frame);
-  out.times.track_ms = MsSince(t0);
-  const Image8 image = Downsample(captured.frame.image, options_.render_divisor);
-  out.has_pose = track.has_pose;
-  out.T_world_camera = track.T_world_camera;
-  out.state = track.state;
-  out.tags_used = track.tags_used;
-  out.camera = (image.width == camera_.width && image.height == camera_.height)
-                   ? camera_
-                   : camera_.Scaled(image.width, image.height);
-
-  // The user's edits as of now.
-  std::vector<LiveObjectState> states;
-  {
-    std::lock_guard<std::mutex> lock(edit_mutex_);
-    states = states_;
-    if (preset_changed_) {
-      inserter_->set_options(InsertOptions::Preset(preset_));
-      preset_changed_ = false;
+void LivePipeline::UpdateGain(const LiveFrame& frame) {
+  if (gain_valid_ && ++frames_since_gain_ < options_.gain_every) return;
+  frames_since_gain_ = 0;
+  const Image8& image = frame.ar;
+  const int step = options_.gain_grid_step;
+  // Skip clipped and near-black pixels: the ratio there says little.
+  const float white = codec_.Linear(255);
+  SceneRays rays;
+  std::vector<float> camera_lum;
+  for (int y = step / 2; y < image.height; y += step)
+    for (int x = step / 2; x < image.width; x += step) {
+      const std::uint8_t* code = image.Pixel(x, y);
+      const float px[3] = {codec_.Linear(code[0]), codec_.Linear(code[1]), codec_.Linear(code[2])};
+      const float lum = Luminance(px, 3);
+      if (!(lum > 1e-3f && px[0] < 0.9f * white && px[1] < 0.9f * white && px[2] < 0.9f * white)) continue;
+      const Vec3 d = Normalized(frame.T_world_camera.Rotate(Unproject(frame.camera, {x + 0.5, y + 0.5})));
+      const auto range = IntersectBox(scene_.Box(), frame.T_world_camera.translation, d);
+      if (!range) continue;
+      rays.Add(Vec3f(frame.T_world_camera.translation), Vec3f(d), static_cast<float>(range->first),
+               static_cast<float>(range->second));
+      camera_lum.push_back(lum);
     }
+  SceneSamples samples;
+  scene_.RenderRays(rays, samples);
+  std::vector<double> ratios;
+  for (size_t i = 0; i < rays.size(); ++i) {
+    // Rays that met a surface, compared by their radiance Ĉ/Ô (a fast NeRF
+    // often stays below full opacity on solid surfaces).
+    const float o = samples.opacity[i];
+    if (!(o >= kSurfaceOpacity)) continue;
+    const float c[3] = {samples.colour[i].x / o, samples.colour[i].y / o, samples.colour[i].z / o};
+    const float scene_lum = Luminance(c, 3);
+    if (scene_lum > 1e-6f && std::isfinite(scene_lum)) ratios.push_back(std::log(camera_lum[i] / scene_lum));
   }
-  const int views = views_.load();
-
-  // Linear frame and the exposure gain camera / scene field.
-  t0 = LiveClock::now();
-  ImageF linear = Linearise(image, display_response);
-  if (out.has_pose && (!gain_valid_ || ++frames_since_gain_ >= options_.gain_every)) {
-    frames_since_gain_ = 0;
-    const int step = options_.gain_grid_step;
-    SceneRays rays;
-    std::vector<float> camera_lum;
-    for (int y = step / 2; y < image.height; y += step)
-      for (int x = step / 2; x < image.width; x += step) {
-        const float* px = linear.Pixel(x, y);
-        const float lum = Luminance(px, 3);
-        // Skip clipped and near-black pixels: the ratio there says little.
-        const float white = display_response ? kDisplayCap / (1 - kDisplayCap) : 1.0f;
-        if (!(lum > 1e-3f && px[0] < 0.9f * white && px[1] < 0.9f * white && px[2] < 0.9f * white)) continue;
-        const Vec3 d = Normalized(out.T_world_camera.Rotate(Unproject(out.camera, {x + 0.5, y + 0.5})));
-        const auto range = IntersectBox(scene_.Box(), out.T_world_camera.translation, d);
-        if (!range) continue;
-        rays.Add(Vec3f(out.T_world_camera.translation), Vec3f(d), static_cast<float>(range->first),
-                 static_cast<float>(range->second));
-        camera_lum.push_back(lum);
-      }
-    SceneSamples samples;
-    scene_.RenderRays(rays, samples);
-    std::vector<double> ratios;
-    for (size_t i = 0; i < rays.size(); ++i) {
-      // Rays that met a surface, compared by their radiance Ĉ/Ô (a fast NeRF
-      // often stays below full opacity on solid surfaces).
-      const float o = samples.opacity[i];
-      if (!(o >= kSurfaceOpacity)) continue;
-      const float c[3] = {samples.colour[i].x / o, samples.colour[i].y / o, samples.colour[i].z / o};
-      const float scene_lum = Luminance(c, 3);
-      if (scene_lum > 1e-6f && std::isfinite(scene_lum)) ratios.push_back(std::log(camera_lum[i] / scene_lum));
-    }
-    LogVerbose("live: exposure gain from " + std::to_string(ratios.size()) + " of " + std::to_string(rays.size()) +
-               " rays");
-    if (ratios.size() >= 8) {
-      std::nth_element(ratios.begin(), ratios.begin() + ratios.size() / 2, ratios.end());
-      const double g = std::exp(ratios[ratios.size() / 2]);
-      gain_ = gain_valid_ ? std::exp(0.7 * std::log(gain_) + 0.3 * std::log(g)) : g;
-      gain_valid_ = true;
-    }
+  LogVerbose("live: exposure gain from " + std::to_string(ratios.size()) + " of " + std::to_string(rays.size()) +
+             " rays");
+  if (ratios.size() >= 8) {
+    std::nth_element(ratios.begin(), ratios.begin() + ratios.size() / 2, ratios.end());
+    const double g = std::exp(ratios[ratios.size() / 2]);
+    gain_ = gain_valid_ ? std::exp(0.7 * std::log(gain_) + 0.3 * std::log(g)) : g;
+    gain_valid_ = true;
   }
-  out.exposure_gain = gain_;
-  const float inv_gain = static_cast<float>(1.0 / gain_);
-  for (float& v : linear.pixels) v *= inv_gain;
-  out.times.expose_ms = MsSince(t0);
+}
 
-  // Objects of this frame. A posed SSDF field is kept while its object
-  // stands still: the inserter's caches (per-vertex self-shadow, κ lattice)
-  // are keyed by the objects' fields and poses, so a still object reuses
-  // them frame after frame and a moved one recomputes them.
+std::vector<InsertObject> LivePipeline::PlaceObjects(const std::vector<LiveObjectState>& states) {
+  // A posed SSDF field is kept while its object stands still: the
+  // inserter's caches (per-vertex self-shadow, κ lattice) are keyed by the
+  // objects' fields and poses, so a still object reuses them frame after
+  // frame and a moved one recomputes them.
   std::vector<InsertObject> objects;
-  std::vector<size_t> object_index;
   visibility_.resize(states.size());
   for (size_t i = 0; i < states.size(); ++i) {
     if (!states[i].placed) continue;
@@ -513,40 +451,22 @@ LiveFrame LivePipeline::Process(Captured captured) {
       o.visibility = posed.field.get();
     }
     objects.push_back(o);
-    object_index.push_back(i);
   }
+  return objects;
+}
 
-  // AR: the objects over the camera frame; pixels outside the touched boxes
-  // keep the camera's own values exactly.
-  out.ar = ToRgb(image);
-  InsertLayers layers;
-  double fit_loss = -1;
-  if (out.has_pose && !objects.empty()) {
-    ImageF composite = linear;
-    out.times.insert = inserter_->Render(out.camera, out.T_world_camera, objects, composite, &layers);
-    if (out.times.insert.lights_recomputed > 0) {
-      const IncidentLight& cache = inserter_->LightCache(0);
-      if (cache.valid() && !cache.samples().directions.empty())
-        fit_loss = SgFitLoss(cache.samples(), cache.light(), inserter_->options().light.fit.hdr_floor);
-    }
-    t0 = LiveClock::now();
-    const PixelRect touched = Union(layers.gbuffer.rect, layers.kappa_rect);
-    for (int y = std::max(0, touched.y0); y < std::min(image.height, touched.y1); ++y)
-      for (int x = std::max(0, touched.x0); x < std::min(image.width, touched.x1); ++x)
-        for (int c = 0; c < 3; ++c)
-          out.ar.at(x, y, c) = ToDisplayValue(static_cast<float>(composite.at(x, y, c) * gain_), display_response);
-    out.times.display_ms += MsSince(t0);
-  }
-
-  const int side_w = std::max(16, static_cast<int>(std::lround(image.width * options_.alongside_scale)));
-  const int side_h = std::max(16, static_cast<int>(std::lround(image.height * options_.alongside_scale)));
+void LivePipeline::MakeSideViews(LiveFrame& out, const std::vector<InsertObject>& objects, const InsertLayers& layers,
+                                 int views) {
+  const int w = out.ar.width, h = out.ar.height;
+  const int side_w = std::max(16, static_cast<int>(std::lround(w * options_.alongside_scale)));
+  const int side_h = std::max(16, static_cast<int>(std::lround(h * options_.alongside_scale)));
   if (views & kViewAlongside) {
-    t0 = LiveClock::now();
+    const auto t0 = LiveClock::now();
     if (out.has_pose) {
       const CameraIntrinsics small = out.camera.Scaled(side_w, side_h);
       ImageF background = inserter_->RenderBackground(small, out.T_world_camera);
       if (!objects.empty()) inserter_->Render(small, out.T_world_camera, objects, background);
-      out.alongside = ToDisplay(background, gain_, display_response);
+      out.alongside = codec_.ToDisplay(background, gain_);
     } else {
       out.alongside = Image8(side_w, side_h, 3, 40);
       DrawText(out.alongside, "no pose yet", 4, 4);
@@ -554,8 +474,7 @@ LiveFrame LivePipeline::Process(Captured captured) {
     out.times.alongside_ms = MsSince(t0);
   }
   if (views & kViewLayers) {
-    t0 = LiveClock::now();
-    const int w = image.width, h = image.height;
+    const auto t0 = LiveClock::now();
     Image8 kappa = LayerTile(ExpandLayer(layers.kappa, layers.kappa_rect, w, h, 1.0f), side_w, side_h);
     Image8 alpha = LayerTile(ExpandLayer(layers.alpha, layers.gbuffer.rect, w, h, 0.0f), side_w, side_h);
     Image8 sphere = !objects.empty() && out.has_pose
@@ -567,10 +486,25 @@ LiveFrame LivePipeline::Process(Captured captured) {
     out.layers = SideBySide({kappa, alpha, sphere});
     out.times.layers_ms = MsSince(t0);
   }
+}
 
-  // HUD (in the image itself, so the window and the files show the same).
-  t0 = LiveClock::now();
-  if (hud_.load()) {
+void LivePipeline::DrawHud(LiveFrame& out) {
+  // The numbers change every frame, but nobody reads them faster than a few
+  // times a second: the text is renewed every kHudRefresh, and at once when
+  // the tracking state or the error count changes, and drawn from the
+  // overlay's cache in between (a blend of its pixels).
+  std::uint64_t errors = 0;
+  {
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    errors = counters_.frame_errors + counters_.source_errors + counters_.output_errors;
+  }
+  const auto now = LiveClock::now();
+  if (now - hud_updated_ >= kHudRefresh || out.ar.width != hud_width_ || out.state != hud_state_ ||
+      errors != hud_errors_) {
+    hud_updated_ = now;
+    hud_width_ = out.ar.width;
+    hud_state_ = out.state;
+    hud_errors_ = errors;
     double fps = 0, latency = -1;
     LiveCounters counts;
     std::string last_error;
@@ -586,22 +520,89 @@ LiveFrame LivePipeline::Process(Captured captured) {
           break;
         }
     }
+    std::vector<std::string> lines;
     char line[256];
     std::snprintf(line, sizeof line, "%.1f fps  latency %.0f ms  %s  tags %d", fps, latency,
                   TrackingStateName(out.state), out.tags_used);
-    DrawText(out.ar, line, 4, 4);
+    lines.push_back(line);
     const InsertTimings& it = out.times.insert;
     std::snprintf(line, sizeof line, "ms: track %.1f  insert %.1f (kappa %.1f)  views %.1f", out.times.track_ms,
                   it.total_ms, it.kappa_ms, out.times.alongside_ms + out.times.layers_ms);
-    DrawText(out.ar, line, 4, 17);
+    lines.push_back(line);
     if (!last_error.empty()) {
       std::snprintf(line, sizeof line, "errors: %llu frames, %llu source, %llu outputs; last %.60s",
                     static_cast<unsigned long long>(counts.frame_errors),
                     static_cast<unsigned long long>(counts.source_errors),
                     static_cast<unsigned long long>(counts.output_errors), last_error.c_str());
-      DrawText(out.ar, line, 4, 30);
+      lines.push_back(line);
+    }
+    hud_.Set(lines, out.ar.width);
+  }
+  hud_.Draw(out.ar);
+}
+
+LiveFrame LivePipeline::Process(Captured captured) {
+  const auto t_start = LiveClock::now();
+  LiveFrame out;
+  out.index = captured.frame.index;
+  out.captured = captured.captured;
+  out.times.capture_ms = captured.capture_ms;
+  out.T_world_camera_true = captured.frame.T_world_camera_true;
+  // Tracking: the pose of this very frame (at its full size).
+  auto t0 = LiveClock::now();
+  const TrackResult track = tracker_->Process(captured.frame);
+  out.times.track_ms = MsSince(t0);
+  out.ar = ArBase(std::move(captured.frame.image), options_.render_divisor);
+  out.has_pose = track.has_pose;
+  out.T_world_camera = track.T_world_camera;
+  out.state = track.state;
+  out.tags_used = track.tags_used;
+  out.camera = (out.ar.width == camera_.width && out.ar.height == camera_.height)
+                   ? camera_
+                   : camera_.Scaled(out.ar.width, out.ar.height);
+
+  // The user's edits as of now.
+  std::vector<LiveObjectState> states;
+  {
+    std::lock_guard<std::mutex> lock(edit_mutex_);
+    states = states_;
+    if (preset_changed_) {
+      inserter_->set_options(InsertOptions::Preset(preset_));
+      preset_changed_ = false;
     }
   }
+  const int views = views_.load();
+  t0 = LiveClock::now();
+  if (out.has_pose) UpdateGain(out);
+  out.exposure_gain = gain_;
+  out.times.expose_ms = MsSince(t0);
+  const std::vector<InsertObject> objects = PlaceObjects(states);
+
+  // AR: the objects over the camera frame, linearised once into a buffer
+  // the loop keeps; back in the display encoding only the pixels the
+  // insertion changed (the rest keep the camera's own values exactly).
+  InsertLayers layers;
+  double fit_loss = -1;
+  if (out.has_pose && !objects.empty()) {
+    t0 = LiveClock::now();
+    codec_.Linearise(out.ar, gain_, composite_);
+    out.times.expose_ms += MsSince(t0);
+    out.times.insert = inserter_->Render(out.camera, out.T_world_camera, objects, composite_, &layers);
+    if (out.times.insert.lights_recomputed > 0) {
+      const IncidentLight& cache = inserter_->LightCache(0);
+      if (cache.valid() && !cache.samples().directions.empty())
+        fit_loss = SgFitLoss(cache.samples(), cache.light(), inserter_->options().light.fit.hdr_floor);
+    }
+    t0 = LiveClock::now();
+    out.pixels_rewritten =
+        CompositeToDisplay(codec_, composite_, gain_, Union(layers.gbuffer.rect, layers.kappa_rect), out.ar);
+    out.times.display_ms += MsSince(t0);
+  }
+  MakeSideViews(out, objects, layers, views);
+
+  // HUD (in the image itself, so the window and the files show the same).
+  t0 = LiveClock::now();
+  if (hud_on_.load()) DrawHud(out);
   out.times.display_ms += MsSince(t0);
   out.times.process_ms = MsSince(t_start);
   out.finished = LiveClock::now();
@@ -615,6 +616,7 @@ LiveFrame LivePipeline::Process(Captured captured) {
   record.T_world_camera_true = out.T_world_camera_true;
   record.times = out.times;
   record.light_fit_loss = fit_loss;
+  record.pixels_rewritten = out.pixels_rewritten;
   {
     std::lock_guard<std::mutex> lock(stats_mutex_);
     record.t_s = std::chrono::duration<double>(out.captured - start_).count();

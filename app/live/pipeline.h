@@ -25,6 +25,7 @@
 #include <thread>
 #include <vector>
 
+#include "app/live/display.h"
 #include "app/live/latest_queue.h"
 #include "calib/board.h"
 #include "calib/camera.h"
@@ -109,7 +110,8 @@ struct LiveFrame {
   std::optional<Pose> T_world_camera_true;  // synthetic sources
   TrackingState state = TrackingState::kLost;
   int tags_used = 0;
-  double exposure_gain = 1;  // camera linear / scene-field radiance
+  double exposure_gain = 1;     // camera linear / scene-field radiance
+  size_t pixels_rewritten = 0;  // AR pixels the insertion changed (the rest are the camera's own)
   LiveStageTimes times;
   LiveClock::time_point captured;  // when the frame arrived from the source
   LiveClock::time_point finished;  // when its views were done
@@ -124,9 +126,10 @@ struct LiveFrameRecord {
   Pose T_world_camera;
   std::optional<Pose> T_world_camera_true;
   LiveStageTimes times;
-  double latency_ms = -1;      // capture to display (-1: never displayed)
-  double t_s = 0;              // capture time since the start
-  double light_fit_loss = -1;  // SG fit loss of object 0's light when it was refitted this frame (-1: not)
+  double latency_ms = -1;       // capture to display (-1: never displayed)
+  double t_s = 0;               // capture time since the start
+  double light_fit_loss = -1;   // SG fit loss of object 0's light when it was refitted this frame (-1: not)
+  size_t pixels_rewritten = 0;  // AR pixels re-encoded by the display path
 };
 
 struct LiveCounters {
@@ -187,7 +190,7 @@ class LivePipeline {
   std::string preset() const;
   void set_views(int views) { views_.store(views); }
   int views() const { return views_.load(); }
-  void set_hud(bool on) { hud_.store(on); }
+  void set_hud(bool on) { hud_on_.store(on); }
 
   // World pose of object i for a state (lowest point on the anchor, yaw about z).
   Pose ObjectPose(size_t i, const LiveObjectState& state) const;
@@ -217,6 +220,11 @@ class LivePipeline {
   std::optional<Captured> CaptureGuarded(bool& end);
   std::optional<LiveFrame> ProcessGuarded(Captured captured);
   void RecordError(std::int64_t frame, const std::string& stage, const std::string& what);
+  // Steps of Process (processing thread only).
+  void UpdateGain(const LiveFrame& frame);  // every gain_every frames, from the frame's codes
+  std::vector<InsertObject> PlaceObjects(const std::vector<LiveObjectState>& states);
+  void MakeSideViews(LiveFrame& out, const std::vector<InsertObject>& objects, const InsertLayers& layers, int views);
+  void DrawHud(LiveFrame& out);
   void CaptureLoop();
   void ProcessLoop();
 
@@ -225,6 +233,7 @@ class LivePipeline {
   const SceneField& scene_;
   std::vector<LiveAsset> assets_;
   LiveOptions options_;
+  DisplayCodec codec_;
   std::unique_ptr<Tracker> tracker_;
   std::unique_ptr<Inserter> inserter_;
 
@@ -233,7 +242,13 @@ class LivePipeline {
   std::string preset_;
   bool preset_changed_ = false;
   std::atomic<int> views_{kViewAr};
-  std::atomic<bool> hud_{true};
+  std::atomic<bool> hud_on_{true};
+  // The HUD's text and when it was last renewed (processing thread only).
+  TextOverlay hud_;
+  LiveClock::time_point hud_updated_;
+  int hud_width_ = 0;
+  TrackingState hud_state_ = TrackingState::kLost;
+  std::uint64_t hud_errors_ = 0;
 
   // Posed SSDF fields of the objects, kept while each stands still
   // (processing thread only).
@@ -243,6 +258,10 @@ class LivePipeline {
     double scale = 1;
   };
   std::vector<PosedField> visibility_;
+
+  // The linear frame the insertion composites into, kept between frames
+  // (processing thread only: no 11 MB allocation per 1280x720 frame).
+  ImageF composite_;
 
   // Exposure gain (processing thread only).
   double gain_ = 1;

@@ -2,12 +2,14 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdarg>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <map>
 #include <nlohmann/json.hpp>
 
+#include "app/live/report_plots.h"
 #include "app/live/scene.h"
 #include "calib/core/atomic_file.h"
 #include "calib/core/error.h"
@@ -57,23 +59,34 @@ struct Jitter {
   int triples = 0;
 };
 
+// Squared second differences (position m², rotation rad²) at frame k when
+// frames k − 1, k, k + 1 are consecutive measured frames; false otherwise.
+bool SecondDifference(const std::vector<Json>& frames, size_t k, double& position_sq, double& rotation_sq) {
+  if (k == 0 || k + 1 >= frames.size()) return false;
+  const Json &a = frames[k - 1], &b = frames[k], &c = frames[k + 1];
+  if (!a.value("measured", false) || !b.value("measured", false) || !c.value("measured", false)) return false;
+  if (b.at("index").get<long long>() != a.at("index").get<long long>() + 1 ||
+      c.at("index").get<long long>() != b.at("index").get<long long>() + 1)
+    return false;
+  const Pose pa = PoseFromJson(a.at("pose")), pb = PoseFromJson(b.at("pose")), pc = PoseFromJson(c.at("pose"));
+  const Vec3 d2 = pa.translation - pb.translation * 2.0 + pc.translation;
+  position_sq = Dot(d2, d2);
+  // Change of the frame-to-frame rotation (angular acceleration × dt²).
+  const Vec3 w0 = AxisAngleFromRotation(pa.rotation.Transposed() * pb.rotation);
+  const Vec3 w1 = AxisAngleFromRotation(pb.rotation.Transposed() * pc.rotation);
+  const Vec3 dw = w1 - w0;
+  rotation_sq = Dot(dw, dw);
+  return true;
+}
+
 Jitter TrackJitter(const std::vector<Json>& frames) {
   Jitter j;
   double sum_p = 0, sum_r = 0;
   for (size_t k = 1; k + 1 < frames.size(); ++k) {
-    const Json &a = frames[k - 1], &b = frames[k], &c = frames[k + 1];
-    if (!a.value("measured", false) || !b.value("measured", false) || !c.value("measured", false)) continue;
-    if (b.at("index").get<long long>() != a.at("index").get<long long>() + 1 ||
-        c.at("index").get<long long>() != b.at("index").get<long long>() + 1)
-      continue;
-    const Pose pa = PoseFromJson(a.at("pose")), pb = PoseFromJson(b.at("pose")), pc = PoseFromJson(c.at("pose"));
-    const Vec3 d2 = pa.translation - pb.translation * 2.0 + pc.translation;
-    sum_p += Dot(d2, d2);
-    // Change of the frame-to-frame rotation (angular acceleration × dt²).
-    const Vec3 w0 = AxisAngleFromRotation(pa.rotation.Transposed() * pb.rotation);
-    const Vec3 w1 = AxisAngleFromRotation(pb.rotation.Transposed() * pc.rotation);
-    const Vec3 dw = w1 - w0;
-    sum_r += Dot(dw, dw);
+    double p = 0, r = 0;
+    if (!SecondDifference(frames, k, p, r)) continue;
+    sum_p += p;
+    sum_r += r;
     ++j.triples;
   }
   if (j.triples > 0) {
@@ -81,6 +94,46 @@ Jitter TrackJitter(const std::vector<Json>& frames) {
     j.rotation_deg = std::sqrt(sum_r / j.triples / 6.0) * 180 / kPi;
   }
   return j;
+}
+
+// Stages as the report's plot stacks them (the insertion's six in pairs).
+const std::vector<std::pair<std::string, std::vector<std::string>>>& StageGroups() {
+  static const std::vector<std::pair<std::string, std::vector<std::string>>> groups = {
+      {"track", {"track"}},
+      {"expose", {"expose"}},
+      {"light+fit", {"light", "fit"}},
+      {"raster+shade", {"raster", "shade"}},
+      {"occlusion+kappa", {"occlusion", "kappa"}},
+      {"views", {"alongside", "layers"}},
+      {"display", {"display"}}};
+  return groups;
+}
+
+// Per-frame series of the session (the report's plots): time, stage groups,
+// latency, pose jitter (each frame's second difference / √6, the estimate
+// TrackJitter averages), tracking state, light refits; null where a frame
+// has no value.
+Json SeriesJson(const std::vector<Json>& frames) {
+  Json t = Json::array(), latency = Json::array(), jitter = Json::array(), state = Json::array(), refit = Json::array();
+  Json stages = Json::object();
+  for (const auto& [group, members] : StageGroups()) stages[group] = Json::array();
+  for (size_t k = 0; k < frames.size(); ++k) {
+    const Json& f = frames[k];
+    t.push_back(f.value("t_s", 0.0));
+    for (const auto& [group, members] : StageGroups()) {
+      double sum = 0;
+      for (const std::string& m : members)
+        if (f.at("ms").contains(m)) sum += f["ms"][m].get<double>();
+      stages[group].push_back(sum);
+    }
+    latency.push_back(f.at("latency_ms"));
+    double p = 0, r = 0;
+    jitter.push_back(SecondDifference(frames, k, p, r) ? Json(std::sqrt(p / 6.0) * 1e3) : Json(nullptr));
+    state.push_back(f.at("state"));
+    refit.push_back(f.contains("light_fit_loss") ? f["light_fit_loss"] : Json(nullptr));
+  }
+  return {{"t_s", t},       {"stages_ms", stages},    {"latency_ms", latency}, {"jitter_mm", jitter},
+          {"state", state}, {"light_fit_loss", refit}};
 }
 
 // SSDF error estimate: the field against brute-force ray casting of its mesh
@@ -192,6 +245,7 @@ void WriteSession(const std::string& session_dir, const SessionInfo& info, const
     f["kappa_evaluated"] = r.times.insert.kappa_evaluated;
     f["gamma_recomputed"] = r.times.insert.gamma_recomputed;
     f["lights_recomputed"] = r.times.insert.lights_recomputed;
+    f["pixels_rewritten"] = r.pixels_rewritten;
     frames.push_back(f);
   }
   Json objects = Json::array();
@@ -320,6 +374,7 @@ Json BuildReport(const std::string& dir, std::string* report_dir) {
     for (const auto& [name, value] : f.at("ms").items()) stages[name].push_back(value.get<double>());
   }
   const Jitter jitter = TrackJitter(frames);
+  report["series"] = SeriesJson(frames);
   const double n = std::max<size_t>(1, frames.size());
   report["tracking"] = {{"frames", frames.size()},
                         {"tracking", counts[0]},
@@ -363,98 +418,198 @@ Json BuildReport(const std::string& dir, std::string* report_dir) {
   return report;
 }
 
-void WriteReport(const Json& report, const std::string& report_dir) {
-  MakeDirectories(report_dir);
-  WriteJsonFile((fs::path(report_dir) / "report.json").string(), report);
-  // The text of the page, also printed.
-  std::vector<std::string> lines;
+namespace {
+
+using Rows = std::vector<std::pair<std::string, std::string>>;
+
+double Num(const Json& j, const char* key) {
+  return j.contains(key) && j[key].is_number() ? j[key].get<double>() : NAN;
+}
+
+std::string Printf(const char* format, ...) __attribute__((format(printf, 1, 2)));
+std::string Printf(const char* format, ...) {
   char buf[256];
-  const auto num = [](const Json& j, const char* key) {
-    return j.contains(key) && j[key].is_number() ? j[key].get<double>() : NAN;
-  };
-  lines.push_back("nerfar session report  " + report.value("session", std::string()));
-  lines.push_back("scene " + report.value("scene", std::string()));
-  std::snprintf(buf, sizeof buf, "calibration RMS      %s px",
-                Fmt(num(report["calibration"], "rms_px"), "%.3f").c_str());
-  lines.push_back(std::string(buf) + (report["calibration"].contains("note")
-                                          ? "  (" + report["calibration"]["note"].get<std::string>() + ")"
-                                          : ""));
+  va_list args;
+  va_start(args, format);
+  std::vsnprintf(buf, sizeof buf, format, args);
+  va_end(args);
+  return buf;
+}
+
+// The figures table: one (what, value) row per figure, shared by the
+// printout, the PNG page and the HTML page.
+Rows FigureRows(const Json& report) {
+  Rows rows;
+  rows.push_back({"session", report.value("session", std::string())});
+  rows.push_back({"scene", report.value("scene", std::string())});
+  const Json& cal = report["calibration"];
+  rows.push_back({"calibration RMS", Fmt(Num(cal, "rms_px"), "%.3f") + " px" +
+                                         (cal.contains("note") ? "  (" + cal["note"].get<std::string>() + ")" : "")});
   if (report.contains("tracking")) {
     const Json& t = report["tracking"];
-    std::snprintf(buf, sizeof buf,
-                  "tracking             %d frames, lost %.1f %% (%d loss events), jitter %s mm / %s deg",
-                  t["frames"].get<int>(), 100 * num(t, "lost_fraction"), t["loss_events"].get<int>(),
-                  Fmt(num(t, "jitter_mm"), "%.2f").c_str(), Fmt(num(t, "jitter_deg"), "%.3f").c_str());
-    lines.push_back(buf);
-    std::snprintf(buf, sizeof buf, "pose vs truth        %s mm RMS (median %s mm), %s deg RMS",
-                  Fmt(num(t, "error_vs_truth_mm"), "%.2f").c_str(),
-                  Fmt(num(t, "error_vs_truth_median_mm"), "%.2f").c_str(),
-                  Fmt(num(t, "error_vs_truth_deg"), "%.3f").c_str());
-    lines.push_back(buf);
+    rows.push_back(
+        {"tracking", Printf("%d frames, lost %.1f %% (%d loss events), jitter %s mm / %s deg", t["frames"].get<int>(),
+                            100 * Num(t, "lost_fraction"), t["loss_events"].get<int>(),
+                            Fmt(Num(t, "jitter_mm"), "%.2f").c_str(), Fmt(Num(t, "jitter_deg"), "%.3f").c_str())});
+    rows.push_back({"pose vs truth", Fmt(Num(t, "error_vs_truth_mm"), "%.2f") + " mm RMS (median " +
+                                         Fmt(Num(t, "error_vs_truth_median_mm"), "%.2f") + " mm), " +
+                                         Fmt(Num(t, "error_vs_truth_deg"), "%.3f") + " deg RMS"});
   }
-  if (report.contains("light_fit")) {
-    std::snprintf(buf, sizeof buf, "light fit            loss %.4f median over %d refits",
-                  num(report["light_fit"], "median_loss"), report["light_fit"]["refits"].get<int>());
-    lines.push_back(buf);
-  }
+  if (report.contains("light_fit"))
+    rows.push_back({"light fit", Printf("loss %.4f median over %d refits", Num(report["light_fit"], "median_loss"),
+                                        report["light_fit"]["refits"].get<int>())});
   const Json& env = report["environment"];
-  std::snprintf(buf, sizeof buf, "environment energy   env/near %.3f at surfaces, %.3f at centre, %d lobes%s",
-                num(env, "env_to_near_surface"), num(env, "env_to_near_center"),
-                env.contains("lobes") ? env["lobes"].get<int>() : 0,
-                env.value("negligible", false) ? " (negligible: dropped)" : "");
-  lines.push_back(buf);
-  for (const Json& s : report["ssdf_error"]) {
-    std::snprintf(buf, sizeof buf, "SSDF error           %s: %.2f deg RMS, %.1f deg max", s.value("object", "").c_str(),
-                  num(s, "rms_deg"), num(s, "max_deg"));
-    lines.push_back(buf);
-  }
+  rows.push_back({"environment energy",
+                  Printf("env/near %.3f at surfaces, %.3f at centre, %d lobes%s", Num(env, "env_to_near_surface"),
+                         Num(env, "env_to_near_center"), env.contains("lobes") ? env["lobes"].get<int>() : 0,
+                         env.value("negligible", false) ? " (negligible: dropped)" : "")});
+  for (const Json& s : report["ssdf_error"])
+    rows.push_back({"SSDF error", Printf("%s: %.2f deg RMS, %.1f deg max", s.value("object", "").c_str(),
+                                         Num(s, "rms_deg"), Num(s, "max_deg"))});
   if (report.contains("performance")) {
     const Json& p = report["performance"];
-    std::snprintf(buf, sizeof buf,
-                  "fps                  %.1f displayed, %.1f captured; latency %.0f ms median, %.0f p90 (%s)",
-                  num(p, "displayed_fps"), num(p, "captured_fps"), num(p["latency_ms"], "median"),
-                  num(p["latency_ms"], "p90"), p.value("mode", "").c_str());
-    lines.push_back(buf);
-    lines.push_back("load " + p.value("load", std::string()) + ", threads " + std::to_string(p.value("threads", 0)));
+    rows.push_back({"fps", Printf("%.1f displayed, %.1f captured; latency %.0f ms median, %.0f p90 (%s)",
+                                  Num(p, "displayed_fps"), Num(p, "captured_fps"), Num(p["latency_ms"], "median"),
+                                  Num(p["latency_ms"], "p90"), p.value("mode", "").c_str())});
+    rows.push_back({"load", p.value("load", std::string()) + ", threads " + std::to_string(p.value("threads", 0))});
     if (report.contains("errors")) {
       const Json& e = report["errors"];
-      std::snprintf(buf, sizeof buf,
-                    "errors               %d frames failed, %d source errors (%d reconnections), %d outputs",
-                    e.value("frames", 0), e.value("source", 0), e.value("reconnects", 0), e.value("outputs", 0));
-      lines.push_back(buf);
+      rows.push_back(
+          {"errors", Printf("%d frames failed, %d source errors (%d reconnections), %d outputs", e.value("frames", 0),
+                            e.value("source", 0), e.value("reconnects", 0), e.value("outputs", 0))});
     }
-    lines.push_back("stage (ms)           median     p90");
-    for (const auto& [name, v] : p["stages"].items()) {
-      std::snprintf(buf, sizeof buf, "  %-18s %8.2f %8.2f", name.c_str(), num(v, "median_ms"), num(v, "p90_ms"));
-      lines.push_back(buf);
-    }
+    rows.push_back({"stage (ms)", "median     p90"});
+    for (const auto& [name, v] : p["stages"].items())
+      rows.push_back({"  " + name, Printf("%8.2f %8.2f", Num(v, "median_ms"), Num(v, "p90_ms"))});
   }
-  for (const std::string& l : lines) std::printf("%s\n", l.c_str());
+  return rows;
+}
 
-  // One page: the last views on top, the text below.
-  std::vector<Image8> tiles;
-  std::vector<std::string> captions;
+std::vector<double> Values(const Json& array) {
+  std::vector<double> v;
+  for (const Json& x : array) v.push_back(x.is_number() ? x.get<double>() : NAN);
+  return v;
+}
+
+// The session's plots from report["series"]: frame time by stage with the
+// latency and the 33 ms budget; pose jitter; tracking state; light refits.
+Plot NewPlot(const std::string& title, const std::vector<double>& x) {
+  Plot plot;
+  plot.title = title;
+  plot.x = x;
+  return plot;
+}
+
+std::vector<Plot> SessionPlots(const Json& series) {
+  std::vector<Plot> plots;
+  const std::vector<double> t = Values(series.at("t_s"));
+  static const std::array<std::uint8_t, 3> kColours[] = {{86, 140, 220}, {120, 200, 200}, {240, 190, 70},
+                                                         {230, 120, 60}, {200, 80, 140},  {150, 110, 220},
+                                                         {120, 200, 100}};
+  Plot time = NewPlot("frame time by stage (ms)", t);
+  size_t k = 0;
+  for (const auto& [group, members] : StageGroups())
+    time.stacked.push_back({group, kColours[k++ % 7], Values(series.at("stages_ms").at(group))});
+  time.lines.push_back({"latency", {250, 250, 250}, Values(series.at("latency_ms"))});
+  time.lines.push_back({"33 ms budget", {255, 60, 60}, std::vector<double>(t.size(), 33.0)});
+  plots.push_back(time);
+  Plot jitter = NewPlot("pose jitter (mm, second difference / sqrt 6)", t);
+  jitter.lines.push_back({"jitter", {120, 200, 250}, Values(series.at("jitter_mm"))});
+  plots.push_back(jitter);
+  Plot state = NewPlot("tracking state", t);
+  state.y_max = 1;
+  state.y_axis = false;
+  const std::pair<const char*, std::array<std::uint8_t, 3>> states[] = {
+      {"tracking", {80, 190, 90}}, {"recovering", {230, 190, 60}}, {"lost", {220, 60, 60}}};
+  for (const auto& [name, rgb] : states) {
+    std::vector<double> on;
+    for (const Json& s : series.at("state")) on.push_back(s.get<std::string>() == name ? 1.0 : 0.0);
+    state.stacked.push_back({name, rgb, on});
+  }
+  plots.push_back(state);
+  Plot refits = NewPlot("light fit refits (SG fit loss)", t);
+  refits.markers.push_back({"refit", {240, 190, 70}, Values(series.at("light_fit_loss"))});
+  plots.push_back(refits);
+  return plots;
+}
+
+// The last views found in the folder: (caption, path).
+std::vector<std::pair<std::string, std::string>> ViewFiles(const std::string& report_dir) {
+  std::vector<std::pair<std::string, std::string>> views;
   std::error_code error;
   for (const char* name : {"last_ar.png", "last_alongside.png", "last_layers.png"}) {
     const fs::path p = fs::path(report_dir) / name;
-    if (!fs::is_regular_file(p, error)) continue;
+    if (fs::is_regular_file(p, error)) views.push_back({fs::path(name).stem().string().substr(5), p.string()});
+  }
+  return views;
+}
+
+constexpr int kPageWidth = 1000, kPlotHeight = 150;
+
+// One page: the last views on top, the plots, the figures.
+void WritePng(const std::string& path, const std::vector<std::pair<std::string, std::string>>& views,
+              const std::vector<Plot>& plots, const Rows& rows) {
+  std::vector<Image8> tiles;
+  std::vector<std::string> captions;
+  for (const auto& [caption, file] : views) {
     try {
-      tiles.push_back(ReadImage8(p.string()));
-      captions.push_back(fs::path(name).stem().string().substr(5));
-    } catch (const std::exception&) {
+      tiles.push_back(ReadImage8(file));
+      captions.push_back(caption);
+    } catch (const std::exception&) {  // an unreadable view leaves a gap, not a failed report
     }
   }
-  const int page_w = 1000;
-  Image8 sheet = tiles.empty() ? Image8()
-                               : ContactSheet(tiles, static_cast<int>(tiles.size()),
-                                              (page_w - 16) / static_cast<int>(tiles.size()), captions);
-  const int text_h = 16 * static_cast<int>(lines.size()) + 16;
-  Image8 page(page_w, sheet.height + text_h, 3, 24);
+  Image8 sheet = tiles.empty()
+                     ? Image8()
+                     : ContactSheet(tiles, static_cast<int>(tiles.size()),
+                                    std::min(480, (kPageWidth - 16) / static_cast<int>(tiles.size())), captions);
+  const int plots_h = kPlotHeight * static_cast<int>(plots.size());
+  const int text_y = sheet.height + plots_h + 8;
+  Image8 page(kPageWidth, text_y + 16 * static_cast<int>(rows.size()) + 8, 3, 24);
   for (int y = 0; y < sheet.height; ++y)
-    for (int x = 0; x < std::min(sheet.width, page_w); ++x)
+    for (int x = 0; x < std::min(sheet.width, kPageWidth); ++x)
       for (int c = 0; c < 3; ++c) page.at(x, y, c) = sheet.at(x, y, c);
-  for (size_t i = 0; i < lines.size(); ++i) DrawText(page, lines[i], 8, sheet.height + 8 + 16 * static_cast<int>(i));
-  WriteImage8((fs::path(report_dir) / "report.png").string(), page);
+  for (size_t i = 0; i < plots.size(); ++i)
+    DrawPlot(plots[i], page, 0, sheet.height + kPlotHeight * static_cast<int>(i), kPageWidth, kPlotHeight);
+  for (size_t i = 0; i < rows.size(); ++i)
+    DrawText(page, Printf("%-20s %s", rows[i].first.c_str(), rows[i].second.c_str()), 8,
+             text_y + 16 * static_cast<int>(i));
+  WriteImage8(path, page);
+}
+
+// One self-contained page: the views as data: URIs, the plots as inline SVG.
+void WriteHtml(const std::string& path, const std::vector<std::pair<std::string, std::string>>& views,
+               const std::vector<Plot>& plots, const Rows& rows) {
+  std::string html =
+      "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>nerfar session report</title>\n"
+      "<style>body{background:#202020;color:#ddd;font-family:sans-serif;margin:16px}"
+      "figure{display:inline-block;margin:4px}img{max-width:480px}td{padding:1px 12px 1px 0;"
+      "font-family:monospace;white-space:pre}</style></head><body>\n<h1>nerfar session report</h1>\n";
+  for (const auto& [caption, file] : views) {
+    std::ifstream in(file, std::ios::binary);
+    const std::vector<std::uint8_t> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    if (bytes.empty()) continue;
+    html += "<figure><img alt=\"" + HtmlEscape(caption) + "\" src=\"data:image/png;base64," + Base64(bytes) +
+            "\"><figcaption>" + HtmlEscape(caption) + "</figcaption></figure>\n";
+  }
+  for (const Plot& plot : plots) html += "<div>" + PlotSvg(plot, kPageWidth, kPlotHeight) + "</div>\n";
+  html += "<table>\n";
+  for (const auto& [what, value] : rows)
+    html += "<tr><td>" + HtmlEscape(what) + "</td><td>" + HtmlEscape(value) + "</td></tr>\n";
+  html += "</table>\n</body></html>\n";
+  WriteFileAtomic(path, html);
+}
+
+}  // namespace
+
+void WriteReport(const Json& report, const std::string& report_dir) {
+  MakeDirectories(report_dir);
+  WriteJsonFile((fs::path(report_dir) / "report.json").string(), report);
+  const Rows rows = FigureRows(report);
+  for (const auto& [what, value] : rows) std::printf("%-20s %s\n", what.c_str(), value.c_str());
+  const std::vector<Plot> plots = report.contains("series") ? SessionPlots(report["series"]) : std::vector<Plot>{};
+  const auto views = ViewFiles(report_dir);
+  WritePng((fs::path(report_dir) / "report.png").string(), views, plots, rows);
+  WriteHtml((fs::path(report_dir) / "report.html").string(), views, plots, rows);
 }
 
 }  // namespace nerfar

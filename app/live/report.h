@@ -7,8 +7,10 @@
 // report is computed from those and the SCENE's files: calibration RMS,
 // tracking jitter and loss (and error against the truth), light-fit error,
 // environment energy, SSDF error estimate (field against brute-force ray
-// casting), fps and per-stage times. Written as SESSION/report.json and a
-// one-page SESSION/report.png.
+// casting), fps and per-stage times, and the per-frame series behind the
+// plots (stages, latency, pose jitter, tracking state, light refits).
+// Written as SESSION/report.json, a one-page SESSION/report.png (views,
+// plots, figures) and the same page as one self-contained report.html.
 #pragma once
 
 #include <cstdint>
@@ -40,7 +42,8 @@ void WriteSession(const std::string& session_dir, const SessionInfo& info, const
 // (scene items only, plus its newest sessions/* if any); its "inputs" list
 // the files it was computed from. InputError when the folder is neither.
 Json BuildReport(const std::string& dir, std::string* report_dir = nullptr);
-// Writes report.json and report.png into report_dir and prints a table.
+// Writes report.json, report.png and report.html into report_dir and prints
+// the figures.
 void WriteReport(const Json& report, const std::string& report_dir);
 
 // Median and 90th percentile of values (NaN for none).

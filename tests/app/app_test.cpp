@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <filesystem>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <string>
 
@@ -68,6 +69,31 @@ TEST(App, BenchWritesTableAndJson) {
   EXPECT_NE(json.find("exr_write_float_ms"), std::string::npos);
 }
 
+// bench live with its smallest settings (--quick: 640x360, 8 frames a run,
+// fast preset, 1 thread): it runs the three motions through the threaded
+// pipeline and reports fps, drops, stage and latency percentiles for each.
+TEST(App, BenchLiveQuickReportsEveryMotion) {
+  testing::TempDir dir;
+  const Result result = RunNerfar("bench live --quick --json " + dir.File("b.json"));
+  ASSERT_EQ(result.exit_code, 0) << result.output;
+  const Json report = ReadJsonFile(dir.File("b.json"));
+  std::map<std::string, double> figures;
+  for (const Json& f : report.at("stages").at("live").at("figures"))
+    figures[f.at("name").get<std::string>()] = f.at("value").is_number() ? f["value"].get<double>() : NAN;
+  EXPECT_GT(figures.count("floor_frame_copy_ms"), 0u);
+  for (const char* motion : {"still", "handheld", "drag"}) {
+    const std::string label = std::string(motion) + "_fast_t1";
+    for (const char* figure : {"_fps", "_dropped", "_latency_p50_ms", "_latency_p90_ms", "_process_p50_ms",
+                               "_track_p90_ms", "_insert_p50_ms", "_display_p90_ms"})
+      EXPECT_EQ(figures.count(label + figure), 1u) << label + figure << "\n" << result.output;
+    // Frames fed after the warm-up are either displayed or dropped.
+    const double fps = figures[label + "_fps"], dropped = figures[label + "_dropped"];
+    EXPECT_GE(fps, 0);
+    EXPECT_GE(dropped, 0);
+    EXPECT_NEAR(fps / 30.0 * 6 + dropped, 6.0, 1e-9) << label;
+  }
+}
+
 // A tiny SCENE folder built here: an opaque slab NeRF whose top is the table
 // plane z = 0 (dense grid, 2 cm voxels), the synthetic board, a one-lobe
 // environment and a 6 cm cube mesh (no .ssdf: no shadows).
@@ -122,8 +148,8 @@ TEST(App, LiveHeadlessWritesVideoSheetSessionAndReport) {
       RunNerfar("live --headless --threads 2 --source synthetic:lamps,size=640x480,spp=1,frames=40 --scene " +
                 dir.path() + " --object " + dir.File("cube.obj") + " -o " + session + " --frames 8");
   ASSERT_EQ(r.exit_code, 0) << r.output;
-  for (const char* name : {"live.mp4", "contact_sheet.png", "session.json", "report.json", "report.png", "last_ar.png",
-                           "last_alongside.png", "last_layers.png"})
+  for (const char* name : {"live.mp4", "contact_sheet.png", "session.json", "report.json", "report.png", "report.html",
+                           "last_ar.png", "last_alongside.png", "last_layers.png"})
     EXPECT_TRUE(std::filesystem::is_regular_file(session + "/" + name)) << name << "\n" << r.output;
   const Json s = ReadJsonFile(session + "/session.json");
   ASSERT_EQ(s.at("frames").size(), 8u);
