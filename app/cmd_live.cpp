@@ -35,6 +35,7 @@
 #include "calib/core/media.h"
 #include "calib/core/parallel.h"
 #include "render/synth/camera_stream.h"
+#include "tracking/frame_sources.h"
 #include "tracking/reconnecting_source.h"
 
 namespace nerfar {
@@ -66,7 +67,7 @@ struct LiveArgs {
   std::vector<std::string> object_paths;
   int frames = 0, render_divisor = 0;
   double scale = 1.0;
-  bool headless = false, realtime = false, auto_place = false, no_hud = false;
+  bool headless = false, realtime = false, auto_place = false, no_hud = false, loop = false;
   Vec3 anchor;    // parsed --anchor
   int views = 0;  // parsed --views (LiveView flags; 0: the default)
 };
@@ -129,6 +130,7 @@ std::optional<LiveArgs> ParseLiveArgs(const CommandArgs& args) {
               "headless: capture and processing threads with frame dropping, as in the window "
               "(default: every frame processed in order)");
   parser.Flag("--no-hud", &a.no_hud, "no HUD text in the AR view");
+  parser.Flag("--loop", &a.loop, "images:DIR sources: start over after the last frame (soak runs, unattended demos)");
   parser.Option("--video", &a.video_path, "FILE", "headless: the AR video (default SESSION/live.mp4)");
   parser.Option("--contact-sheet", &a.sheet_path, "FILE",
                 "headless: views of four frames (default SESSION/contact_sheet.png)");
@@ -301,7 +303,9 @@ int RunLive(const CommandArgs& args) {
     throw InputError("nerfar live: no object: give --object OBJ (.ssdf or mesh), or bake one into " + a.scene_dir);
   std::vector<LiveObjectAsset> objects;
   for (const std::string& o : a.object_paths) objects.push_back(LoadLiveObject(o));
-  std::unique_ptr<FrameSource> source = OpenSource(a.source_name);
+  SourceOptions source_options;
+  source_options.loop = a.loop;
+  std::unique_ptr<FrameSource> source = OpenSource(a.source_name, source_options);
   const auto* synthetic = dynamic_cast<const synth::SyntheticCameraSource*>(source.get());
   std::string used_camera;
   const CameraIntrinsics camera = ChooseCamera(a, synthetic, scene, paths, &used_camera);
@@ -322,7 +326,8 @@ int RunLive(const CommandArgs& args) {
   std::vector<LiveAsset> assets;
   for (const LiveObjectAsset& o : objects)
     assets.push_back({o.name, &o.mesh, o.field ? &*o.field : nullptr, o.material});
-  source = ReconnectOnLoss(std::move(source), [&a] { return OpenSource(a.source_name); });
+  source =
+      ReconnectOnLoss(std::move(source), [&a, source_options] { return OpenSource(a.source_name, source_options); });
   LivePipeline pipeline(*source, board, camera, *scene.field, scene.env.lobes, assets, options);
   // A view that cannot be written (a full disk, a folder gone) is reported, not the end of the run.
   const auto write_view = [&pipeline](const std::function<void()>& write) {

@@ -10,6 +10,8 @@
 
 #include "app/cli.h"
 #include "calib/board.h"
+#include "calib/camera_file.h"
+#include "calib/core/atomic_file.h"
 #include "calib/core/error.h"
 #include "calib/core/exr.h"
 #include "calib/core/image_io.h"
@@ -175,6 +177,32 @@ TEST(App, LiveHeadlessWritesVideoSheetSessionAndReport) {
 
 // A video that cannot be written (its folder is a file) is reported and the
 // run goes on: the session and report are written, the exit code is 1.
+// --loop: an image folder of two frames feeds five; without it the stream
+// ends after its two.
+TEST(App, LiveLoopStartsAnImageFolderOver) {
+  testing::TempDir dir;
+  WriteTinyScene(dir.path());
+  MakeDirectories(dir.File("frames"));
+  for (const char* name : {"a.png", "b.png"}) WriteImage8(dir.File("frames/") + name, Image8(64, 48, 3, 120));
+  CameraFile camera;
+  camera.camera.width = 64;
+  camera.camera.height = 48;
+  camera.camera.fx = camera.camera.fy = 60;
+  camera.camera.cx = 32;
+  camera.camera.cy = 24;
+  WriteCameraFile(dir.File("camera.json"), camera);
+  const std::string common = "live --headless --threads 2 --source images:" + dir.File("frames") + " --camera " +
+                             dir.File("camera.json") + " --scene " + dir.path() + " --object " + dir.File("cube.obj") +
+                             " --views ar --frames 5 -o ";
+  for (const bool loop : {true, false}) {
+    const std::string session = dir.File(loop ? "looped" : "once");
+    const Result r = RunNerfar(common + session + (loop ? " --loop" : ""));
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+    const Json counters = ReadJsonFile(session + "/session.json").at("counters");
+    EXPECT_EQ(counters.at("captured").get<int>(), loop ? 5 : 2) << counters.dump();
+  }
+}
+
 TEST(App, LiveHeadlessReportsAVideoItCannotWriteAndStillWritesTheSession) {
   testing::TempDir dir;
   WriteTinyScene(dir.path());
