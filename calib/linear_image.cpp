@@ -49,7 +49,10 @@ cv::Mat ReadDisplayReferred(const std::string& path) {
   if (mat.empty()) ThrowInputError(path, "cannot decode image (expected OpenEXR, PNG or JPEG)");
   if (mat.depth() != CV_8U && mat.depth() != CV_16U)
     ThrowInputError(path, "pixel type is not 8 or 16 bit (expected an 8- or 16-bit PNG or JPEG, or OpenEXR)");
-  if (mat.cols > kMaxImageSide || mat.rows > kMaxImageSide) ThrowInputError(path, "image too large");
+  if (mat.cols > kMaxImageSide || mat.rows > kMaxImageSide || int64_t(mat.total()) > kMaxImagePixels)
+    ThrowInputError(path, "image of " + std::to_string(mat.cols) + "x" + std::to_string(mat.rows) +
+                              " pixels is too large (at most " + std::to_string(kMaxImageSide) + " a side and " +
+                              std::to_string(kMaxImagePixels) + " pixels)");
   cv::Mat rgb;
   switch (mat.channels()) {
     case 1:

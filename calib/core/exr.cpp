@@ -43,9 +43,10 @@ Window CheckedWindow(const std::string& path, const Imf::Header& header) {
   const Imath::Box2i box = header.dataWindow();
   const long long width = static_cast<long long>(box.max.x) - box.min.x + 1;
   const long long height = static_cast<long long>(box.max.y) - box.min.y + 1;
-  if (width < 1 || height < 1 || width > kMaxImageSide || height > kMaxImageSide)
+  if (width < 1 || height < 1 || width > kMaxImageSide || height > kMaxImageSide || width * height > kMaxImagePixels)
     ThrowInputError(path, "image is " + std::to_string(width) + "x" + std::to_string(height) + " (expected 1.." +
-                              std::to_string(kMaxImageSide) + " per side)");
+                              std::to_string(kMaxImageSide) + " per side, at most " + std::to_string(kMaxImagePixels) +
+                              " pixels)");
   return {box.min.x, box.min.y, static_cast<int>(width), static_cast<int>(height)};
 }
 

@@ -13,6 +13,10 @@ namespace nerfar {
 // Largest width or height any reader accepts; larger headers are rejected as
 // corrupt before allocation (16k covers every camera and panorama we meet).
 inline constexpr int kMaxImageSide = 16384;
+// Largest pixel count (2^26: 8192x8192, a 48-megapixel phone frame, a 16384x4096
+// panorama): a decoded frame beyond it is refused before its float copy, which
+// would take 12 bytes a pixel.
+inline constexpr int64_t kMaxImagePixels = int64_t{1} << 26;
 inline constexpr int kMaxImageChannels = 64;
 
 template <typename T>

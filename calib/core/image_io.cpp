@@ -40,7 +40,10 @@ Image8 ReadImage8(const std::string& path) {
     if (mat.depth() != CV_16U) ThrowInputError(path, "pixel type is not 8 or 16 bit (expected an 8-bit image)");
     mat.convertTo(mat, CV_8U, 1.0 / 257.0);
   }
-  if (mat.cols > kMaxImageSide || mat.rows > kMaxImageSide) ThrowInputError(path, "image too large");
+  if (mat.cols > kMaxImageSide || mat.rows > kMaxImageSide || int64_t(mat.total()) > kMaxImagePixels)
+    ThrowInputError(path, "image of " + std::to_string(mat.cols) + "x" + std::to_string(mat.rows) +
+                              " pixels is too large (at most " + std::to_string(kMaxImageSide) + " a side and " +
+                              std::to_string(kMaxImagePixels) + " pixels)");
   cv::Mat converted;
   switch (mat.channels()) {
     case 1:

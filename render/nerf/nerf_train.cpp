@@ -1092,6 +1092,31 @@ void NerfTrainer::SaveCheckpoint(const std::string& path) const {
   WriteBinaryFile(path, std::move(w));
 }
 
+namespace {
+
+// The options matched, so the checkpoint's grid must be the one this trainer has at its level:
+// the coarse voxel halved per level over the dataset's box. Checked before the brick table is
+// allocated, so a corrupt size cannot ask for more memory than training itself would use.
+void CheckGridOfLevel(const NerfField& f, int level, const NerfTrainOptions& options, const std::string& path) {
+  if (level < 0 || level >= options.levels)
+    ThrowInputError(path, "checkpoint level " + std::to_string(level) + " (expected 0 to " +
+                              std::to_string(options.levels - 1) + ")");
+  const double voxel = options.coarse_voxel_m / double(1 << level);
+  if (!(std::abs(f.voxel_m - voxel) <= 1e-5 * voxel))
+    ThrowInputError(path, "checkpoint voxel size " + std::to_string(f.voxel_m) + " m at level " +
+                              std::to_string(level) + " (expected " + std::to_string(voxel) + ")");
+  for (int a = 0; a < 3; ++a) {
+    // The grid spans the box with a vertex on each face: extent / voxel + 1, to within rounding.
+    const double expected = (f.aabb.max[a] - f.aabb.min[a]) / voxel + 1;
+    if (!(std::abs(f.res[a] - expected) <= 2))
+      ThrowInputError(path, "checkpoint grid resolution " + std::to_string(f.res[a]) + " (expected about " +
+                                std::to_string(int(std::lround(expected))) + " at level " + std::to_string(level) +
+                                ")");
+  }
+}
+
+}  // namespace
+
 void NerfTrainer::LoadCheckpoint(const std::string& path) {
   State& s = *state_;
   const std::string bytes = ReadFileBytes(path, kMaxCheckpointBytes);
@@ -1113,12 +1138,9 @@ void NerfTrainer::LoadCheckpoint(const std::string& path) {
   f.voxel_m = r.Get<float>("voxel size");
   for (int a = 0; a < 3; ++a) {
     f.res[a] = r.Get<int32_t>("resolution");
-    if (f.res[a] < 2 || f.res[a] > 8192) ThrowInputError(path, "checkpoint grid resolution out of range");
     f.bricks[a] = (f.res[a] + 3) / 4;
   }
-  if (size_t(f.bricks[0]) * f.bricks[1] * f.bricks[2] > kNerfMaxBrickTable)
-    ThrowInputError(path, "checkpoint grid " + std::to_string(f.res[0]) + "x" + std::to_string(f.res[1]) + "x" +
-                              std::to_string(f.res[2]) + " is larger than any trainer makes (the file is corrupt)");
+  CheckGridOfLevel(f, level, s.options, path);
   const uint64_t n_coords = r.Get<uint64_t>("brick list");
   if (n_coords % 3 != 0 || n_coords / 3 > size_t(f.bricks[0]) * f.bricks[1] * f.bricks[2])
     ThrowInputError(path, "checkpoint brick list is inconsistent");
