@@ -296,9 +296,8 @@ void AddTruthFlags(ArgParser& parser, InsertArgs& a) {
 }
 
 // Every problem with the flags' combination, thrown together.
-void CheckUsage(InsertArgs& a) {
+void CheckUsage(const InsertArgs& a) {
   Problems usage("nerfar insert");
-  a.without_nerf = a.nerf_path.empty() && a.truth_geometry && !a.light_probe.empty();
   if (a.nerf_path.empty() && !a.without_nerf) usage.Add("--nerf", "missing (expected the scene's .nerf file)");
   if (a.without_nerf && a.background == "nerf") usage.Add("--background", "nerf needs --nerf");
   if (a.dataset_dir.empty()) usage.Add("--dataset", "missing (expected the dataset folder)");
@@ -327,6 +326,7 @@ bool ParseInsertArgs(const CommandArgs& args, InsertArgs& a) {
   AddShadingFlags(parser, a);
   AddTruthFlags(parser, a);
   if (!parser.Parse(args)) return false;
+  a.without_nerf = a.nerf_path.empty() && a.truth_geometry && !a.light_probe.empty();
   CheckUsage(a);
   return true;
 }
