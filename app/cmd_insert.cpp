@@ -114,164 +114,175 @@ Image8 TruthSheet(const ImageF& ours, const ImageF& ours_without, const ImageF& 
       5, ours.width, {"ours", "truth", "|ours - truth| x4", "kappa ours", "kappa truth"});
 }
 
-}  // namespace
-
-int RunInsert(const CommandArgs& args) {
+// insert's flags as given: −1, empty or false where a flag was not given
+// (the preset's value holds).
+struct InsertArgs {
   std::string nerf_path, env_path, dataset_dir, split = "test", output, frames_dir, background = "images";
   std::string preset = "balanced", light_source, truth_dir, light_probe, probe_distances;
   std::vector<std::string> object_paths, pose_paths, mesh_paths, material_paths;
-  int light_directions = -1, sg_lobes = -1, kappa_step = -1, occlusion_step = -1;
-  double kappa_cache = -1, receiver_reuse = -1;
-  double kappa_refine_delta = -1;
-  bool no_cell_normals = false, no_parallax = false;
-  bool no_kappa_snap = false, kappa_under_objects = false;
-  bool kappa_samples = false;
-  int kappa_sample_bins = -1;
-  double parallax_min_sharpness = -1;
-  int light_refine_rays = -1;
-  bool gamma_per_pixel = false;
+  int light_directions = -1, sg_lobes = -1, kappa_step = -1, shade_step = -1, occlusion_step = -1;
+  int kappa_sample_bins = -1, light_refine_rays = -1, seen_views = -1;
+  double kappa_cache = -1, receiver_reuse = -1, kappa_refine_delta = -1, parallax_min_sharpness = -1;
   double shadow_reach = -1, self_shadow_offset = -1, receiver_min_opacity = -1;
+  double seen_group_cm = -1, seen_agree = -1, normal_probe_voxels = -1;
+  bool no_cell_normals = false, no_parallax = false, no_kappa_snap = false, kappa_under_objects = false;
+  bool kappa_samples = false, gamma_per_pixel = false, sampled_lobes = false, sg_specular = false;
   bool no_self_shadow = false, no_shadows = false, paper_gamma = false, truth_geometry = false;
-  bool light_from_centre = false, no_seen_radiance = false, expected_depth = false;
-  bool no_support_plane = false;
-  bool no_see_through = false;
-  int seen_views = -1;
-  double seen_group_cm = -1;
-  double seen_agree = -1;
-  bool seen_whole_band = false;
-  bool no_views_cache = false;
-  double normal_probe_voxels = -1;
-  ArgParser parser("insert", "Insert virtual objects into a captured scene: light, shade, occlude, shadow, composite.");
+  bool light_from_centre = false, no_seen_radiance = false, expected_depth = false, no_support_plane = false;
+  bool no_see_through = false, seen_whole_band = false, no_views_cache = false;
+  bool specular_parallax = false, no_specular_parallax = false;
+  // Derived: ground-truth geometry and a light probe stand in for the NeRF.
+  bool without_nerf = false;
+};
+
+// A preset's value as the help shows it.
+std::string Shown(double value) {
+  std::ostringstream text;
+  text << value;
+  return text.str();
+}
+
+// The objects, poses, dataset and output flags.
+void AddInputFlags(ArgParser& parser, InsertArgs& a) {
   parser.Option(
-      "--nerf", &nerf_path, "FILE",
+      "--nerf", &a.nerf_path, "FILE",
       "the scene's HDR NeRF (.nerf; required unless --truth-geometry with --light-probe: then nothing occludes)");
-  parser.Option("--env", &env_path, "FILE", "environment SGs (env.json from `nerfar env`; default: none)");
-  parser.Option("--object", &object_paths, "FILE", "an object's SSDF field (.ssdf from `nerfar bake`); repeatable");
-  parser.Option("--pose", &pose_paths, "FILE", "the object's pose.json (object_to_world); one per --object");
-  parser.Option("--mesh", &mesh_paths, "FILE", "the object's mesh (default: the one the .ssdf names); per --object");
-  parser.Option("--material", &material_paths, "FILE",
+  parser.Option("--env", &a.env_path, "FILE", "environment SGs (env.json from `nerfar env`; default: none)");
+  parser.Option("--object", &a.object_paths, "FILE", "an object's SSDF field (.ssdf from `nerfar bake`); repeatable");
+  parser.Option("--pose", &a.pose_paths, "FILE", "the object's pose.json (object_to_world); one per --object");
+  parser.Option("--mesh", &a.mesh_paths, "FILE", "the object's mesh (default: the one the .ssdf names); per --object");
+  parser.Option("--material", &a.material_paths, "FILE",
                 "the object's material JSON (default: the .ssdf's); per --object");
-  parser.Option("--dataset", &dataset_dir, "DIR", "dataset folder with the cameras (required)");
-  parser.Option("--split", &split, "NAME", "test (default) or train");
-  parser.Option("-o", &output, "OUT", "output folder (required)");
-  parser.Option("--frames", &frames_dir, "DIR",
+  parser.Option("--dataset", &a.dataset_dir, "DIR", "dataset folder with the cameras (required)");
+  parser.Option("--split", &a.split, "NAME", "test (default) or train");
+  parser.Option("-o", &a.output, "OUT", "output folder (required)");
+  parser.Option("--frames", &a.frames_dir, "DIR",
                 "camera frames named like the dataset's images (default: those images)");
-  parser.Option("--background", &background, "B", "images (AR over the camera frames, default) or nerf");
-  parser.Option("--preset", &preset, "P", "fast, balanced (default) or accurate; the knobs below override it");
+  parser.Option("--background", &a.background, "B", "images (AR over the camera frames, default) or nerf");
+  parser.Option("--preset", &a.preset, "P", "fast, balanced (default) or accurate; the knobs below override it");
+}
+
+// The stages' knobs (light, κ grid and cache, receivers); their help shows the presets' values.
+void AddKnobFlags(ArgParser& parser, InsertArgs& a) {
   // The presets' values in the help come from the presets themselves.
   const InsertOptions balanced = InsertOptions::Preset("balanced"), fast = InsertOptions::Preset("fast");
-  const auto shown = [](double value) {
-    std::ostringstream text;
-    text << value;
-    return text.str();
-  };
-  parser.Option("--light-directions", &light_directions, "N",
-                "rays from the object centre (balanced: " + shown(balanced.light.directions) + ")");
-  parser.Option("--sg-lobes", &sg_lobes, "M",
-                "SG lobes of the incident light (balanced: " + shown(balanced.light.fit.lobes) + ")");
-  parser.Option("--kappa-step", &kappa_step, "S",
+  parser.Option("--light-directions", &a.light_directions, "N",
+                "rays from the object centre (balanced: " + Shown(balanced.light.directions) + ")");
+  parser.Option("--sg-lobes", &a.sg_lobes, "M",
+                "SG lobes of the incident light (balanced: " + Shown(balanced.light.fit.lobes) + ")");
+  parser.Option("--kappa-step", &a.kappa_step, "S",
                 "κ every S pixels of a 1280-pixel-wide frame (other widths scale it), interpolated between "
                 "(balanced: " +
-                    shown(balanced.kappa_step) + ")");
-  int shade_step = -1;
-  parser.Option("--shade-step", &shade_step, "S",
+                    Shown(balanced.kappa_step) + ")");
+  parser.Option("--shade-step", &a.shade_step, "S",
                 "diffuse and self-shadow every S pixels of the object, interpolated where smooth (balanced: " +
-                    shown(balanced.shade_step) + ")");
-  parser.Option("--kappa-refine-delta", &kappa_refine_delta, "D",
+                    Shown(balanced.shade_step) + ")");
+  parser.Option("--kappa-refine-delta", &a.kappa_refine_delta, "D",
                 "coarse κ cells whose corners differ by more than D get every node (balanced: " +
-                    shown(balanced.kappa_refine_delta) + ", fast: " + shown(fast.kappa_refine_delta) + ")");
-  parser.Option("--shadow-reach", &shadow_reach, "R",
-                "κ within R bounding radii of an object (balanced: " + shown(balanced.shadow_reach_radii) + ")");
-  parser.Option("--self-shadow-offset", &self_shadow_offset, "R",
+                    Shown(balanced.kappa_refine_delta) + ", fast: " + Shown(fast.kappa_refine_delta) + ")");
+  parser.Option("--shadow-reach", &a.shadow_reach, "R",
+                "κ within R bounding radii of an object (balanced: " + Shown(balanced.shadow_reach_radii) + ")");
+  parser.Option("--self-shadow-offset", &a.self_shadow_offset, "R",
                 "self-shadow SSDF queried R bounding radii off the surface (balanced: " +
-                    shown(balanced.self_shadow_offset_radii) + ")");
+                    Shown(balanced.self_shadow_offset_radii) + ")");
   parser.Option(
-      "--receiver-min-opacity", &receiver_min_opacity, "A",
-      "κ only on receivers whose NeRF opacity reaches A (balanced: " + shown(balanced.receiver_min_opacity) + ")");
-  parser.Option("--light-source", &light_source, "L", "full (default), near (NeRF only) or env (environment only)");
-  parser.Option("--occlusion-step", &occlusion_step, "S",
+      "--receiver-min-opacity", &a.receiver_min_opacity, "A",
+      "κ only on receivers whose NeRF opacity reaches A (balanced: " + Shown(balanced.receiver_min_opacity) + ")");
+  parser.Option("--light-source", &a.light_source, "L", "full (default), near (NeRF only) or env (environment only)");
+  parser.Option("--occlusion-step", &a.occlusion_step, "S",
                 "occlusion first every S pixels, per pixel only where the scene is seen (balanced: " +
-                    shown(balanced.occlusion_step) + "; 1: every pixel)");
-  parser.Option("--kappa-cache", &kappa_cache, "H",
+                    Shown(balanced.occlusion_step) + "; 1: every pixel)");
+  parser.Option("--kappa-cache", &a.kappa_cache, "H",
                 "κ kept on a world lattice of H bounding radii while nothing moves (balanced: " +
-                    shown(balanced.kappa_cache_spacing_radii) + "; 0: exact per pixel)");
-  parser.Option("--receiver-reuse", &receiver_reuse, "T",
+                    Shown(balanced.kappa_cache_spacing_radii) + "; 0: exact per pixel)");
+  parser.Option("--receiver-reuse", &a.receiver_reuse, "T",
                 "κ receivers taken from the last frame's within T bounding radii of their planes (balanced: " +
-                    shown(balanced.kappa_reuse_tolerance_radii) + "; 0: every receiver marched)");
-  parser.Flag("--kappa-samples", &kappa_samples,
+                    Shown(balanced.kappa_reuse_tolerance_radii) + "; 0: every receiver marched)");
+}
+
+// κ from samples, parallax, the seen radiance and the NeRF's depth.
+void AddLightFlags(ArgParser& parser, InsertArgs& a) {
+  const InsertOptions balanced = InsertOptions::Preset("balanced"), fast = InsertOptions::Preset("fast");
+  parser.Flag("--kappa-samples", &a.kappa_samples,
               "shadow ratio κ from the light's samples gathered into sources instead of the SG lobes");
-  parser.Option("--kappa-sample-bins", &kappa_sample_bins, "N",
+  parser.Option("--kappa-sample-bins", &a.kappa_sample_bins, "N",
                 "directions the light's samples are gathered into for κ (default: the preset's)");
-  parser.Flag("--no-parallax", &no_parallax,
+  parser.Flag("--no-parallax", &a.no_parallax,
               "the light is the same at every shadow receiver, as taken at the object centre (no lobe distances)");
-  parser.Option("--light-refine-rays", &light_refine_rays, "K",
+  parser.Option("--light-refine-rays", &a.light_refine_rays, "K",
                 "rays averaged over each incident-light direction where the light changes fast (balanced: " +
-                    shown(balanced.light.refine_rays) + "; fast: " + shown(fast.light.refine_rays) + " = off)");
-  parser.Option("--parallax-min-sharpness", &parallax_min_sharpness, "L",
+                    Shown(balanced.light.refine_rays) + "; fast: " + Shown(fast.light.refine_rays) + " = off)");
+  parser.Option("--parallax-min-sharpness", &a.parallax_min_sharpness, "L",
                 "lobes at least this sharp are re-aimed from each receiver as compact sources (default 10)");
-  bool sampled_lobes = false;
-  parser.Flag("--sampled-lobes", &sampled_lobes,
+  parser.Flag("--sampled-lobes", &a.sampled_lobes,
               "environment lobes sharper than the light directions resolve go through the directions and the SG fit "
               "like the rest (default: they pass to the incident light analytically)");
-  parser.Flag("--light-from-centre", &light_from_centre,
+  parser.Flag("--light-from-centre", &a.light_from_centre,
               "incident-light rays start at the object centre (the paper), not where they leave the object's mesh");
-  parser.Flag("--no-seen-radiance", &no_seen_radiance,
+  parser.Flag("--no-seen-radiance", &a.no_seen_radiance,
               "incident light takes the NeRF's own colour of surfaces seen from below the capture band (default: "
               "the radiance the views from the band agree on nearby)");
-  parser.Flag("--no-see-through", &no_see_through,
+  parser.Flag("--no-see-through", &a.no_see_through,
               "incident light keeps the NeRF's semi-transparent content whole (default: only the share that views "
               "from the capture band find matter; the rest lets the environment behind it through)");
-  parser.Option("--seen-views", &seen_views, "V",
+  parser.Option("--seen-views", &a.seen_views, "V",
                 "views aimed from the capture band at each point a light ray meets from below (default 12)");
-  parser.Option("--seen-agree", &seen_agree, "F",
+  parser.Option("--seen-agree", &a.seen_agree, "F",
                 "a point's seen radiance: the mean of its views at least F x as bright as the brightest (default "
                 "0.5; 1: the brightest alone)");
-  parser.Option("--seen-group-cm", &seen_group_cm, "C",
+  parser.Option("--seen-group-cm", &a.seen_group_cm, "C",
                 "light rays whose points lie in one C cm cell share their views (fast: 2, balanced: 1, accurate: "
                 "0 = one NeRF voxel)");
-  parser.Flag("--expected-depth", &expected_depth,
+  parser.Flag("--expected-depth", &a.expected_depth,
               "NeRF depth (κ receivers, lobe distances) as the opacity-weighted mean, not where transmittance "
               "crosses 1/2");
-  parser.Option("--normal-probe-voxels", &normal_probe_voxels, "V",
+  parser.Option("--normal-probe-voxels", &a.normal_probe_voxels, "V",
                 "NeRF receiver normals from the surface found V voxels to each side (default 3; 0: density "
                 "gradient only)");
-  parser.Flag("--no-views-cache", &no_views_cache,
+  parser.Flag("--no-views-cache", &a.no_views_cache,
               "every light takes its own seen-radiance views (default in fast and balanced: the answers of cells "
               "met before are kept, also from the centre rays for the refined sub-rays)");
-  parser.Flag("--seen-whole-band", &seen_whole_band,
+  parser.Flag("--seen-whole-band", &a.seen_whole_band,
               "seen radiance from views over the whole capture band (default: the views that see the face the "
               "light ray meets, the band only where none does)");
-  parser.Flag("--no-support-plane", &no_support_plane,
+}
+
+// Receivers, self-shadow and specular switches.
+void AddShadingFlags(ArgParser& parser, InsertArgs& a) {
+  parser.Flag("--no-support-plane", &a.no_support_plane,
               "κ receivers from the NeRF alone (default: where the dataset has a board.json, receivers whose "
               "rays end on the tag board's plane are taken onto it)");
-  parser.Flag("--no-kappa-snap", &no_kappa_snap, "keep κ in [1 - ε, 1) as computed (default: taken as 1)");
-  parser.Flag("--kappa-under-objects", &kappa_under_objects,
+  parser.Flag("--no-kappa-snap", &a.no_kappa_snap, "keep κ in [1 - ε, 1) as computed (default: taken as 1)");
+  parser.Flag("--kappa-under-objects", &a.kappa_under_objects,
               "κ also at grid nodes only the objects' pixels cover (default: skipped)");
-  parser.Flag("--no-cell-normals", &no_cell_normals,
+  parser.Flag("--no-cell-normals", &a.no_cell_normals,
               "a NeRF normal per κ receiver, not one per κ lattice cell shared by all views");
-  parser.Flag("--gamma-per-pixel", &gamma_per_pixel, "self-shadow γ by an SSDF query per pixel, not per mesh vertex");
-  parser.Flag("--no-self-shadow", &no_self_shadow, "objects do not shadow themselves or each other");
-  parser.Flag("--no-shadows", &no_shadows, "no shadows on the scene (κ = 1)");
-  bool sg_specular = false;
-  parser.Flag("--sg-specular", &sg_specular,
+  parser.Flag("--gamma-per-pixel", &a.gamma_per_pixel, "self-shadow γ by an SSDF query per pixel, not per mesh vertex");
+  parser.Flag("--no-self-shadow", &a.no_self_shadow, "objects do not shadow themselves or each other");
+  parser.Flag("--no-shadows", &a.no_shadows, "no shadows on the scene (κ = 1)");
+  parser.Flag("--sg-specular", &a.sg_specular,
               "specular from the SG light (paper eq. 5) instead of the prefiltered incident-light samples");
-  bool no_specular_parallax = false, specular_parallax = false;
-  parser.Flag("--specular-parallax", &specular_parallax,
+  parser.Flag("--specular-parallax", &a.specular_parallax,
               "prefiltered reflections looked up from each pixel's point towards where its reflected ray meets the "
               "scene's distance seen from the light centre (default in accurate only)");
-  parser.Flag("--no-specular-parallax", &no_specular_parallax,
+  parser.Flag("--no-specular-parallax", &a.no_specular_parallax,
               "prefiltered reflections looked up along the reflected direction, as if all they reflect were distant "
               "(the default in fast and balanced)");
-  parser.Flag("--paper-gamma", &paper_gamma,
+  parser.Flag("--paper-gamma", &a.paper_gamma,
               "self-shadow γ = f_h(S)/f_h(π/2) as in the paper (default: horizon-relative)");
-  parser.Option("--light-probe", &light_probe, "FILE", "light every object with this panorama fitted with SGs instead");
-  parser.Option("--probe-distances", &probe_distances, "NERF",
+}
+
+// A light probe instead of the scene's light, the ground truth, and the epilog.
+void AddTruthFlags(ArgParser& parser, InsertArgs& a) {
+  parser.Option("--light-probe", &a.light_probe, "FILE",
+                "light every object with this panorama fitted with SGs instead");
+  parser.Option("--probe-distances", &a.probe_distances, "NERF",
                 "with --light-probe: the probe's lobes get their distances (parallax of near light) from this "
                 "NeRF's depth seen from the object centre; only the lobe distances come from it");
-  parser.Option("--truth", &truth_dir, "DIR",
+  parser.Option("--truth", &a.truth_dir, "DIR",
                 "ground truth (scenes/*/insert/<object>): writes report.json with object psnr_tm, shadow and "
                 "lighting errors, and OUT/<name>_sheet.png (ours, truth, difference, both shadow ratios)");
-  parser.Flag("--truth-geometry", &truth_geometry,
+  parser.Flag("--truth-geometry", &a.truth_geometry,
               "shadow receivers (and, without --nerf, occlusion) from the truth's depth maps instead of the NeRF");
   parser.Epilog(
       "outputs: OUT/<name>.exr and .png, OUT/<name>_object.exr, _alpha.exr, _kappa.exr, OUT/probe.exr\n"
@@ -282,193 +293,212 @@ int RunInsert(const CommandArgs& args) {
       "  nerfar insert --nerf lamps.nerf --object monkey.ssdf --pose "
       "../shared/scenes/lamps/insert/monkey_diffuse/pose.json \\\n"
       "      --dataset ../shared/scenes/lamps -o out/monkey\n");
-  if (!parser.Parse(args)) return 0;
+}
+
+// Every problem with the flags' combination, thrown together.
+void CheckUsage(const InsertArgs& a) {
   Problems usage("nerfar insert");
-  const bool without_nerf = nerf_path.empty() && truth_geometry && !light_probe.empty();
-  if (nerf_path.empty() && !without_nerf) usage.Add("--nerf", "missing (expected the scene's .nerf file)");
-  if (without_nerf && background == "nerf") usage.Add("--background", "nerf needs --nerf");
-  if (dataset_dir.empty()) usage.Add("--dataset", "missing (expected the dataset folder)");
-  if (output.empty()) usage.Add("-o", "missing (expected an output folder)");
-  if (truth_geometry && truth_dir.empty()) usage.Add("--truth-geometry", "needs --truth DIR");
-  if (!probe_distances.empty() && light_probe.empty()) usage.Add("--probe-distances", "needs --light-probe FILE");
-  if (object_paths.empty()) usage.Add("--object", "missing (expected at least one .ssdf)");
-  if (pose_paths.size() != object_paths.size())
-    usage.Add("--pose", std::to_string(pose_paths.size()) + " given for " + std::to_string(object_paths.size()) +
+  if (a.nerf_path.empty() && !a.without_nerf) usage.Add("--nerf", "missing (expected the scene's .nerf file)");
+  if (a.without_nerf && a.background == "nerf") usage.Add("--background", "nerf needs --nerf");
+  if (a.dataset_dir.empty()) usage.Add("--dataset", "missing (expected the dataset folder)");
+  if (a.output.empty()) usage.Add("-o", "missing (expected an output folder)");
+  if (a.truth_geometry && a.truth_dir.empty()) usage.Add("--truth-geometry", "needs --truth DIR");
+  if (!a.probe_distances.empty() && a.light_probe.empty()) usage.Add("--probe-distances", "needs --light-probe FILE");
+  if (a.object_paths.empty()) usage.Add("--object", "missing (expected at least one .ssdf)");
+  if (a.pose_paths.size() != a.object_paths.size())
+    usage.Add("--pose", std::to_string(a.pose_paths.size()) + " given for " + std::to_string(a.object_paths.size()) +
                             " objects (expected one per --object)");
-  if (!mesh_paths.empty() && mesh_paths.size() != object_paths.size())
+  if (!a.mesh_paths.empty() && a.mesh_paths.size() != a.object_paths.size())
     usage.Add("--mesh", "expected none or one per --object");
-  if (!material_paths.empty() && material_paths.size() != object_paths.size())
+  if (!a.material_paths.empty() && a.material_paths.size() != a.object_paths.size())
     usage.Add("--material", "expected none or one per --object");
-  if (background != "images" && background != "nerf")
-    usage.Add("--background", "'" + background + "' (expected images or nerf)");
+  if (a.background != "images" && a.background != "nerf")
+    usage.Add("--background", "'" + a.background + "' (expected images or nerf)");
   usage.ThrowIfAny();
+}
 
-  InsertOptions options = InsertOptions::Preset(preset);
-  if (light_directions != -1) options.light.directions = light_directions;
-  if (sg_lobes != -1) options.light.fit.lobes = sg_lobes;
-  if (kappa_step != -1) options.kappa_step = kappa_step;
-  if (shade_step != -1) options.shade_step = shade_step;
-  if (kappa_refine_delta != -1) options.kappa_refine_delta = kappa_refine_delta;  // validated
-  if (occlusion_step != -1) options.occlusion_step = occlusion_step;
-  if (kappa_cache >= 0) options.kappa_cache_spacing_radii = kappa_cache;
-  if (receiver_reuse == 0) options.kappa_receiver_reuse = false;
-  if (receiver_reuse != -1 && receiver_reuse != 0) options.kappa_reuse_tolerance_radii = receiver_reuse;  // validated
-  if (no_cell_normals) options.receiver_normal_per_cell = false;
-  if (no_kappa_snap) options.shadow_epsilon_snap = false;
-  if (kappa_under_objects) options.kappa_skip_covered = false;
-  if (no_parallax) options.light.parallax = false;
-  if (kappa_samples) options.kappa_from_samples = true;
-  if (kappa_sample_bins != -1) options.kappa_sample_bins = kappa_sample_bins;  // validated
-  if (light_from_centre) options.light.start_outside_object = false;
-  if (sampled_lobes) options.light.analytic_compact_lobes = false;
-  NerfSceneOptions nerf_options = NerfSceneOptions::Preset(preset);
-  if (seen_views != -1) nerf_options.seen.views = seen_views;  // validated
-  if (seen_group_cm != -1) nerf_options.seen.group_m = seen_group_cm / 100.0;
-  if (seen_agree != -1) nerf_options.seen.agree_fraction = seen_agree;  // validated
-  if (no_seen_radiance) nerf_options.light_seen_radiance = false;
-  if (no_see_through) nerf_options.seen.see_through = false;
-  if (seen_whole_band) nerf_options.seen.face_views = false;
-  if (no_views_cache) nerf_options.cache_views = false;
-  if (expected_depth) nerf_options.surface_depth = false;
-  if (normal_probe_voxels != -1) nerf_options.normal_probe_voxels = normal_probe_voxels;
-  if (parallax_min_sharpness != -1) options.light.parallax_min_sharpness = parallax_min_sharpness;
-  if (light_refine_rays != -1) options.light.refine_rays = light_refine_rays;
-  if (gamma_per_pixel) options.self_shadow_per_vertex = false;
-  if (shadow_reach != -1) options.shadow_reach_radii = shadow_reach;
-  if (self_shadow_offset != -1) options.self_shadow_offset_radii = self_shadow_offset;
-  if (receiver_min_opacity != -1) options.receiver_min_opacity = receiver_min_opacity;
-  if (!light_source.empty()) options.light.source = ParseLightSource(light_source);
-  if (no_self_shadow) options.self_shadow = false;
-  if (no_shadows) options.shadows = false;
-  if (paper_gamma) options.self_shadow_horizon = false;
-  if (sg_specular) options.prefiltered_specular = false;
-  if (specular_parallax) options.specular_parallax = true;
-  if (no_specular_parallax) options.specular_parallax = false;
-  {
-    Problems p("nerfar insert options");
-    for (const std::string& s : options.Validate()) p.Add("", s);
-    for (const std::string& s : nerf_options.Validate()) p.Add("", s);
-    p.ThrowIfAny();
-  }
+// Parses insert's flags into `a`; false when --help was given.
+bool ParseInsertArgs(const CommandArgs& args, InsertArgs& a) {
+  ArgParser parser("insert", "Insert virtual objects into a captured scene: light, shade, occlude, shadow, composite.");
+  AddInputFlags(parser, a);
+  AddKnobFlags(parser, a);
+  AddLightFlags(parser, a);
+  AddShadingFlags(parser, a);
+  AddTruthFlags(parser, a);
+  if (!parser.Parse(args)) return false;
+  a.without_nerf = a.nerf_path.empty() && a.truth_geometry && !a.light_probe.empty();
+  CheckUsage(a);
+  return true;
+}
 
-  // Inputs.
-  const Dataset dataset = ReadDataset(DatasetSplitPath(dataset_dir, split));
-  CheckOutputsSpareInputs(InsertOutputs(output, dataset, object_paths.size()),
-                          Paths(nerf_path, env_path, light_probe, probe_distances, frames_dir, DatasetInputs(dataset),
-                                object_paths, pose_paths, mesh_paths, material_paths, InsertTruthInputs(truth_dir)));
-  // Without a NeRF (ground-truth inputs) the scene is empty: nothing occludes.
-  NerfField nerf = without_nerf ? NerfField{} : LoadNerf(nerf_path);
-  // The field does not change from here on: rays read its compact copy (same samples, quantised values).
-  if (!without_nerf) nerf.UpdateRenderCopy();
-  std::unique_ptr<SceneField> scene_field;
-  if (without_nerf)
-    scene_field = std::make_unique<EmptyScene>(dataset.aabb ? *dataset.aabb : Aabb{{-1, -1, -1}, {1, 1, 1}});
-  else
-    scene_field = std::make_unique<NerfScene>(nerf, nerf_options);
-  const SceneField& scene = *scene_field;
-  EnvLight environment;
-  if (!env_path.empty()) {
-    environment = ReadEnvLight(env_path);
-    if (environment.negligible) {
-      LogInfo("insert: " + env_path + " marks the environment as negligible: it is dropped");
-      environment.lobes.clear();
-    }
-  }
-  std::vector<LoadedObject> loaded(object_paths.size());
-  for (size_t i = 0; i < object_paths.size(); ++i) {
+// The preset's insertion options with the flags given over them.
+InsertOptions InsertOptionsFrom(const InsertArgs& a) {
+  InsertOptions options = InsertOptions::Preset(a.preset);
+  if (a.light_directions != -1) options.light.directions = a.light_directions;
+  if (a.sg_lobes != -1) options.light.fit.lobes = a.sg_lobes;
+  if (a.kappa_step != -1) options.kappa_step = a.kappa_step;
+  if (a.shade_step != -1) options.shade_step = a.shade_step;
+  if (a.kappa_refine_delta != -1) options.kappa_refine_delta = a.kappa_refine_delta;  // validated
+  if (a.occlusion_step != -1) options.occlusion_step = a.occlusion_step;
+  if (a.kappa_cache >= 0) options.kappa_cache_spacing_radii = a.kappa_cache;
+  if (a.receiver_reuse == 0) options.kappa_receiver_reuse = false;
+  if (a.receiver_reuse != -1 && a.receiver_reuse != 0)
+    options.kappa_reuse_tolerance_radii = a.receiver_reuse;  // validated
+  if (a.no_cell_normals) options.receiver_normal_per_cell = false;
+  if (a.no_kappa_snap) options.shadow_epsilon_snap = false;
+  if (a.kappa_under_objects) options.kappa_skip_covered = false;
+  if (a.no_parallax) options.light.parallax = false;
+  if (a.kappa_samples) options.kappa_from_samples = true;
+  if (a.kappa_sample_bins != -1) options.kappa_sample_bins = a.kappa_sample_bins;  // validated
+  if (a.light_from_centre) options.light.start_outside_object = false;
+  if (a.sampled_lobes) options.light.analytic_compact_lobes = false;
+  if (a.parallax_min_sharpness != -1) options.light.parallax_min_sharpness = a.parallax_min_sharpness;
+  if (a.light_refine_rays != -1) options.light.refine_rays = a.light_refine_rays;
+  if (a.gamma_per_pixel) options.self_shadow_per_vertex = false;
+  if (a.shadow_reach != -1) options.shadow_reach_radii = a.shadow_reach;
+  if (a.self_shadow_offset != -1) options.self_shadow_offset_radii = a.self_shadow_offset;
+  if (a.receiver_min_opacity != -1) options.receiver_min_opacity = a.receiver_min_opacity;
+  if (!a.light_source.empty()) options.light.source = ParseLightSource(a.light_source);
+  if (a.no_self_shadow) options.self_shadow = false;
+  if (a.no_shadows) options.shadows = false;
+  if (a.paper_gamma) options.self_shadow_horizon = false;
+  if (a.sg_specular) options.prefiltered_specular = false;
+  if (a.specular_parallax) options.specular_parallax = true;
+  if (a.no_specular_parallax) options.specular_parallax = false;
+  return options;
+}
+
+// The preset's NeRF scene options with the flags given over them.
+NerfSceneOptions NerfOptionsFrom(const InsertArgs& a) {
+  NerfSceneOptions nerf_options = NerfSceneOptions::Preset(a.preset);
+  if (a.seen_views != -1) nerf_options.seen.views = a.seen_views;  // validated
+  if (a.seen_group_cm != -1) nerf_options.seen.group_m = a.seen_group_cm / 100.0;
+  if (a.seen_agree != -1) nerf_options.seen.agree_fraction = a.seen_agree;  // validated
+  if (a.no_seen_radiance) nerf_options.light_seen_radiance = false;
+  if (a.no_see_through) nerf_options.seen.see_through = false;
+  if (a.seen_whole_band) nerf_options.seen.face_views = false;
+  if (a.no_views_cache) nerf_options.cache_views = false;
+  if (a.expected_depth) nerf_options.surface_depth = false;
+  if (a.normal_probe_voxels != -1) nerf_options.normal_probe_voxels = a.normal_probe_voxels;
+  return nerf_options;
+}
+
+void ValidateOptions(const InsertOptions& options, const NerfSceneOptions& nerf_options) {
+  Problems p("nerfar insert options");
+  for (const std::string& s : options.Validate()) p.Add("", s);
+  for (const std::string& s : nerf_options.Validate()) p.Add("", s);
+  p.ThrowIfAny();
+}
+
+// A light probe fitted with SGs (--light-probe): the lobes, the probe's
+// pixels (down to 128 × 64) for the prefiltered specular term and its
+// compact sources beside those samples.
+struct ProbeLight {
+  SgMixture light;
+  RadianceSamples samples;
+  SgMixture compact;
+};
+
+ProbeLight FitProbe(const std::string& path, const InsertOptions& options) {
+  ProbeLight probe;
+  const ImageF panorama = ReadExrRgb(path);
+  const bool halve = panorama.width % 128 == 0 && panorama.height % 64 == 0 && panorama.width > 128;
+  probe.samples = SamplesFromEquirect(panorama, halve ? 128 : panorama.width, halve ? 64 : panorama.height);
+  // The SGs are fitted to the same 128 × 64 samples (2.8° pixels: a 5°
+  // source spans two); at half that a sun or a strip light narrower than a
+  // pixel leaves its width, and so its energy, to the fit's guess.
+  // Compact sources (a sun one or two pixels wide) out first, as lobes of
+  // their own energy; the fit takes the rest with the lobes they leave.
+  const CompactSplit split =
+      SplitCompactSources(probe.samples, options.light.fit.lobes / 2, options.light.fit.hdr_floor);
+  probe.samples = split.rest;
+  probe.compact = split.lobes;
+  SgFitOptions fit = options.light.fit;
+  fit.lobes -= static_cast<int>(probe.compact.size());
+  probe.light = FitSg(probe.samples, fit);
+  probe.light.insert(probe.light.end(), probe.compact.begin(), probe.compact.end());
+  std::string compact_list;
+  for (const Sg& lobe : probe.compact)
+    compact_list += " (λ " + std::to_string(static_cast<int>(lobe.sharpness)) + ", " +
+                    std::to_string(LuminanceOf(Integral(lobe))).substr(0, 6) + " Y·sr)";
+  LogInfo("insert: lighting every object with " + path + " as " + std::to_string(probe.compact.size()) +
+          " compact sources" + compact_list + " and " + std::to_string(fit.lobes) + " fitted SGs");
+  return probe;
+}
+
+std::vector<LoadedObject> LoadObjects(const InsertArgs& a) {
+  std::vector<LoadedObject> loaded(a.object_paths.size());
+  for (size_t i = 0; i < a.object_paths.size(); ++i) {
     LoadedObject& o = loaded[i];
-    o.field = ReadSsdf(object_paths[i]);
+    o.field = ReadSsdf(a.object_paths[i]);
     const std::string mesh_path =
-        mesh_paths.empty() ? ResolveMesh(o.field.mesh_reference, object_paths[i]) : mesh_paths[i];
+        a.mesh_paths.empty() ? ResolveMesh(o.field.mesh_reference, a.object_paths[i]) : a.mesh_paths[i];
     o.mesh = ReadMesh(mesh_path);
-    o.placement = ReadObjectPlacement(pose_paths[i]);
+    o.placement = ReadObjectPlacement(a.pose_paths[i]);
     std::optional<Material> material = o.field.material;
-    if (!material_paths.empty()) material = ReadMaterial(material_paths[i]);
+    if (!a.material_paths.empty()) material = ReadMaterial(a.material_paths[i]);
     if (!material) material = o.mesh.material;
     if (material) {
       o.material.base_color = material->albedo;
       o.material.roughness = material->roughness;
       o.material.metallic = material->metallic;
     } else {
-      LogWarning("insert: " + object_paths[i] + " carries no material; using the default grey");
+      LogWarning("insert: " + a.object_paths[i] + " carries no material; using the default grey");
     }
     o.visibility = std::make_unique<SsdfVisibility>(o.field, o.placement.T_world_object, o.placement.scale);
   }
-  SgMixture probe_light;
-  RadianceSamples probe_samples;  // the probe's pixels (down to 128 × 64) for the prefiltered specular term
-  SgMixture probe_compact;        // its compact sources, beside those samples
-  if (!light_probe.empty()) {
-    const ImageF panorama = ReadExrRgb(light_probe);
-    const bool halve = panorama.width % 128 == 0 && panorama.height % 64 == 0 && panorama.width > 128;
-    probe_samples = SamplesFromEquirect(panorama, halve ? 128 : panorama.width, halve ? 64 : panorama.height);
-    // The SGs are fitted to the same 128 × 64 samples (2.8° pixels: a 5°
-    // source spans two). At 64 × 32 (5.6°) a sun or a strip light narrower
-    // than a pixel left its width, and so its energy, to the fit's guess:
-    // lighting error 0.31 -> 0.05 (overhead, sphere), 0.06 -> 0.02
-    // (sunroom); lamps and window within ±0.03 (ground-truth inputs).
-    // Compact sources (a sun one or two pixels wide) out first, as lobes of
-    // their own energy; the fit takes the rest with the lobes they leave.
-    const CompactSplit split =
-        SplitCompactSources(probe_samples, options.light.fit.lobes / 2, options.light.fit.hdr_floor);
-    probe_samples = split.rest;
-    probe_compact = split.lobes;
-    SgFitOptions fit = options.light.fit;
-    fit.lobes -= static_cast<int>(probe_compact.size());
-    probe_light = FitSg(probe_samples, fit);
-    probe_light.insert(probe_light.end(), probe_compact.begin(), probe_compact.end());
-    std::string compact_list;
-    for (const Sg& lobe : probe_compact)
-      compact_list += " (λ " + std::to_string(static_cast<int>(lobe.sharpness)) + ", " +
-                      std::to_string(LuminanceOf(Integral(lobe))).substr(0, 6) + " Y·sr)";
-    LogInfo("insert: lighting every object with " + light_probe + " as " + std::to_string(probe_compact.size()) +
-            " compact sources" + compact_list + " and " + std::to_string(fit.lobes) + " fitted SGs");
-  }
-  // The probe's lobe distances per object, from a NeRF's depth at its centre.
-  std::vector<std::vector<double>> probe_lobe_distances(loaded.size());
-  std::vector<DistanceMap> probe_reflection_distances(loaded.size());  // the same depth per direction
-  if (!probe_distances.empty() && options.light.parallax) {
-    const NerfField distance_nerf = LoadNerf(probe_distances);
-    const NerfScene distance_scene(distance_nerf, nerf_options);
-    const std::vector<Vec3> dirs = FibonacciSphere(options.light.directions);
-    for (size_t i = 0; i < loaded.size(); ++i) {
-      std::vector<float> opacity, depth;
-      const ObjectPlacement& placement = loaded[i].placement;
-      const Vec3 center = placement.center_world.value_or(
-          placement.T_world_object * (ComputeBoundingSphere(loaded[i].mesh).center * placement.scale));
-      // As the inserter does: the rays start where they leave the object.
-      std::vector<float> starts;
-      if (options.light.start_outside_object)
-        starts = ObjectExitDistances({&loaded[i].mesh, placement.T_world_object, placement.scale}, center, dirs);
-      SampleIncidentLight(distance_scene, {}, center, dirs, LightSource::kNearFieldOnly, &opacity, &depth,
-                          starts.empty() ? nullptr : &starts);
-      // Distances from opacity alone, without the share of the light the
-      // NeRF's radiance explains: the probe is measured apart from the NeRF,
-      // so their ratio mixes the NeRF's radiance error (an emitter's peak
-      // under-fitted to 0.6 of the probe's) into where the light comes from,
-      // and pushes near lamps out by that factor. Measured with ground-truth
-      // inputs (docs/BENCHMARKS.md, session 8): shadow error lamps 0.366 ->
-      // 0.294 / 0.464 -> 0.356, window 0.238 -> 0.249 / 0.406 -> 0.410; with
-      // parallax, lamps sphere 24.48 -> 24.84 dB, window sphere 22.41 -> 22.02
-      // (the window's glass, half opaque, now counts as near).
-      probe_lobe_distances[i] = LobeDistances(probe_light, dirs, opacity, depth);
-      probe_reflection_distances[i] = ReflectionDistances(dirs, opacity, depth);
-      std::string list;
-      for (size_t k = 0; k < probe_light.size(); ++k)
-        if (std::isfinite(probe_lobe_distances[i][k]))
-          list += " λ " + std::to_string(int(probe_light[k].sharpness)) + ": " +
-                  std::to_string(probe_lobe_distances[i][k]).substr(0, 5) + " m;";
-      LogVerbose("insert: object " + std::to_string(i) + " probe lobe distances:" + list);
-    }
-  }
-  MakeDirectories(output);
-  const std::string options_json = options.ToJson();
-  LogInfo("insert: options " + options_json + ", threads " + std::to_string(ThreadCount()) +
-          (without_nerf ? std::string()
-                        : std::string(", nerf depth ") + (nerf_options.surface_depth ? "surface" : "expected") +
-                              ", light seen radiance " + (nerf_options.light_seen_radiance ? "on" : "off") +
-                              ", normal probe " + std::to_string(nerf_options.normal_probe_voxels) + " voxels"));
-  WriteFileAtomic((fs::path(output) / "options.json").string(), options_json + "\n");
+  return loaded;
+}
 
+// The probe's lobe distances per object (--probe-distances), from a NeRF's
+// depth seen from the object's centre; left empty without one.
+struct ProbeDistances {
+  std::vector<std::vector<double>> lobes;
+  std::vector<DistanceMap> reflections;  // the same depth per direction
+};
+
+ProbeDistances ProbeDistancesFrom(const std::string& nerf_path, const SgMixture& probe_light,
+                                  const std::vector<LoadedObject>& loaded, const InsertOptions& options,
+                                  const NerfSceneOptions& nerf_options) {
+  ProbeDistances distances;
+  distances.lobes.resize(loaded.size());
+  distances.reflections.resize(loaded.size());
+  if (nerf_path.empty() || !options.light.parallax) return distances;
+  const NerfField distance_nerf = LoadNerf(nerf_path);
+  const NerfScene distance_scene(distance_nerf, nerf_options);
+  const std::vector<Vec3> dirs = FibonacciSphere(options.light.directions);
+  for (size_t i = 0; i < loaded.size(); ++i) {
+    std::vector<float> opacity, depth;
+    const ObjectPlacement& placement = loaded[i].placement;
+    const Vec3 center = placement.center_world.value_or(
+        placement.T_world_object * (ComputeBoundingSphere(loaded[i].mesh).center * placement.scale));
+    // As the inserter does: the rays start where they leave the object.
+    std::vector<float> starts;
+    if (options.light.start_outside_object)
+      starts = ObjectExitDistances({&loaded[i].mesh, placement.T_world_object, placement.scale}, center, dirs);
+    SampleIncidentLight(distance_scene, {}, center, dirs, LightSource::kNearFieldOnly, &opacity, &depth,
+                        starts.empty() ? nullptr : &starts);
+    // Distances from opacity alone, without the share of the light the
+    // NeRF's radiance explains: the probe is measured apart from the NeRF,
+    // so their ratio would mix the NeRF's radiance error (an emitter's peak
+    // under-fitted) into where the light comes from, and push near lamps
+    // out by that factor.
+    distances.lobes[i] = LobeDistances(probe_light, dirs, opacity, depth);
+    distances.reflections[i] = ReflectionDistances(dirs, opacity, depth);
+    std::string list;
+    for (size_t k = 0; k < probe_light.size(); ++k)
+      if (std::isfinite(distances.lobes[i][k]))
+        list += " λ " + std::to_string(int(probe_light[k].sharpness)) + ": " +
+                std::to_string(distances.lobes[i][k]).substr(0, 5) + " m;";
+    LogVerbose("insert: object " + std::to_string(i) + " probe lobe distances:" + list);
+  }
+  return distances;
+}
+
+// The inserter's view of the loaded objects (loans from `loaded`, `probe`
+// and `distances`, which outlive it).
+std::vector<InsertObject> InsertObjects(const std::vector<LoadedObject>& loaded, const ProbeLight* probe,
+                                        const ProbeDistances& distances) {
   std::vector<InsertObject> objects(loaded.size());
   for (size_t i = 0; i < loaded.size(); ++i) {
     InsertObject& o = objects[i];
@@ -478,215 +508,309 @@ int RunInsert(const CommandArgs& args) {
     o.material = loaded[i].material;
     o.visibility = loaded[i].visibility.get();
     o.light_center = loaded[i].placement.center_world;
-    if (!light_probe.empty())
-      o.light_override = &probe_light, o.light_samples = &probe_samples, o.light_compact = &probe_compact;
-    if (!probe_lobe_distances[i].empty()) o.light_distances = &probe_lobe_distances[i];
-    if (!probe_reflection_distances[i].empty()) o.light_sample_distances = &probe_reflection_distances[i];
+    if (probe != nullptr)
+      o.light_override = &probe->light, o.light_samples = &probe->samples, o.light_compact = &probe->compact;
+    if (!distances.lobes[i].empty()) o.light_distances = &distances.lobes[i];
+    if (!distances.reflections[i].empty()) o.light_sample_distances = &distances.reflections[i];
   }
+  return objects;
+}
 
-  Inserter inserter(scene, environment.lobes, options);
-  const fs::path board_path = fs::path(dataset_dir) / "board.json";
-  if (!no_support_plane && !truth_geometry && fs::exists(board_path) && !dataset.frames.empty()) {
-    const SupportPlane plane =
-        PlaneOfBoard(ReadBoard(board_path.string()), dataset.frames.front().T_world_camera.translation);
-    inserter.set_support_plane(plane);
-    LogInfo("insert: shadow receivers that end on the board's plane (" + board_path.string() + ") are taken onto it");
-  }
+// What the views add up for timings.json and report.json.
+struct ViewTotals {
   Json views = Json::array();
   std::vector<double> psnrs, shadow_errors;
   // Object psnr over all views' mask pixels together: a view where the object
   // is nearly hidden (a few pixels at 50-60 dB) weighs by its pixels, not 1/N.
   std::vector<double> view_psnrs;
   std::vector<size_t> view_mask_pixels;
-  std::vector<std::vector<double>> stage_ms(8);
-  std::printf("%-8s %9s %7s %8s %8s %8s %9s %8s %9s %10s %8s\n", "view", "light_ms", "fit_ms", "raster", "shade",
-              "occlude", "kappa_ms", "total", "bg_ms", "psnr_obj", "shadow");
-  for (const DatasetFrame& frame_info : dataset.frames) {
-    const fs::path image_path(frame_info.image_path);
-    const std::string stem = image_path.stem().string();
-    CameraIntrinsics camera = dataset.camera;
-    ImageF frame;
-    double background_ms = 0;
-    if (background == "nerf") {
-      const double t0 = NowSeconds();
-      frame = inserter.RenderBackground(camera, frame_info.T_world_camera);
-      background_ms = (NowSeconds() - t0) * 1e3;
-    } else {
-      const std::string path =
-          frames_dir.empty() ? frame_info.image_path : (fs::path(frames_dir) / image_path.filename()).string();
-      frame = ReadFrame(path);
-      if (frame.width != camera.width || frame.height != camera.height)
-        camera = camera.Scaled(frame.width, frame.height);
-    }
-    const ImageF without = frame;
-    InsertLayers layers;
-    ImageF receiver_distance, receiver_normal;
-    ReceiverOverride receivers;
-    if (truth_geometry) {
-      const fs::path depth_path = fs::path(truth_dir) / ("depth_" + IndexSuffix(stem) + ".exr");
-      const ImageF depth = ReadExrChannel(depth_path.string());
-      if (depth.width != camera.width || depth.height != camera.height)
-        ThrowInputError(depth_path.string(), "size differs from the frame (expected " + std::to_string(camera.width) +
-                                                 "x" + std::to_string(camera.height) + ")");
-      ReceiversFromDepth(depth, camera, frame_info.T_world_camera, receiver_distance, receiver_normal);
-      receivers = {&receiver_distance, &receiver_normal, without_nerf};
-    }
-    const InsertTimings t = inserter.Render(camera, frame_info.T_world_camera, objects, frame, &layers, receivers);
-    const fs::path out(output);
-    WriteExrRgb((out / (stem + ".exr")).string(), frame);
-    WriteImage8((out / (stem + ".png")).string(), ToneMapToDisplay(frame, ExposureForPercentile(without)));
-    WriteExrRgb((out / (stem + "_object.exr")).string(),
-                ExpandLayer(layers.object, layers.gbuffer.rect, camera.width, camera.height, 0.0f));
-    WriteExr((out / (stem + "_alpha.exr")).string(),
-             ExpandLayer(layers.alpha, layers.gbuffer.rect, camera.width, camera.height, 0.0f), {"Y"});
-    WriteExr((out / (stem + "_kappa.exr")).string(),
-             ExpandLayer(layers.kappa, layers.kappa_rect, camera.width, camera.height, 1.0f), {"Y"});
-    Json view = {{"name", stem},
-                 {"light_ms", t.light_ms},
-                 {"fit_ms", t.fit_ms},
-                 {"raster_ms", t.raster_ms},
-                 {"shade_ms", t.shade_ms},
-                 {"occlusion_ms", t.occlusion_ms},
-                 {"kappa_ms", t.kappa_ms},
-                 {"total_ms", t.total_ms},
-                 {"background_ms", background_ms},
-                 {"lights_recomputed", t.lights_recomputed},
-                 {"object_pixels", layers.gbuffer.covered},
-                 {"kappa_queries", layers.kappa_queries}};
-    const double values[8] = {t.light_ms,     t.fit_ms,   t.raster_ms, t.shade_ms,
-                              t.occlusion_ms, t.kappa_ms, t.total_ms,  background_ms};
-    for (int s = 0; s < 8; ++s) stage_ms[s].push_back(values[s]);
-    double psnr = NAN, shadow = NAN;
-    if (!truth_dir.empty()) {
-      const std::string index = IndexSuffix(stem);
-      const fs::path truth(truth_dir);
-      const ImageF truth_with = ReadExrRgb((truth / ("rgb_" + index + ".exr")).string());
-      const ImageF truth_without = ReadExrRgb((truth.parent_path() / ("bg_" + index + ".exr")).string());
-      const ImageF mask = ReadMask((truth / ("mask_" + index + ".png")).string());
-      if (truth_with.width == frame.width && truth_with.height == frame.height) {
-        psnr = ObjectPsnrTm(frame, truth_with, mask);
-        const ShadowError se = ComputeShadowError(frame, without, truth_with, truth_without, mask);
-        shadow = se.error;
-        view["object_psnr_tm_db"] = std::isfinite(psnr) ? Json(psnr) : Json(nullptr);
-        view["shadow_error"] = std::isfinite(shadow) ? Json(shadow) : Json(nullptr);
-        view["shadow_region_pixels"] = se.region;
-        view["mean_kappa"] = se.mean_kappa;
-        view["mean_kappa_truth"] = se.mean_kappa_gt;
-        view["worst_shadow_pixel"] = {{"x", se.worst_x},
-                                      {"y", se.worst_y},
-                                      {"kappa", se.worst_kappa},
-                                      {"kappa_truth", se.worst_kappa_gt},
-                                      {"background", se.worst_background}};
-        WriteImage8((out / (stem + "_sheet.png")).string(),
-                    TruthSheet(frame, without, truth_with, truth_without, ExposureForPercentile(truth_without)));
-        size_t mask_pixels = 0;
-        for (size_t p = 0; p < mask.PixelCount(); ++p) mask_pixels += mask.pixels[p * mask.channels] > 0.5f;
-        view["object_mask_pixels"] = mask_pixels;
-        view_psnrs.push_back(psnr);
-        view_mask_pixels.push_back(mask_pixels);
-        if (std::isfinite(psnr)) psnrs.push_back(psnr);
-        if (std::isfinite(shadow)) shadow_errors.push_back(shadow);
-      } else {
-        LogWarning("insert: " + stem + ": truth size differs from the frame; no metrics");
-      }
-    }
-    std::printf("%-8s %9.2f %7.2f %8.2f %8.2f %8.2f %9.2f %8.2f %9.1f %10.2f %8.3f\n", stem.c_str(), t.light_ms,
-                t.fit_ms, t.raster_ms, t.shade_ms, t.occlusion_ms, t.kappa_ms, t.total_ms, background_ms, psnr, shadow);
-    views.push_back(view);
+  std::vector<std::vector<double>> stage_ms = std::vector<std::vector<double>>(8);
+};
+
+// One view's metrics against the ground truth in `truth_dir` into `view`
+// and `totals`, and its sheet; NaN where the truth's size differs.
+void TruthMetrics(const std::string& truth_dir, const std::string& stem, const fs::path& out, const ImageF& frame,
+                  const ImageF& without, Json& view, ViewTotals& totals, double& psnr, double& shadow) {
+  const std::string index = IndexSuffix(stem);
+  const fs::path truth(truth_dir);
+  const ImageF truth_with = ReadExrRgb((truth / ("rgb_" + index + ".exr")).string());
+  const ImageF truth_without = ReadExrRgb((truth.parent_path() / ("bg_" + index + ".exr")).string());
+  const ImageF mask = ReadMask((truth / ("mask_" + index + ".png")).string());
+  if (truth_with.width != frame.width || truth_with.height != frame.height) {
+    LogWarning("insert: " + stem + ": truth size differs from the frame; no metrics");
+    return;
   }
-  // Incident light at each object's centre, as the scenes' probes are stored.
-  for (size_t i = 0; i < objects.size(); ++i) {
+  psnr = ObjectPsnrTm(frame, truth_with, mask);
+  const ShadowError se = ComputeShadowError(frame, without, truth_with, truth_without, mask);
+  shadow = se.error;
+  view["object_psnr_tm_db"] = std::isfinite(psnr) ? Json(psnr) : Json(nullptr);
+  view["shadow_error"] = std::isfinite(shadow) ? Json(shadow) : Json(nullptr);
+  view["shadow_region_pixels"] = se.region;
+  view["mean_kappa"] = se.mean_kappa;
+  view["mean_kappa_truth"] = se.mean_kappa_gt;
+  view["worst_shadow_pixel"] = {{"x", se.worst_x},
+                                {"y", se.worst_y},
+                                {"kappa", se.worst_kappa},
+                                {"kappa_truth", se.worst_kappa_gt},
+                                {"background", se.worst_background}};
+  WriteImage8((out / (stem + "_sheet.png")).string(),
+              TruthSheet(frame, without, truth_with, truth_without, ExposureForPercentile(truth_without)));
+  size_t mask_pixels = 0;
+  for (size_t p = 0; p < mask.PixelCount(); ++p) mask_pixels += mask.pixels[p * mask.channels] > 0.5f;
+  view["object_mask_pixels"] = mask_pixels;
+  totals.view_psnrs.push_back(psnr);
+  totals.view_mask_pixels.push_back(mask_pixels);
+  if (std::isfinite(psnr)) totals.psnrs.push_back(psnr);
+  if (std::isfinite(shadow)) totals.shadow_errors.push_back(shadow);
+}
+
+// What every view needs besides its frame.
+struct ViewJob {
+  const InsertArgs& a;
+  const Dataset& dataset;
+  const std::vector<InsertObject>& objects;
+  Inserter& inserter;
+  bool nerf_background;  // --background nerf: the NeRF's rendering, else the camera frames
+};
+
+// One view: its background, the insertion, the composite and layers
+// written, its timings and metrics into `totals` and one table row.
+void InsertView(const ViewJob& job, const DatasetFrame& frame_info, ViewTotals& totals) {
+  const InsertArgs& a = job.a;
+  const fs::path image_path(frame_info.image_path);
+  const std::string stem = image_path.stem().string();
+  CameraIntrinsics camera = job.dataset.camera;
+  ImageF frame;
+  double background_ms = 0;
+  if (job.nerf_background) {
+    const double t0 = NowSeconds();
+    frame = job.inserter.RenderBackground(camera, frame_info.T_world_camera);
+    background_ms = (NowSeconds() - t0) * 1e3;
+  } else {
+    const std::string path =
+        a.frames_dir.empty() ? frame_info.image_path : (fs::path(a.frames_dir) / image_path.filename()).string();
+    frame = ReadFrame(path);
+    if (frame.width != camera.width || frame.height != camera.height) camera = camera.Scaled(frame.width, frame.height);
+  }
+  const ImageF without = frame;
+  InsertLayers layers;
+  ImageF receiver_distance, receiver_normal;
+  ReceiverOverride receivers;
+  if (a.truth_geometry) {
+    const fs::path depth_path = fs::path(a.truth_dir) / ("depth_" + IndexSuffix(stem) + ".exr");
+    const ImageF depth = ReadExrChannel(depth_path.string());
+    if (depth.width != camera.width || depth.height != camera.height)
+      ThrowInputError(depth_path.string(), "size differs from the frame (expected " + std::to_string(camera.width) +
+                                               "x" + std::to_string(camera.height) + ")");
+    ReceiversFromDepth(depth, camera, frame_info.T_world_camera, receiver_distance, receiver_normal);
+    receivers = {&receiver_distance, &receiver_normal, a.without_nerf};
+  }
+  const InsertTimings t =
+      job.inserter.Render(camera, frame_info.T_world_camera, job.objects, frame, &layers, receivers);
+  const fs::path out(a.output);
+  WriteExrRgb((out / (stem + ".exr")).string(), frame);
+  WriteImage8((out / (stem + ".png")).string(), ToneMapToDisplay(frame, ExposureForPercentile(without)));
+  WriteExrRgb((out / (stem + "_object.exr")).string(),
+              ExpandLayer(layers.object, layers.gbuffer.rect, camera.width, camera.height, 0.0f));
+  WriteExr((out / (stem + "_alpha.exr")).string(),
+           ExpandLayer(layers.alpha, layers.gbuffer.rect, camera.width, camera.height, 0.0f), {"Y"});
+  WriteExr((out / (stem + "_kappa.exr")).string(),
+           ExpandLayer(layers.kappa, layers.kappa_rect, camera.width, camera.height, 1.0f), {"Y"});
+  Json view = {{"name", stem},
+               {"light_ms", t.light_ms},
+               {"fit_ms", t.fit_ms},
+               {"raster_ms", t.raster_ms},
+               {"shade_ms", t.shade_ms},
+               {"occlusion_ms", t.occlusion_ms},
+               {"kappa_ms", t.kappa_ms},
+               {"total_ms", t.total_ms},
+               {"background_ms", background_ms},
+               {"lights_recomputed", t.lights_recomputed},
+               {"object_pixels", layers.gbuffer.covered},
+               {"kappa_queries", layers.kappa_queries}};
+  const double values[8] = {t.light_ms,     t.fit_ms,   t.raster_ms, t.shade_ms,
+                            t.occlusion_ms, t.kappa_ms, t.total_ms,  background_ms};
+  for (int s = 0; s < 8; ++s) totals.stage_ms[s].push_back(values[s]);
+  double psnr = NAN, shadow = NAN;
+  if (!a.truth_dir.empty()) TruthMetrics(a.truth_dir, stem, out, frame, without, view, totals, psnr, shadow);
+  std::printf("%-8s %9.2f %7.2f %8.2f %8.2f %8.2f %9.2f %8.2f %9.1f %10.2f %8.3f\n", stem.c_str(), t.light_ms, t.fit_ms,
+              t.raster_ms, t.shade_ms, t.occlusion_ms, t.kappa_ms, t.total_ms, background_ms, psnr, shadow);
+  totals.views.push_back(view);
+}
+
+// Where the first object's light differs from the truth's probe: the raw
+// samples (before the SG fit, with the analytic lobes) as
+// OUT/probe_samples.exr and their lighting error, the scene's opacity seen
+// from the centre as OUT/probe_opacity.exr, and the luminance flux per
+// region of the sphere of the truth, the fit and the samples.
+void LightDiagnostics(const Inserter& inserter, const fs::path& true_probe, const std::string& output, Json& report) {
+  const ImageF truth_probe = ReadExrRgb(true_probe.string());
+  const ImageF fitted = RenderEquirect(inserter.Light(0), truth_probe.width, truth_probe.height);
+  ImageF raw, opacity, opacity_depth;
+  const ImageF ones(truth_probe.width, truth_probe.height, 3, 1.0f);
+  if (inserter.LightCache(0).valid() && inserter.LightCache(0).samples().size() > 0) {
+    raw = SamplesPanorama(inserter.LightCache(0).samples(), truth_probe.width, truth_probe.height);
+    // The compact lobes that passed analytically, beside the samples.
+    const ImageF compact = RenderEquirect(inserter.LightCache(0).compact(), truth_probe.width, truth_probe.height);
+    for (size_t k = 0; k < raw.pixels.size(); ++k) raw.pixels[k] += compact.pixels[k];
+    WriteExrRgb((fs::path(output) / "probe_samples.exr").string(), raw, ExrPixelType::kFloat);
+    report["lighting_error_samples"] = LightingError(raw, truth_probe);
+    report["light_refined_directions"] = inserter.LightCache(0).refined();
+    std::printf("lighting error of the raw samples (before the SG fit, with the analytic lobes): %.3f\n",
+                report["lighting_error_samples"].get<double>());
+    // R = opacity Ô (where the NeRF hides the environment), G = Ô × hit
+    // distance (m), B = 0.
+    const IncidentLight& cache = inserter.LightCache(0);
+    RadianceSamples o = cache.samples(), od = cache.samples();
+    for (size_t k = 0; k < o.size() && k < cache.opacity().size() && k < cache.depth().size(); ++k) {
+      o.radiance[k] = Vec3{1.0, 1.0, 1.0} * double(cache.opacity()[k]);
+      od.radiance[k] = Vec3{1.0, 1.0, 1.0} * double(cache.opacity()[k]) * double(cache.depth()[k]);
+    }
+    opacity = SamplesPanorama(o, truth_probe.width, truth_probe.height);
+    opacity_depth = SamplesPanorama(od, truth_probe.width, truth_probe.height);
+    ImageF layers = opacity;
+    for (size_t k = 0; k < layers.PixelCount(); ++k) {
+      layers.pixels[3 * k + 1] = opacity_depth.pixels[3 * k];
+      layers.pixels[3 * k + 2] = 0.0f;
+    }
+    WriteExrRgb((fs::path(output) / "probe_opacity.exr").string(), layers, ExrPixelType::kFloat);
+  }
+  Json regions = Json::array();
+  std::printf("light flux per region (Y x sr): %-42s %9s %9s %9s %9s %9s\n", "region", "truth", "fitted", "samples",
+              "opacity", "depth_m");
+  for (const SphereRegion& region : LightReportRegions(truth_probe)) {
+    const double t = RegionFlux(truth_probe, region), f = RegionFlux(fitted, region);
+    const double r = raw.empty() ? NAN : RegionFlux(raw, region);
+    const double o = opacity.empty() ? NAN : RegionFlux(opacity, region) / RegionFlux(ones, region);
+    const double depth = opacity.empty() ? NAN : RegionFlux(opacity_depth, region) / RegionFlux(opacity, region);
+    regions.push_back({{"region", region.name},
+                       {"truth", t},
+                       {"fitted", f},
+                       {"samples", raw.empty() ? Json() : Json(r)},
+                       {"mean_opacity", opacity.empty() ? Json() : Json(o)},
+                       {"mean_depth_m", std::isfinite(depth) ? Json(depth) : Json()}});
+    std::printf("light flux per region (Y x sr): %-42s %9.4f %9.4f %9.4f %9.3f %9.3f\n", region.name.c_str(), t, f, r,
+                o, depth);
+  }
+  report["light_flux_per_region"] = regions;
+}
+
+// OUT/report.json (--truth): the views' metrics, their means and medians,
+// and the light's error against the truth's probe.
+void WriteReport(const InsertArgs& a, const InsertOptions& options, const Inserter& inserter,
+                 const ViewTotals& totals) {
+  Json report = {
+      {"truth", a.truth_dir}, {"views", totals.views}, {"light_source", LightSourceName(options.light.source)}};
+  const auto mean = [](const std::vector<double>& v) {
+    double s = 0;
+    for (double x : v) s += x;
+    return v.empty() ? NAN : s / v.size();
+  };
+  const std::vector<double>& psnrs = totals.psnrs;
+  const std::vector<double>& shadow_errors = totals.shadow_errors;
+  report["mean_object_psnr_tm_db"] = psnrs.empty() ? Json(nullptr) : Json(mean(psnrs));
+  report["mean_shadow_error"] = shadow_errors.empty() ? Json(nullptr) : Json(mean(shadow_errors));
+  const double pooled_psnr = PooledPsnr(totals.view_psnrs, totals.view_mask_pixels);
+  const double median_shadow = shadow_errors.empty() ? NAN : MedianOf(shadow_errors);
+  report["pooled_object_psnr_tm_db"] = std::isfinite(pooled_psnr) ? Json(pooled_psnr) : Json(nullptr);
+  // The ratio κ = with / without over a black camera pixel makes one view's
+  // error unbounded where a few object pixels land on it; the median is
+  // what most views show.
+  report["median_shadow_error"] = std::isfinite(median_shadow) ? Json(median_shadow) : Json(nullptr);
+  const fs::path true_probe = fs::path(a.truth_dir) / "probe.exr";
+  std::error_code error;
+  if (fs::is_regular_file(true_probe, error)) {
+    const double lighting = LightingError(inserter.Light(0), ReadExrRgb(true_probe.string()));
+    report["lighting_error"] = lighting;
+    std::printf("lighting error (relative RMS irradiance, 64 normals): %.3f\n", lighting);
+    LightDiagnostics(inserter, true_probe, a.output, report);
+  }
+  std::printf("object psnr_tm mean %.2f dB, pooled %.2f dB; shadow error mean %.3f, median %.3f\n", mean(psnrs),
+              pooled_psnr, mean(shadow_errors), median_shadow);
+  WriteJsonFile((fs::path(a.output) / "report.json").string(), report);
+}
+
+// OUT/probe.exr (probe_<i>.exr for further objects): the incident light at
+// each object's centre, as the scenes' probes are stored; OUT/timings.json.
+void WriteProbesAndTimings(const InsertArgs& a, const Inserter& inserter, size_t n_objects, const ViewTotals& totals) {
+  for (size_t i = 0; i < n_objects; ++i) {
     const std::string name = i == 0 ? "probe.exr" : "probe_" + std::to_string(i) + ".exr";
-    WriteExrRgb((fs::path(output) / name).string(), RenderEquirect(inserter.Light(i), 256, 128), ExrPixelType::kFloat);
+    WriteExrRgb((fs::path(a.output) / name).string(), RenderEquirect(inserter.Light(i), 256, 128),
+                ExrPixelType::kFloat);
   }
   const char* stage_names[8] = {"light_ms",     "fit_ms",   "raster_ms", "shade_ms",
                                 "occlusion_ms", "kappa_ms", "total_ms",  "background_ms"};
   Json medians = Json::object();
-  for (int s = 0; s < 8; ++s) medians[stage_names[s]] = MedianOf(stage_ms[s]);
-  WriteJsonFile((fs::path(output) / "timings.json").string(),
+  for (int s = 0; s < 8; ++s) medians[stage_names[s]] = MedianOf(totals.stage_ms[s]);
+  WriteJsonFile((fs::path(a.output) / "timings.json").string(),
                 {{"threads", ThreadCount()},
                  {"note", "per-stage wall time of each frame; the first frame includes the cold SG fit"},
                  {"median", medians},
-                 {"views", views}});
-  if (!truth_dir.empty()) {
-    Json report = {{"truth", truth_dir}, {"views", views}, {"light_source", LightSourceName(options.light.source)}};
-    const auto mean = [](const std::vector<double>& v) {
-      double s = 0;
-      for (double x : v) s += x;
-      return v.empty() ? NAN : s / v.size();
-    };
-    report["mean_object_psnr_tm_db"] = psnrs.empty() ? Json(nullptr) : Json(mean(psnrs));
-    report["mean_shadow_error"] = shadow_errors.empty() ? Json(nullptr) : Json(mean(shadow_errors));
-    const double pooled_psnr = PooledPsnr(view_psnrs, view_mask_pixels);
-    const double median_shadow = shadow_errors.empty() ? NAN : MedianOf(shadow_errors);
-    report["pooled_object_psnr_tm_db"] = std::isfinite(pooled_psnr) ? Json(pooled_psnr) : Json(nullptr);
-    // The ratio κ = with / without over a black camera pixel makes one view's
-    // error unbounded where a few object pixels land on it; the median is
-    // what most views show.
-    report["median_shadow_error"] = std::isfinite(median_shadow) ? Json(median_shadow) : Json(nullptr);
-    const fs::path true_probe = fs::path(truth_dir) / "probe.exr";
-    std::error_code error;
-    if (fs::is_regular_file(true_probe, error)) {
-      const double lighting = LightingError(inserter.Light(0), ReadExrRgb(true_probe.string()));
-      report["lighting_error"] = lighting;
-      std::printf("lighting error (relative RMS irradiance, 64 normals): %.3f\n", lighting);
-      // Where the light differs: the raw samples (before the SG fit) as OUT/probe_samples.exr and their
-      // lighting error, and the luminance flux per region of the sphere of the truth, the fit and the samples.
-      const ImageF truth_probe = ReadExrRgb(true_probe.string());
-      const ImageF fitted = RenderEquirect(inserter.Light(0), truth_probe.width, truth_probe.height);
-      ImageF raw, opacity, opacity_depth;
-      const ImageF ones(truth_probe.width, truth_probe.height, 3, 1.0f);
-      if (inserter.LightCache(0).valid() && inserter.LightCache(0).samples().size() > 0) {
-        raw = SamplesPanorama(inserter.LightCache(0).samples(), truth_probe.width, truth_probe.height);
-        // The compact lobes that passed analytically, beside the samples.
-        const ImageF compact = RenderEquirect(inserter.LightCache(0).compact(), truth_probe.width, truth_probe.height);
-        for (size_t k = 0; k < raw.pixels.size(); ++k) raw.pixels[k] += compact.pixels[k];
-        WriteExrRgb((fs::path(output) / "probe_samples.exr").string(), raw, ExrPixelType::kFloat);
-        report["lighting_error_samples"] = LightingError(raw, truth_probe);
-        report["light_refined_directions"] = inserter.LightCache(0).refined();
-        std::printf("lighting error of the raw samples (before the SG fit, with the analytic lobes): %.3f\n",
-                    report["lighting_error_samples"].get<double>());
-        // The scene seen from the centre, OUT/probe_opacity.exr: R = opacity Ô (where the NeRF hides the
-        // environment), G = Ô × hit distance (m), B = 0.
-        const IncidentLight& cache = inserter.LightCache(0);
-        RadianceSamples o = cache.samples(), od = cache.samples();
-        for (size_t k = 0; k < o.size() && k < cache.opacity().size() && k < cache.depth().size(); ++k) {
-          o.radiance[k] = Vec3{1.0, 1.0, 1.0} * double(cache.opacity()[k]);
-          od.radiance[k] = Vec3{1.0, 1.0, 1.0} * double(cache.opacity()[k]) * double(cache.depth()[k]);
-        }
-        opacity = SamplesPanorama(o, truth_probe.width, truth_probe.height);
-        opacity_depth = SamplesPanorama(od, truth_probe.width, truth_probe.height);
-        ImageF layers = opacity;
-        for (size_t k = 0; k < layers.PixelCount(); ++k) {
-          layers.pixels[3 * k + 1] = opacity_depth.pixels[3 * k];
-          layers.pixels[3 * k + 2] = 0.0f;
-        }
-        WriteExrRgb((fs::path(output) / "probe_opacity.exr").string(), layers, ExrPixelType::kFloat);
-      }
-      Json regions = Json::array();
-      std::printf("light flux per region (Y x sr): %-42s %9s %9s %9s %9s %9s\n", "region", "truth", "fitted", "samples",
-                  "opacity", "depth_m");
-      for (const SphereRegion& region : LightReportRegions(truth_probe)) {
-        const double t = RegionFlux(truth_probe, region), f = RegionFlux(fitted, region);
-        const double r = raw.empty() ? NAN : RegionFlux(raw, region);
-        const double o = opacity.empty() ? NAN : RegionFlux(opacity, region) / RegionFlux(ones, region);
-        const double depth = opacity.empty() ? NAN : RegionFlux(opacity_depth, region) / RegionFlux(opacity, region);
-        regions.push_back({{"region", region.name},
-                           {"truth", t},
-                           {"fitted", f},
-                           {"samples", raw.empty() ? Json() : Json(r)},
-                           {"mean_opacity", opacity.empty() ? Json() : Json(o)},
-                           {"mean_depth_m", std::isfinite(depth) ? Json(depth) : Json()}});
-        std::printf("light flux per region (Y x sr): %-42s %9.4f %9.4f %9.4f %9.3f %9.3f\n", region.name.c_str(), t, f,
-                    r, o, depth);
-      }
-      report["light_flux_per_region"] = regions;
+                 {"views", totals.views}});
+}
+
+}  // namespace
+
+int RunInsert(const CommandArgs& args) {
+  InsertArgs a;
+  if (!ParseInsertArgs(args, a)) return 0;
+  const InsertOptions options = InsertOptionsFrom(a);
+  const NerfSceneOptions nerf_options = NerfOptionsFrom(a);
+  ValidateOptions(options, nerf_options);
+
+  // Inputs.
+  const Dataset dataset = ReadDataset(DatasetSplitPath(a.dataset_dir, a.split));
+  CheckOutputsSpareInputs(
+      InsertOutputs(a.output, dataset, a.object_paths.size()),
+      Paths(a.nerf_path, a.env_path, a.light_probe, a.probe_distances, a.frames_dir, DatasetInputs(dataset),
+            a.object_paths, a.pose_paths, a.mesh_paths, a.material_paths, InsertTruthInputs(a.truth_dir)));
+  // Without a NeRF (ground-truth inputs) the scene is empty: nothing occludes.
+  NerfField nerf = a.without_nerf ? NerfField{} : LoadNerf(a.nerf_path);
+  // The field does not change from here on: rays read its compact copy (same samples, quantised values).
+  if (!a.without_nerf) nerf.UpdateRenderCopy();
+  std::unique_ptr<SceneField> scene_field;
+  if (a.without_nerf)
+    scene_field = std::make_unique<EmptyScene>(dataset.aabb ? *dataset.aabb : Aabb{{-1, -1, -1}, {1, 1, 1}});
+  else
+    scene_field = std::make_unique<NerfScene>(nerf, nerf_options);
+  const SceneField& scene = *scene_field;
+  EnvLight environment;
+  if (!a.env_path.empty()) {
+    environment = ReadEnvLight(a.env_path);
+    if (environment.negligible) {
+      LogInfo("insert: " + a.env_path + " marks the environment as negligible: it is dropped");
+      environment.lobes.clear();
     }
-    std::printf("object psnr_tm mean %.2f dB, pooled %.2f dB; shadow error mean %.3f, median %.3f\n", mean(psnrs),
-                pooled_psnr, mean(shadow_errors), median_shadow);
-    WriteJsonFile((fs::path(output) / "report.json").string(), report);
   }
-  LogInfo("insert: wrote " + std::to_string(dataset.frames.size()) + " views to " + output);
+  const std::vector<LoadedObject> loaded = LoadObjects(a);
+  const ProbeLight probe = a.light_probe.empty() ? ProbeLight{} : FitProbe(a.light_probe, options);
+  const ProbeDistances distances = ProbeDistancesFrom(a.probe_distances, probe.light, loaded, options, nerf_options);
+  MakeDirectories(a.output);
+  const std::string options_json = options.ToJson();
+  LogInfo("insert: options " + options_json + ", threads " + std::to_string(ThreadCount()) +
+          (a.without_nerf ? std::string()
+                          : std::string(", nerf depth ") + (nerf_options.surface_depth ? "surface" : "expected") +
+                                ", light seen radiance " + (nerf_options.light_seen_radiance ? "on" : "off") +
+                                ", normal probe " + std::to_string(nerf_options.normal_probe_voxels) + " voxels"));
+  WriteFileAtomic((fs::path(a.output) / "options.json").string(), options_json + "\n");
+  const std::vector<InsertObject> objects = InsertObjects(loaded, a.light_probe.empty() ? nullptr : &probe, distances);
+
+  Inserter inserter(scene, environment.lobes, options);
+  const fs::path board_path = fs::path(a.dataset_dir) / "board.json";
+  if (!a.no_support_plane && !a.truth_geometry && fs::exists(board_path) && !dataset.frames.empty()) {
+    const SupportPlane plane =
+        PlaneOfBoard(ReadBoard(board_path.string()), dataset.frames.front().T_world_camera.translation);
+    inserter.set_support_plane(plane);
+    LogInfo("insert: shadow receivers that end on the board's plane (" + board_path.string() + ") are taken onto it");
+  }
+  ViewTotals totals;
+  std::printf("%-8s %9s %7s %8s %8s %8s %9s %8s %9s %10s %8s\n", "view", "light_ms", "fit_ms", "raster", "shade",
+              "occlude", "kappa_ms", "total", "bg_ms", "psnr_obj", "shadow");
+  const ViewJob job{a, dataset, objects, inserter, a.background == "nerf"};
+  for (const DatasetFrame& frame_info : dataset.frames) InsertView(job, frame_info, totals);
+  WriteProbesAndTimings(a, inserter, objects.size(), totals);
+  if (!a.truth_dir.empty()) WriteReport(a, options, inserter, totals);
+  LogInfo("insert: wrote " + std::to_string(dataset.frames.size()) + " views to " + a.output);
   return 0;
 }
 

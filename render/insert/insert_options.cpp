@@ -17,21 +17,21 @@ InsertOptions InsertOptions::Preset(const std::string& name) {
     o.kappa_step = 4;
     o.occlusion_step = 4;
     o.kappa_cache_spacing_radii = 0.15;
-    // Coarse κ cells refined only where corners differ by > 0.04: hand-held
-    // receivers 14.6 K -> 10.2 K, marches 540 -> 357 (bench insert); κ vs
-    // the bench's true geometry 0.112 -> 0.092, GT-input shadow error
-    // +0.001..+0.014 (docs/BENCHMARKS.md, insert Speed, session 6).
+    // Coarse κ cells refined only where their corners differ by > 0.04:
+    // soft gradients stay interpolated, so fewer receivers are found and
+    // marched per frame, at a small cost in the shadow's error near edges
+    // (`nerfar bench insert` gives both).
     o.kappa_refine_delta = 0.04;
     o.antialias_edges = false;  // the coverage sub-samples double the raster time
-    // The prefiltered specular costs ~1.5× the SG shading (bench insert,
-    // monkey: look-up per pixel beside the SG diffuse + visibility pass):
-    // fast keeps the SG specular to stay within the 6 ms shade budget.
+    // The prefiltered specular adds a map look-up per pixel beside the SG
+    // diffuse and visibility pass: fast keeps the SG specular to stay within
+    // DESIGN.md's shading budget.
     o.prefiltered_specular = false;
-    // Re-aiming near lobes prepares the SSDF query per κ evaluation: ~2-3×
-    // the κ work of a frame whose object or light changed (lamps, balanced).
+    // Re-aiming near lobes prepares the SSDF query per κ evaluation, which
+    // multiplies the κ work of a frame whose object or light changed.
     o.light.parallax = false;
-    // Refining the incident light's fast-changing directions costs 3-4.5×
-    // the light rays on the shared scenes' NeRFs (docs/BENCHMARKS.md).
+    // Refining the incident light's fast-changing directions casts
+    // refine_rays more rays for each of them: several times the light's rays.
     o.light.refine_rays = 0;
   } else if (name == "balanced") {
   } else if (name == "accurate") {

@@ -43,9 +43,9 @@ struct InsertOptions {
   // (PrefilteredRadiance::SetParallax; near walls, the table, neighbouring
   // objects), in this many fixed-point steps; false: along the reflected
   // direction, as if everything reflected were distant. On in accurate
-  // only: the look-up's instructions per pixel rise 354 -> 854 (callgrind,
-  // 3 steps), ~+3.5 ms at 720p on top of a balanced shade already over its
-  // 6 ms budget (docs/BENCHMARKS.md, shading session 7).
+  // only: each step is a distance look-up per pixel, which more than doubles
+  // the specular look-up's cost, beyond the shading budget of the faster
+  // presets.
   bool specular_parallax = false;
   int specular_parallax_iterations = 3;
   // With a prefiltered map: the smooth part of the shading (the diffuse
@@ -94,11 +94,10 @@ struct InsertOptions {
   // κ from the light's radiance samples gathered into sources (compact ones
   // keep their true size; near ones re-aimed at each receiver with their
   // lobe's distance; ShadowSources in shadow_terms.h) instead of from the SG
-  // lobes; false (every preset): the SG lobes (paper eqs. 8-9). Off: with
-  // ground-truth inputs it lowers the shadow error on three of four pairs,
-  // but end to end on lamps / monkey_diffuse it raises the median 0.82 ->
-  // 1.00 (docs/BENCHMARKS.md, session 7), and it costs 2-2.5× the κ time
-  // under a sky of many distant sources.
+  // lobes; false (every preset): the SG lobes (paper eqs. 8-9). Off: the
+  // sources follow the light's samples, so with a NeRF's light they carry
+  // its radiance errors into κ that the SG fit smooths, and κ's cost grows
+  // with the number of distinct sources (a sky of many distant ones).
   bool kappa_from_samples = false;
   int kappa_sample_bins = 128;            // Fibonacci bins the samples are gathered into (per kind: near, distant)
   double kappa_sample_min_radius = 0.03;  // radians: no source narrower (the SSDF's own resolution)
@@ -108,10 +107,9 @@ struct InsertOptions {
   // spacings by its width over this one (rounded; the step at least 1 px,
   // the coarse spacing at least the step), so that κ resolves the same share
   // of the view, and costs about the same share of the frame, at every
-  // resolution. 1280: DESIGN.md's budgets' frame (fast's 4 px there is
-  // 1.25 px of a 400-pixel view: its sun edges were blurred over ~8 px,
-  // GT-input sunroom shadow 0.50 against 0.34 at 2 px). 0: spacings in the
-  // frame's own pixels.
+  // resolution (a small frame in its own pixels would blur sharp shadow
+  // edges over several of the view's grid cells). 1280: DESIGN.md's
+  // budgets' frame. 0: spacings in the frame's own pixels.
   int kappa_grid_width = 1280;
   // κ grid nodes whose surrounding grid cells hold only object pixels (no
   // background pixel is multiplied by them) are neither found nor
@@ -138,10 +136,10 @@ struct InsertOptions {
   // spacing (× the smallest caster's bounding radius), one value per node and
   // receiver-normal cell (32×32 octahedral cells), computed when a receiver
   // first needs it and reused, trilinearly, until an object or a light
-  // changes. 0: κ evaluated exactly at every receiver, every frame. 0.15
-  // (was 0.1 in balanced): a hand-held frame's new nodes 1 804 -> 468 and
-  // look-ups 51 K -> 31 K (bench insert), ground-truth-input shadow error
-  // within 0.001 on all four pairs (docs/BENCHMARKS.md, session 9).
+  // changes. 0: κ evaluated exactly at every receiver, every frame. The
+  // trilinear error grows with the spacing relative to the casters' size,
+  // the nodes a moving camera needs anew shrink with it; 0.15 radii keeps κ
+  // within the shadow metric's noise.
   double kappa_cache_spacing_radii = 0.15;
   // With the lattice (spacing > 0) and NeRF receivers: a grid node's receiver
   // is first sought among the last frame's receivers instead of marching its

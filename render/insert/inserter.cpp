@@ -31,6 +31,71 @@ const SgMixture& CompactLobes(const InsertObject& object, const IncidentLight& l
   if (!object.light_override) return light.compact();
   return object.light_compact ? *object.light_compact : kNone;
 }
+
+// World bounding spheres of the objects (radius 0 without a mesh).
+std::vector<WorldSphere> WorldSpheres(const std::vector<InsertObject>& objects) {
+  std::vector<WorldSphere> spheres(objects.size());
+  for (size_t i = 0; i < objects.size(); ++i) {
+    if (objects[i].mesh == nullptr || objects[i].mesh->positions.empty()) continue;
+    const BoundingSphere bs = ComputeBoundingSphere(*objects[i].mesh);
+    spheres[i].center = Vec3f(objects[i].T_world_object * (bs.center * objects[i].scale));
+    spheres[i].radius = static_cast<float>(bs.radius * std::abs(objects[i].scale));
+  }
+  return spheres;
+}
+
+// Covered pixels (G-buffer indices), in scan order.
+std::vector<uint32_t> CoveredPixels(const ObjectGBuffer& g) {
+  std::vector<uint32_t> covered;
+  covered.reserve(g.covered);
+  for (size_t i = 0; i < g.object.size(); ++i)
+    if (g.object[i] >= 0) covered.push_back(static_cast<uint32_t>(i));
+  return covered;
+}
+
+// The incident-light samples prefiltered for the specular term, per object,
+// made again when the preps were (`specular` emptied with them).
+void UpdatePrefilteredSpecular(const InsertOptions& options, const std::vector<InsertObject>& objects,
+                               const std::vector<LightParallax>& parallax, const std::vector<IncidentLight>& lights,
+                               std::vector<PrefilteredRadiance>& specular) {
+  const size_t n_objects = objects.size();
+  if (!options.prefiltered_specular) specular.clear();
+  if (!options.prefiltered_specular || specular.size() == n_objects) return;
+  specular.assign(n_objects, PrefilteredRadiance());
+  for (size_t o = 0; o < n_objects; ++o) {
+    const RadianceSamples* samples = objects[o].light_override ? objects[o].light_samples : &lights[o].samples();
+    // The compact lobes given beside the samples reach the map as lobes.
+    if (samples != nullptr)
+      specular[o] = PrefilteredRadiance(*samples, options.specular_levels, CompactLobes(objects[o], lights[o]));
+    // Parallax-corrected reflections: the distances the samples' light comes from.
+    if (!options.specular_parallax || specular[o].empty()) continue;
+    if (objects[o].light_override && objects[o].light_sample_distances)
+      specular[o].SetParallax(parallax[o].center, *objects[o].light_sample_distances,
+                              options.specular_parallax_iterations);
+    else if (!objects[o].light_override)
+      specular[o].SetParallax(
+          parallax[o].center,
+          ReflectionDistances(lights[o].samples().directions, lights[o].opacity(), lights[o].depth()),
+          options.specular_parallax_iterations);
+  }
+}
+
+// κ's light as sources from the same samples, per object, made again when
+// the preps were (`sources` emptied with them).
+void UpdateShadowSources(const InsertOptions& options, const std::vector<InsertObject>& objects,
+                         const std::vector<SgMixture>& used_lights, const std::vector<LightParallax>& parallax,
+                         const std::vector<IncidentLight>& lights, std::vector<ShadowSources>& sources) {
+  const size_t n_objects = objects.size();
+  if (!options.kappa_from_samples) sources.clear();
+  if (!options.kappa_from_samples || sources.size() == n_objects) return;
+  sources.resize(n_objects);
+  for (size_t o = 0; o < n_objects; ++o) {
+    const RadianceSamples* samples = objects[o].light_override ? objects[o].light_samples : &lights[o].samples();
+    if (samples != nullptr)
+      sources[o] = BuildShadowSources(*samples, used_lights[o], parallax[o], objects, options.kappa_sample_bins,
+                                      options.kappa_sample_min_radius, CompactLobes(objects[o], lights[o]));
+  }
+}
 }  // namespace
 
 ImageF ExpandLayer(const ImageF& layer, const PixelRect& rect, int width, int height, float fill) {
@@ -84,34 +149,9 @@ ImageF Inserter::RenderBackground(const CameraIntrinsics& camera, const Pose& T_
   return image;
 }
 
-InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_world_camera,
-                               const std::vector<InsertObject>& objects, ImageF& frame, InsertLayers* layers_out,
-                               const ReceiverOverride& receivers) {
-  const auto t_start = InsertClock::now();
-  InsertTimings times;
-  if (frame.width != camera.width || frame.height != camera.height || frame.channels != 3) {
-    ThrowInputError("frame", "size " + std::to_string(frame.width) + "x" + std::to_string(frame.height) + "x" +
-                                 std::to_string(frame.channels) + " does not match the camera (expected " +
-                                 std::to_string(camera.width) + "x" + std::to_string(camera.height) + "x3)");
-  }
-  InsertLayers local_layers;
-  InsertLayers& layers = layers_out ? *layers_out : local_layers;
-  layers = InsertLayers{};
+std::vector<LightParallax> Inserter::UpdateLights(const std::vector<InsertObject>& objects,
+                                                  const std::vector<WorldSphere>& spheres, InsertTimings& times) {
   const size_t n_objects = objects.size();
-  lights_.resize(n_objects);
-  used_lights_.resize(n_objects);
-
-  // World bounding spheres of the objects.
-  std::vector<WorldSphere> spheres(n_objects);
-  for (size_t i = 0; i < n_objects; ++i) {
-    if (objects[i].mesh == nullptr || objects[i].mesh->positions.empty()) continue;
-    const BoundingSphere bs = ComputeBoundingSphere(*objects[i].mesh);
-    spheres[i].center = Vec3f(objects[i].T_world_object * (bs.center * objects[i].scale));
-    spheres[i].radius = static_cast<float>(bs.radius * std::abs(objects[i].scale));
-  }
-
-  // 1. Incident light per object (cached while it stands still), with its
-  // lobes' distances for the parallax of near light.
   std::vector<LightParallax> parallax(n_objects);
   for (size_t i = 0; i < n_objects; ++i) {
     const Vec3 at = objects[i].light_center.value_or(Vec3(spheres[i].center));
@@ -133,27 +173,12 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
     used_lights_[i] = lights_[i].light();
     parallax[i].distance = lights_[i].lobe_distances();
   }
+  return parallax;
+}
 
-  // 2. G-buffer.
-  auto t0 = InsertClock::now();
-  std::vector<RasterObject> raster(n_objects);
-  for (size_t i = 0; i < n_objects; ++i) raster[i] = {objects[i].mesh, objects[i].T_world_object, objects[i].scale};
-  RasterOptions raster_options;
-  raster_options.coverage_grid = options_.antialias_edges ? 4 : 0;
-  layers.gbuffer = Rasterize(camera, T_world_camera, raster, raster_options);
-  const ObjectGBuffer& g = layers.gbuffer;
-  times.raster_ms = MsSince(t0);
-
-  // Covered pixels (G-buffer indices), in scan order.
-  std::vector<uint32_t> covered;
-  covered.reserve(g.covered);
-  for (size_t i = 0; i < g.object.size(); ++i)
-    if (g.object[i] >= 0) covered.push_back(static_cast<uint32_t>(i));
-  // 3. Shading with self-shadows: lobes of each object's light, SSD of every
-  // shadow-casting object at those axes (the union takes the minimum).
-  t0 = InsertClock::now();
-  layers.object = ImageF(g.rect.width(), g.rect.height(), 3, 0.0f);
-  layers.alpha = ImageF(g.rect.width(), g.rect.height(), 1, 0.0f);
+std::vector<LightPrep>& Inserter::PrepareLights(const std::vector<InsertObject>& objects,
+                                                const std::vector<LightParallax>& parallax) {
+  const size_t n_objects = objects.size();
   // Every object's light (the shadow pass needs those of objects not seen
   // too), prepared again only when a light, its parallax or an object (its
   // field's queries are posed) changed.
@@ -176,41 +201,53 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
   }
   std::vector<LightPrep>& preps = preps_->preps;
   for (size_t o = 0; o < n_objects; ++o) PrepareLight(used_lights_[o], objects, preps[o], &parallax[o]);
-  // The incident-light samples prefiltered for the specular term, with the preps.
+  return preps;
+}
+
+InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_world_camera,
+                               const std::vector<InsertObject>& objects, ImageF& frame, InsertLayers* layers_out,
+                               const ReceiverOverride& receivers) {
+  const auto t_start = InsertClock::now();
+  InsertTimings times;
+  if (frame.width != camera.width || frame.height != camera.height || frame.channels != 3) {
+    ThrowInputError("frame", "size " + std::to_string(frame.width) + "x" + std::to_string(frame.height) + "x" +
+                                 std::to_string(frame.channels) + " does not match the camera (expected " +
+                                 std::to_string(camera.width) + "x" + std::to_string(camera.height) + "x3)");
+  }
+  InsertLayers local_layers;
+  InsertLayers& layers = layers_out ? *layers_out : local_layers;
+  layers = InsertLayers{};
+  const size_t n_objects = objects.size();
+  lights_.resize(n_objects);
+  used_lights_.resize(n_objects);
+
+  const std::vector<WorldSphere> spheres = WorldSpheres(objects);
+
+  // 1. Incident light per object (cached while it stands still), with its
+  // lobes' distances for the parallax of near light.
+  const std::vector<LightParallax> parallax = UpdateLights(objects, spheres, times);
+
+  // 2. G-buffer.
+  auto t0 = InsertClock::now();
+  std::vector<RasterObject> raster(n_objects);
+  for (size_t i = 0; i < n_objects; ++i) raster[i] = {objects[i].mesh, objects[i].T_world_object, objects[i].scale};
+  RasterOptions raster_options;
+  raster_options.coverage_grid = options_.antialias_edges ? 4 : 0;
+  layers.gbuffer = Rasterize(camera, T_world_camera, raster, raster_options);
+  const ObjectGBuffer& g = layers.gbuffer;
+  times.raster_ms = MsSince(t0);
+
+  const std::vector<uint32_t> covered = CoveredPixels(g);
+  // 3. Shading with self-shadows: lobes of each object's light, SSD of every
+  // shadow-casting object at those axes (the union takes the minimum).
+  t0 = InsertClock::now();
+  layers.object = ImageF(g.rect.width(), g.rect.height(), 3, 0.0f);
+  layers.alpha = ImageF(g.rect.width(), g.rect.height(), 1, 0.0f);
+  std::vector<LightPrep>& preps = PrepareLights(objects, parallax);
   std::vector<PrefilteredRadiance>& specular = preps_->specular;
-  if (!options_.prefiltered_specular) specular.clear();
-  if (options_.prefiltered_specular && specular.size() != n_objects) {
-    specular.assign(n_objects, PrefilteredRadiance());
-    for (size_t o = 0; o < n_objects; ++o) {
-      const RadianceSamples* samples = objects[o].light_override ? objects[o].light_samples : &lights_[o].samples();
-      // The compact lobes given beside the samples reach the map as lobes.
-      if (samples != nullptr)
-        specular[o] = PrefilteredRadiance(*samples, options_.specular_levels, CompactLobes(objects[o], lights_[o]));
-      // Parallax-corrected reflections: the distances the samples' light comes from.
-      if (!options_.specular_parallax || specular[o].empty()) continue;
-      if (objects[o].light_override && objects[o].light_sample_distances)
-        specular[o].SetParallax(parallax[o].center, *objects[o].light_sample_distances,
-                                options_.specular_parallax_iterations);
-      else if (!objects[o].light_override)
-        specular[o].SetParallax(
-            parallax[o].center,
-            ReflectionDistances(lights_[o].samples().directions, lights_[o].opacity(), lights_[o].depth()),
-            options_.specular_parallax_iterations);
-    }
-  }
-  // κ's light as sources from the same samples, with the preps.
+  UpdatePrefilteredSpecular(options_, objects, parallax, lights_, specular);
   std::vector<ShadowSources>& shadow_sources = preps_->shadow_sources;
-  if (!options_.kappa_from_samples) shadow_sources.clear();
-  if (options_.kappa_from_samples && shadow_sources.size() != n_objects) {
-    shadow_sources.resize(n_objects);
-    for (size_t o = 0; o < n_objects; ++o) {
-      const RadianceSamples* samples = objects[o].light_override ? objects[o].light_samples : &lights_[o].samples();
-      if (samples != nullptr)
-        shadow_sources[o] =
-            BuildShadowSources(*samples, used_lights_[o], parallax[o], objects, options_.kappa_sample_bins,
-                               options_.kappa_sample_min_radius, CompactLobes(objects[o], lights_[o]));
-    }
-  }
+  UpdateShadowSources(options_, objects, used_lights_, parallax, lights_, shadow_sources);
   // Self-shadow γ per mesh vertex, kept while the objects and the light
   // stand still (it does not depend on the view).
   const bool per_vertex = options_.self_shadow && options_.self_shadow_per_vertex;

@@ -32,6 +32,8 @@ namespace nerfar {
 struct VertexGamma;
 struct KappaCache;
 struct LightPrepCache;
+struct LightPrep;
+struct WorldSphere;
 
 // One virtual object in this frame. Pointers are loans for the call.
 struct InsertObject {
@@ -167,6 +169,14 @@ class Inserter {
   void set_support_plane(const std::optional<SupportPlane>& plane) { support_ = plane; }
 
  private:
+  // Render's first steps: each object's incident light refreshed (or its
+  // override taken) with its lobes' distances; every object's light
+  // prepared, again only when a light, its parallax or an object changed.
+  std::vector<LightParallax> UpdateLights(const std::vector<InsertObject>& objects,
+                                          const std::vector<WorldSphere>& spheres, InsertTimings& times);
+  std::vector<LightPrep>& PrepareLights(const std::vector<InsertObject>& objects,
+                                        const std::vector<LightParallax>& parallax);
+
   const SceneField& scene_;
   SgMixture environment_;
   InsertOptions options_;

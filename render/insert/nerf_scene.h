@@ -68,11 +68,10 @@ struct NerfSceneOptions {
   // incident light's views: "accurate" is the default above without the
   // cache (the views of each voxel's points their own, every light); "balanced" shares the views of the light
   // rays whose points fall in one 1 cm cell (seen.group_m: a refined
-  // direction's 16 sub-rays meet one lamp within a few centimetres), "fast"
-  // in one 2 cm cell. End to end within 0.1 dB / 0.01 of the unshared views
-  // (docs/BENCHMARKS.md "incident light on a real NeRF"); fewer views per
-  // point were measured and dropped (6 or 8: the lamps' light error +0.03 to
-  // +0.06). Any other name: InputError.
+  // direction's 16 sub-rays meet one emitter within a few centimetres),
+  // "fast" in one 2 cm cell: the seen radiance varies little within a cell,
+  // and the views are the light's largest cost. Fewer views per point leave
+  // the brightest view of an emitter to chance. Any other name: InputError.
   static NerfSceneOptions Preset(const std::string& name);
   // Every problem as "field: what is wrong (what was expected)".
   std::vector<std::string> Validate() const;

@@ -341,6 +341,182 @@ uint8_t CellAgrees(const ShadeGrid& grid, int cx, int cy, float delta) {
   return kCellSpecular;
 }
 
+constexpr size_t kChunk = 256;
+
+// Step 1's values at the grid's nodes: D and V (and the specular parts) of
+// each node on an object of the grid path, by chunks of nodes.
+void ShadeGridNodes(const ShadeInputs& in, const std::vector<char>& on_grid, ShadeGrid& grid) {
+  const ObjectGBuffer& g = in.g;
+  const int step = grid.step;
+  std::vector<uint32_t> node_pixels;
+  for (int r = 0; r < grid.rows; ++r)
+    for (int c = 0; c < grid.columns; ++c) {
+      const size_t i = g.Index(g.rect.x0 + c * step, g.rect.y0 + r * step);
+      if (g.object[i] >= 0 && on_grid[g.object[i]]) node_pixels.push_back(static_cast<uint32_t>(i));
+    }
+  std::vector<DiffuseAndVisibility> node_values(node_pixels.size());
+  ParallelFor((node_pixels.size() + kChunk - 1) / kChunk,
+              [&](size_t c) {
+                RunScratch& s = ThreadScratch();
+                const size_t begin = c * kChunk, end = std::min(node_pixels.size(), begin + kChunk);
+                s.pixels.assign(node_pixels.begin() + begin, node_pixels.begin() + end);
+                ForEachRun(g, s.pixels, [&](int32_t o, size_t first, size_t count) {
+                  ShadeRunDiffuseAndVisibility(in, o, &node_pixels[begin + first], count, s,
+                                               &node_values[begin + first], /*specular_parts=*/true);
+                });
+              },
+              1);
+  const size_t n_objects = in.objects.size();
+  std::vector<double> sum(n_objects, 0.0), count(n_objects, 0.0), specular_sum(n_objects, 0.0);
+  for (size_t k = 0; k < node_pixels.size(); ++k) {
+    const int x = int(node_pixels[k] % size_t(g.rect.width())), y = int(node_pixels[k] / size_t(g.rect.width()));
+    const size_t node = grid.Node(x / step, y / step);
+    const int32_t o = g.object[node_pixels[k]];
+    const DiffuseAndVisibility& v = node_values[k];
+    grid.object[node] = o;
+    grid.values[node] = v;
+    const float brightest = std::max({v.d[0], v.d[1], v.d[2]});
+    const float specular = std::max({v.s[0] + v.b[0], v.s[1] + v.b[1], v.s[2] + v.b[2]});
+    if (std::isfinite(brightest) && std::isfinite(specular))
+      sum[o] += brightest, specular_sum[o] += specular, count[o] += 1;
+  }
+  grid.mean_brightest.assign(n_objects, 0.0f);
+  grid.mean_specular.assign(n_objects, 0.0f);
+  grid.min_cos_reflect.assign(n_objects, -2.0f);
+  for (size_t o = 0; o < n_objects; ++o) {
+    if (count[o] > 0) {
+      grid.mean_brightest[o] = static_cast<float>(sum[o] / count[o]);
+      grid.mean_specular[o] = static_cast<float>(specular_sum[o] / count[o]);
+    }
+    const double r = std::clamp(in.objects[o].material.roughness, 0.0, 1.0);
+    if (in.options.shade_specular_on_grid && std::isfinite(in.objects[o].material.roughness))
+      grid.min_cos_reflect[o] = static_cast<float>(std::cos(kSpecularCellLobes * r * r));
+  }
+}
+
+// Step 1: D and V at the grid's nodes, the nodes' normals and mirror
+// directions, and which cells may be interpolated (CellAgrees).
+ShadeGrid BuildShadeGrid(const ShadeInputs& in, const std::vector<char>& on_grid, int step) {
+  const ObjectGBuffer& g = in.g;
+  ShadeGrid grid;
+  grid.step = step;
+  grid.columns = (g.rect.width() - 1) / step + 1;
+  grid.rows = (g.rect.height() - 1) / step + 1;
+  grid.object.assign(size_t(grid.columns) * size_t(grid.rows), -1);
+  grid.values.resize(grid.object.size());
+  ShadeGridNodes(in, on_grid, grid);
+  grid.normal.assign(grid.object.size(), Vec3f{});
+  grid.reflect.assign(grid.object.size(), Vec3f{});
+  grid.cell_agrees.assign(size_t(std::max(0, grid.columns - 1)) * size_t(std::max(0, grid.rows - 1)), 0);
+  const float delta = static_cast<float>(in.options.shade_refine_delta);
+  ParallelFor(
+      size_t(grid.rows),
+      [&](size_t r) {
+        for (int c = 0; c < grid.columns; ++c) {
+          const size_t i = g.Index(g.rect.x0 + c * step, g.rect.y0 + int(r) * step), node = grid.Node(c, int(r));
+          const Vec3f n = g.normal[i], v = Normalized(in.eye - g.position[i]);
+          grid.normal[node] = n;
+          grid.reflect[node] = n * (2.0f * Dot(n, v)) - v;
+        }
+      },
+      8);
+  ParallelFor(
+      size_t(std::max(0, grid.rows - 1)),
+      [&](size_t r) {
+        for (int c = 0; c + 1 < grid.columns; ++c)
+          grid.cell_agrees[r * size_t(grid.columns - 1) + size_t(c)] = CellAgrees(grid, c, int(r), delta);
+      },
+      8);
+  return grid;
+}
+
+// Step 2's sorting of one chunk's pixels by path into the scratch: SG-only
+// objects (sg_pixels); everything from the grid (composed_pixels with their
+// values); D and V from the grid (map_pixels with values); D and V exact
+// (map_pixels with an empty value, listed in exact_pixels with its slot).
+void SortChunk(const ShadeInputs& in, const ShadeGrid& grid, const std::vector<char>& on_grid, float min_cos,
+               const uint32_t* pixels, size_t count, RunScratch& s) {
+  const ObjectGBuffer& g = in.g;
+  const int step = grid.step;
+  s.sg_pixels.clear(), s.map_pixels.clear(), s.exact_pixels.clear(), s.composed_pixels.clear();
+  s.values.clear(), s.exact_slot.clear(), s.composed_values.clear();
+  for (size_t k = 0; k < count; ++k) {
+    const uint32_t i = pixels[k];
+    const int32_t o = g.object[i];
+    if (in.Map(o) == nullptr) {
+      s.sg_pixels.push_back(i);
+      continue;
+    }
+    if (on_grid[o]) {
+      // G-buffer indices run over its rectangle.
+      const int rx = int(i % size_t(g.rect.width())), ry = int(i / size_t(g.rect.width()));
+      DiffuseAndVisibility v;
+      const bool from_grid =
+          (rx % step == 0 && ry % step == 0)
+              ? (v = grid.values[grid.Node(rx / step, ry / step)], true)
+              : InterpolateFromGrid(grid, g, o, g.rect.x0 + rx, g.rect.y0 + ry, g.normal[i], min_cos, &v);
+      if (from_grid && v.has_specular) {
+        s.composed_pixels.push_back(i);
+        s.composed_values.push_back(v);
+        continue;
+      }
+      if (from_grid) {
+        s.map_pixels.push_back(i);
+        s.values.push_back(v);
+        continue;
+      }
+    }
+    s.map_pixels.push_back(i);
+    s.values.emplace_back();
+    s.exact_pixels.push_back(i);
+    s.exact_slot.push_back(s.values.size() - 1);
+  }
+}
+
+// Step 2 for one chunk of pixels: each by its path (SortChunk) into `object`.
+void ShadeChunk(const ShadeInputs& in, const ShadeGrid& grid, const std::vector<char>& on_grid, float min_cos,
+                const uint32_t* pixels, size_t count, ImageF& object) {
+  const ObjectGBuffer& g = in.g;
+  RunScratch& s = ThreadScratch();
+  SortChunk(in, grid, on_grid, min_cos, pixels, count, s);
+  // SG-only objects.
+  ForEachRun(g, s.sg_pixels, [&](int32_t o, size_t first, size_t n) {
+    s.sg_rgb.resize(n);
+    ShadeRunSg(in, o, &s.sg_pixels[first], n, s, s.sg_rgb.data());
+    for (size_t k = 0; k < n; ++k) Store(s.sg_rgb[k], s.sg_pixels[first + k], object);
+  });
+  // D and V where the grid could not stand in.
+  s.exact_values.resize(s.exact_pixels.size());
+  ForEachRun(g, s.exact_pixels, [&](int32_t o, size_t first, size_t n) {
+    ShadeRunDiffuseAndVisibility(in, o, &s.exact_pixels[first], n, s, &s.exact_values[first]);
+  });
+  for (size_t k = 0; k < s.exact_pixels.size(); ++k) s.values[s.exact_slot[k]] = s.exact_values[k];
+  // Everything from the grid: radiance = base ⊙ D + V · (F0 ⊙ s + b).
+  for (size_t k = 0; k < s.composed_pixels.size(); ++k) {
+    const uint32_t i = s.composed_pixels[k];
+    const SgMaterial m = PixelMaterial(in.objects[g.object[i]], g.uv[i]);
+    const DiffuseAndVisibility& v = s.composed_values[k];
+    const Vec3f specular =
+        PrefilteredRadiance::SpecularFromParts(m, {v.s[0], v.s[1], v.s[2]}, {v.b[0], v.b[1], v.b[2]});
+    const Vec3f diffuse(float(m.base_color.x) * v.d[0], float(m.base_color.y) * v.d[1], float(m.base_color.z) * v.d[2]);
+    Store(diffuse + specular * v.visibility, i, object);
+  }
+  // The map's specular per pixel: radiance = base ⊙ D + specular · V.
+  ForEachRun(g, s.map_pixels, [&](int32_t o, size_t first, size_t n) {
+    const uint32_t* run = &s.map_pixels[first];
+    GatherRun(in, o, run, n, s, /*gamma=*/false);
+    s.specular_rgb.resize(n);
+    in.Map(o)->ShadeSpecular(s.materials.data(), s.normals.data(), s.views.data(), s.points.data(), n,
+                             s.specular_rgb.data());
+    for (size_t k = 0; k < n; ++k) {
+      const DiffuseAndVisibility& v = s.values[first + k];
+      const Vec3& base = s.materials[k].base_color;
+      const Vec3f rgb(float(base.x) * v.d[0], float(base.y) * v.d[1], float(base.z) * v.d[2]);
+      Store(rgb + s.specular_rgb[k] * v.visibility, run[k], object);
+    }
+  });
+}
+
 }  // namespace
 
 void ShadeObjects(const std::vector<InsertObject>& objects, const std::vector<WorldSphere>& spheres,
@@ -349,7 +525,6 @@ void ShadeObjects(const std::vector<InsertObject>& objects, const std::vector<Wo
                   const ObjectGBuffer& g, const std::vector<uint32_t>& covered, const Vec3f& eye, ImageF& object,
                   const std::vector<PrefilteredRadiance>& specular) {
   const ShadeInputs in{objects, spheres, preps, vertex_gamma, vertex_normals, options, g, eye, specular};
-  constexpr size_t kChunk = 256;
   // The grid path: objects with a map and one roughness and metallic over
   // the whole object (an albedo map is applied per pixel after the grid).
   const int step = std::max(1, options.shade_step);
@@ -361,163 +536,15 @@ void ShadeObjects(const std::vector<InsertObject>& objects, const std::vector<Wo
   }
   // 1. D and V at the grid's nodes.
   ShadeGrid grid;
-  if (any_on_grid && !covered.empty() && g.rect.width() > 0 && g.rect.height() > 0) {
-    grid.step = step;
-    grid.columns = (g.rect.width() - 1) / step + 1;
-    grid.rows = (g.rect.height() - 1) / step + 1;
-    grid.object.assign(size_t(grid.columns) * size_t(grid.rows), -1);
-    grid.values.resize(grid.object.size());
-    std::vector<uint32_t> node_pixels;
-    for (int r = 0; r < grid.rows; ++r)
-      for (int c = 0; c < grid.columns; ++c) {
-        const size_t i = g.Index(g.rect.x0 + c * step, g.rect.y0 + r * step);
-        if (g.object[i] >= 0 && on_grid[g.object[i]]) node_pixels.push_back(static_cast<uint32_t>(i));
-      }
-    std::vector<DiffuseAndVisibility> node_values(node_pixels.size());
-    ParallelFor((node_pixels.size() + kChunk - 1) / kChunk,
-                [&](size_t c) {
-                  RunScratch& s = ThreadScratch();
-                  const size_t begin = c * kChunk, end = std::min(node_pixels.size(), begin + kChunk);
-                  s.pixels.assign(node_pixels.begin() + begin, node_pixels.begin() + end);
-                  ForEachRun(g, s.pixels, [&](int32_t o, size_t first, size_t count) {
-                    ShadeRunDiffuseAndVisibility(in, o, &node_pixels[begin + first], count, s,
-                                                 &node_values[begin + first], /*specular_parts=*/true);
-                  });
-                },
-                1);
-    std::vector<double> sum(objects.size(), 0.0), count(objects.size(), 0.0), specular_sum(objects.size(), 0.0);
-    for (size_t k = 0; k < node_pixels.size(); ++k) {
-      const int x = int(node_pixels[k] % size_t(g.rect.width())), y = int(node_pixels[k] / size_t(g.rect.width()));
-      const size_t node = grid.Node(x / step, y / step);
-      const int32_t o = g.object[node_pixels[k]];
-      const DiffuseAndVisibility& v = node_values[k];
-      grid.object[node] = o;
-      grid.values[node] = v;
-      const float brightest = std::max({v.d[0], v.d[1], v.d[2]});
-      const float specular = std::max({v.s[0] + v.b[0], v.s[1] + v.b[1], v.s[2] + v.b[2]});
-      if (std::isfinite(brightest) && std::isfinite(specular))
-        sum[o] += brightest, specular_sum[o] += specular, count[o] += 1;
-    }
-    grid.mean_brightest.assign(objects.size(), 0.0f);
-    grid.mean_specular.assign(objects.size(), 0.0f);
-    grid.min_cos_reflect.assign(objects.size(), -2.0f);
-    for (size_t o = 0; o < objects.size(); ++o) {
-      if (count[o] > 0) {
-        grid.mean_brightest[o] = static_cast<float>(sum[o] / count[o]);
-        grid.mean_specular[o] = static_cast<float>(specular_sum[o] / count[o]);
-      }
-      const double r = std::clamp(objects[o].material.roughness, 0.0, 1.0);
-      if (options.shade_specular_on_grid && std::isfinite(objects[o].material.roughness))
-        grid.min_cos_reflect[o] = static_cast<float>(std::cos(kSpecularCellLobes * r * r));
-    }
-    grid.normal.assign(grid.object.size(), Vec3f{});
-    grid.reflect.assign(grid.object.size(), Vec3f{});
-    grid.cell_agrees.assign(size_t(std::max(0, grid.columns - 1)) * size_t(std::max(0, grid.rows - 1)), 0);
-    const float delta = static_cast<float>(options.shade_refine_delta);
-    ParallelFor(
-        size_t(grid.rows),
-        [&](size_t r) {
-          for (int c = 0; c < grid.columns; ++c) {
-            const size_t i = g.Index(g.rect.x0 + c * step, g.rect.y0 + int(r) * step), node = grid.Node(c, int(r));
-            const Vec3f n = g.normal[i], v = Normalized(eye - g.position[i]);
-            grid.normal[node] = n;
-            grid.reflect[node] = n * (2.0f * Dot(n, v)) - v;
-          }
-        },
-        8);
-    ParallelFor(
-        size_t(std::max(0, grid.rows - 1)),
-        [&](size_t r) {
-          for (int c = 0; c + 1 < grid.columns; ++c)
-            grid.cell_agrees[r * size_t(grid.columns - 1) + size_t(c)] = CellAgrees(grid, c, int(r), delta);
-        },
-        8);
-  }
+  if (any_on_grid && !covered.empty() && g.rect.width() > 0 && g.rect.height() > 0)
+    grid = BuildShadeGrid(in, on_grid, step);
+  grid.step = step;
   // 2. Every pixel: from the grid where it may stand in, else exactly.
   const float min_cos = static_cast<float>(std::cos(options.shade_refine_angle_deg * kPi / 180.0));
   ParallelFor((covered.size() + kChunk - 1) / kChunk,
               [&](size_t c) {
                 const size_t begin = c * kChunk, end = std::min(covered.size(), begin + kChunk);
-                RunScratch& s = ThreadScratch();
-                std::vector<uint32_t>& sg_pixels = s.sg_pixels;
-                std::vector<uint32_t>& map_pixels = s.map_pixels;
-                std::vector<uint32_t>& exact_pixels = s.exact_pixels;
-                std::vector<uint32_t>& composed_pixels = s.composed_pixels;
-                std::vector<DiffuseAndVisibility>& composed_values = s.composed_values;
-                std::vector<DiffuseAndVisibility>& values = s.values;
-                std::vector<DiffuseAndVisibility>& exact_values = s.exact_values;
-                std::vector<size_t>& exact_slot = s.exact_slot;
-                std::vector<Vec3f>& sg_rgb = s.sg_rgb;
-                sg_pixels.clear(), map_pixels.clear(), exact_pixels.clear(), composed_pixels.clear();
-                values.clear(), exact_slot.clear(), composed_values.clear();
-                for (size_t k = begin; k < end; ++k) {
-                  const uint32_t i = covered[k];
-                  const int32_t o = g.object[i];
-                  if (in.Map(o) == nullptr) {
-                    sg_pixels.push_back(i);
-                    continue;
-                  }
-                  if (on_grid[o]) {
-                    // G-buffer indices run over its rectangle.
-                    const int rx = int(i % size_t(g.rect.width())), ry = int(i / size_t(g.rect.width()));
-                    DiffuseAndVisibility v;
-                    const bool from_grid =
-                        (rx % step == 0 && ry % step == 0)
-                            ? (v = grid.values[grid.Node(rx / step, ry / step)], true)
-                            : InterpolateFromGrid(grid, g, o, g.rect.x0 + rx, g.rect.y0 + ry, g.normal[i], min_cos, &v);
-                    if (from_grid && v.has_specular) {
-                      composed_pixels.push_back(i);
-                      composed_values.push_back(v);
-                      continue;
-                    }
-                    if (from_grid) {
-                      map_pixels.push_back(i);
-                      values.push_back(v);
-                      continue;
-                    }
-                  }
-                  map_pixels.push_back(i);
-                  values.emplace_back();
-                  exact_pixels.push_back(i);
-                  exact_slot.push_back(values.size() - 1);
-                }
-                // SG-only objects.
-                ForEachRun(g, sg_pixels, [&](int32_t o, size_t first, size_t count) {
-                  sg_rgb.resize(count);
-                  ShadeRunSg(in, o, &sg_pixels[first], count, s, sg_rgb.data());
-                  for (size_t k = 0; k < count; ++k) Store(sg_rgb[k], sg_pixels[first + k], object);
-                });
-                // D and V where the grid could not stand in.
-                exact_values.resize(exact_pixels.size());
-                ForEachRun(g, exact_pixels, [&](int32_t o, size_t first, size_t count) {
-                  ShadeRunDiffuseAndVisibility(in, o, &exact_pixels[first], count, s, &exact_values[first]);
-                });
-                for (size_t k = 0; k < exact_pixels.size(); ++k) values[exact_slot[k]] = exact_values[k];
-                // Everything from the grid: radiance = base ⊙ D + V · (F0 ⊙ s + b).
-                for (size_t k = 0; k < composed_pixels.size(); ++k) {
-                  const uint32_t i = composed_pixels[k];
-                  const SgMaterial m = PixelMaterial(objects[g.object[i]], g.uv[i]);
-                  const DiffuseAndVisibility& v = composed_values[k];
-                  const Vec3f specular =
-                      PrefilteredRadiance::SpecularFromParts(m, {v.s[0], v.s[1], v.s[2]}, {v.b[0], v.b[1], v.b[2]});
-                  const Vec3f diffuse(float(m.base_color.x) * v.d[0], float(m.base_color.y) * v.d[1],
-                                      float(m.base_color.z) * v.d[2]);
-                  Store(diffuse + specular * v.visibility, i, object);
-                }
-                // The map's specular per pixel: radiance = base ⊙ D + specular · V.
-                ForEachRun(g, map_pixels, [&](int32_t o, size_t first, size_t count) {
-                  const uint32_t* pixels = &map_pixels[first];
-                  GatherRun(in, o, pixels, count, s, /*gamma=*/false);
-                  s.specular_rgb.resize(count);
-                  in.Map(o)->ShadeSpecular(s.materials.data(), s.normals.data(), s.views.data(), s.points.data(), count,
-                                           s.specular_rgb.data());
-                  for (size_t k = 0; k < count; ++k) {
-                    const DiffuseAndVisibility& v = values[first + k];
-                    const Vec3& base = s.materials[k].base_color;
-                    const Vec3f rgb(float(base.x) * v.d[0], float(base.y) * v.d[1], float(base.z) * v.d[2]);
-                    Store(rgb + s.specular_rgb[k] * v.visibility, pixels[k], object);
-                  }
-                });
+                ShadeChunk(in, grid, on_grid, min_cos, &covered[begin], end - begin, object);
               },
               1);
 }

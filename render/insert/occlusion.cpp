@@ -10,16 +10,15 @@
 
 namespace nerfar {
 
-void OccludeAndComposite(const SceneField& scene, const InsertOptions& options, const CameraIntrinsics& camera,
-                         const Pose& T_world_camera, const std::vector<uint32_t>& covered,
-                         const ReceiverOverride& receivers, ImageF& frame, InsertLayers& layers) {
-  const ObjectGBuffer& g = layers.gbuffer;
-  const Vec3f eye(T_world_camera.translation);
-  constexpr size_t kChunk = 256;
-  const size_t chunks = (covered.size() + kChunk - 1) / kChunk;
-  const Aabb box = scene.Box();
-  // The ray of pixel (x, y) over the scene up to `depth` (the object).
-  const auto add_ray = [&](SceneRays& rays, int x, int y, float depth) {
+namespace {
+
+// The ray of pixel (x, y) over the scene's box up to `depth` (the object).
+struct OcclusionRays {
+  const CameraIntrinsics& camera;
+  const Pose& T_world_camera;
+  Vec3f eye;
+  Aabb box;
+  void Add(SceneRays& rays, int x, int y, float depth) const {
     const Vec3f d = CameraRayDirection(camera, T_world_camera, x, y);
     const auto range = IntersectBox(box, Vec3(eye), Vec3(d));
     float t_near = 0.0f, t_far = 0.0f;
@@ -28,104 +27,134 @@ void OccludeAndComposite(const SceneField& scene, const InsertOptions& options, 
       t_far = std::min(depth, static_cast<float>(range->second));
     }
     rays.Add(eye, d, t_near, t_far);
-  };
-  // Coarse pass: rays at the corners of occlusion_step-sized blocks, each up
-  // to the farthest object depth of the blocks it touches; blocks whose
-  // corners all see (almost) nothing need no ray per pixel.
+  }
+};
+
+// Coarse pass: rays at the corners of occlusion_step-sized blocks, each up
+// to the farthest object depth of the blocks it touches; per G-buffer pixel,
+// 1 where the corners of its block all see (almost) nothing, so that the
+// pixel needs no ray of its own.
+std::vector<uint8_t> ClearPixels(const SceneField& scene, const InsertOptions& options, const OcclusionRays& add,
+                                 const std::vector<uint32_t>& covered, const ObjectGBuffer& g) {
   std::vector<uint8_t> clear(g.object.size(), 0);
-  if (options.occlusion_step > 1 && !covered.empty()) {
-    const int s = options.occlusion_step, w = g.rect.width(), h = g.rect.height();
-    const int bx = (w + s - 1) / s, by = (h + s - 1) / s;
-    std::vector<float> block_far(static_cast<size_t>(bx) * by, 0.0f);
-    for (uint32_t i : covered) {
-      float& f = block_far[static_cast<size_t>(i / w / s) * bx + (i % w) / s];
-      f = std::max(f, g.t[i]);
+  if (options.occlusion_step <= 1 || covered.empty()) return clear;
+  const int s = options.occlusion_step, w = g.rect.width(), h = g.rect.height();
+  const int bx = (w + s - 1) / s, by = (h + s - 1) / s;
+  std::vector<float> block_far(static_cast<size_t>(bx) * by, 0.0f);
+  for (uint32_t i : covered) {
+    float& f = block_far[static_cast<size_t>(i / w / s) * bx + (i % w) / s];
+    f = std::max(f, g.t[i]);
+  }
+  const int nx = bx + 1, ny = by + 1;
+  std::vector<float> node_opacity(static_cast<size_t>(nx) * ny, 0.0f);
+  ParallelFor(
+      static_cast<size_t>(ny),
+      [&](size_t row) {
+        const int v = static_cast<int>(row);
+        SceneRays rays;
+        SceneSamples out;
+        std::vector<int> cols;
+        for (int u = 0; u < nx; ++u) {
+          float far = 0.0f;
+          for (int b = v - 1; b <= v; ++b)
+            for (int a = u - 1; a <= u; ++a)
+              if (a >= 0 && b >= 0 && a < bx && b < by) far = std::max(far, block_far[size_t(b) * bx + a]);
+          if (!(far > 0.0f)) continue;
+          add.Add(rays, g.rect.x0 + std::min(u * s, w - 1), g.rect.y0 + std::min(v * s, h - 1), far);
+          cols.push_back(u);
+        }
+        if (cols.empty()) return;
+        scene.RenderRays(rays, out);
+        for (size_t k = 0; k < cols.size(); ++k)
+          node_opacity[row * nx + cols[k]] = std::isfinite(out.opacity[k]) ? out.opacity[k] : 1.0f;
+      },
+      1);
+  const float limit = static_cast<float>(options.occlusion_clear_opacity);
+  for (uint32_t i : covered) {
+    const size_t u = (i % w) / s, v = i / w / s;
+    clear[i] = node_opacity[v * nx + u] < limit && node_opacity[v * nx + u + 1] < limit &&
+               node_opacity[(v + 1) * nx + u] < limit && node_opacity[(v + 1) * nx + u + 1] < limit;
+  }
+  return clear;
+}
+
+// The covered pixels [begin, end): the scene in front of the object up to
+// its depth (paper eq. 7), composited over the frame; edge pixels' background
+// shares into `shares`; returns the non-finite samples replaced.
+size_t CompositeChunk(const SceneField& scene, const OcclusionRays& add, const std::vector<uint32_t>& covered,
+                      size_t begin, size_t end, const std::vector<uint8_t>& clear, const ReceiverOverride& receivers,
+                      ImageF& frame, InsertLayers& layers, std::vector<InsertLayers::EdgeShare>& shares) {
+  const ObjectGBuffer& g = layers.gbuffer;
+  size_t fixed = 0;
+  SceneRays rays;
+  SceneSamples out;
+  rays.Reserve(end - begin);
+  std::vector<int> ray_of(end - begin, -1);
+  for (size_t k = begin; k < end; ++k) {
+    const uint32_t i = covered[k];
+    if (clear[i]) continue;
+    ray_of[k - begin] = static_cast<int>(rays.size());
+    add.Add(rays, g.rect.x0 + static_cast<int>(i % g.rect.width()), g.rect.y0 + static_cast<int>(i / g.rect.width()),
+            g.t[i]);
+  }
+  if (rays.size() > 0) scene.RenderRays(rays, out);
+  for (size_t k = begin; k < end; ++k) {
+    const uint32_t i = covered[k];
+    const int x = g.rect.x0 + static_cast<int>(i % g.rect.width());
+    const int y = g.rect.y0 + static_cast<int>(i / g.rect.width());
+    const int r = ray_of[k - begin];
+    float opacity = r >= 0 ? out.opacity[r] : 0.0f;
+    Vec3f front = r >= 0 ? out.colour[r] : Vec3f{};
+    if (!std::isfinite(opacity) || !Finite(front)) {
+      opacity = 0.0f;
+      front = {};
+      ++fixed;
     }
-    const int nx = bx + 1, ny = by + 1;
-    std::vector<float> node_opacity(static_cast<size_t>(nx) * ny, 0.0f);
-    ParallelFor(
-        static_cast<size_t>(ny),
-        [&](size_t row) {
-          const int v = static_cast<int>(row);
-          SceneRays rays;
-          SceneSamples out;
-          std::vector<int> cols;
-          for (int u = 0; u < nx; ++u) {
-            float far = 0.0f;
-            for (int b = v - 1; b <= v; ++b)
-              for (int a = u - 1; a <= u; ++a)
-                if (a >= 0 && b >= 0 && a < bx && b < by) far = std::max(far, block_far[size_t(b) * bx + a]);
-            if (!(far > 0.0f)) continue;
-            add_ray(rays, g.rect.x0 + std::min(u * s, w - 1), g.rect.y0 + std::min(v * s, h - 1), far);
-            cols.push_back(u);
-          }
-          if (cols.empty()) return;
-          scene.RenderRays(rays, out);
-          for (size_t k = 0; k < cols.size(); ++k)
-            node_opacity[row * nx + cols[k]] = std::isfinite(out.opacity[k]) ? out.opacity[k] : 1.0f;
-        },
-        1);
-    const float limit = static_cast<float>(options.occlusion_clear_opacity);
-    for (uint32_t i : covered) {
-      const size_t u = (i % w) / s, v = i / w / s;
-      clear[i] = node_opacity[v * nx + u] < limit && node_opacity[v * nx + u + 1] < limit &&
-                 node_opacity[(v + 1) * nx + u] < limit && node_opacity[(v + 1) * nx + u + 1] < limit;
+    opacity = std::clamp(opacity, 0.0f, 1.0f);
+    if (receivers.occlude_with_distance && receivers.distance) {
+      const float scene_t = receivers.distance->at(x, y);
+      if (scene_t > 0.0f && scene_t < 0.99f * g.t[i]) {  // the scene is in front: keep the frame
+        layers.alpha.pixels[i] = 0.0f;
+        continue;
+      }
+    }
+    const float w = 1.0f - opacity;
+    layers.alpha.pixels[i] = w;
+    // Ĉ = I_α·I_c (opacity-weighted), so this is I_α·I_c + (1 − I_α)·I_v.
+    // Edge pixels: the object over the part of the pixel it covers.
+    const float cover = g.coverage.empty() ? 1.0f : g.coverage[i];
+    if (cover < 1.0f) {
+      InsertLayers::EdgeShare share;
+      share.index = i;
+      for (int ch = 0; ch < 3; ++ch) share.rgb[ch] = (1.0f - cover) * frame.at(x, y, ch);
+      shares.push_back(share);
+    }
+    for (int ch = 0; ch < 3; ++ch) {
+      const float composite = front[ch] + w * layers.object.pixels[static_cast<size_t>(i) * 3 + ch];
+      frame.at(x, y, ch) = cover * composite + (1.0f - cover) * frame.at(x, y, ch);
     }
   }
+  return fixed;
+}
+
+}  // namespace
+
+void OccludeAndComposite(const SceneField& scene, const InsertOptions& options, const CameraIntrinsics& camera,
+                         const Pose& T_world_camera, const std::vector<uint32_t>& covered,
+                         const ReceiverOverride& receivers, ImageF& frame, InsertLayers& layers) {
+  const ObjectGBuffer& g = layers.gbuffer;
+  constexpr size_t kChunk = 256;
+  const size_t chunks = (covered.size() + kChunk - 1) / kChunk;
+  const OcclusionRays add{camera, T_world_camera, Vec3f(T_world_camera.translation), scene.Box()};
+  const std::vector<uint8_t> clear = ClearPixels(scene, options, add, covered, g);
   std::vector<size_t> fixed_per_chunk(chunks, 0);
   std::vector<std::vector<InsertLayers::EdgeShare>> shares(chunks);
   ParallelFor(
       chunks,
       [&](size_t c) {
         const size_t begin = c * kChunk, end = std::min(covered.size(), begin + kChunk);
-        SceneRays rays;
-        SceneSamples out;
-        rays.Reserve(end - begin);
-        std::vector<int> ray_of(end - begin, -1);
-        for (size_t k = begin; k < end; ++k) {
-          const uint32_t i = covered[k];
-          if (clear[i]) continue;
-          ray_of[k - begin] = static_cast<int>(rays.size());
-          add_ray(rays, g.rect.x0 + static_cast<int>(i % g.rect.width()),
-                  g.rect.y0 + static_cast<int>(i / g.rect.width()), g.t[i]);
-        }
-        if (rays.size() > 0) scene.RenderRays(rays, out);
-        for (size_t k = begin; k < end; ++k) {
-          const uint32_t i = covered[k];
-          const int x = g.rect.x0 + static_cast<int>(i % g.rect.width());
-          const int y = g.rect.y0 + static_cast<int>(i / g.rect.width());
-          const int r = ray_of[k - begin];
-          float opacity = r >= 0 ? out.opacity[r] : 0.0f;
-          Vec3f front = r >= 0 ? out.colour[r] : Vec3f{};
-          if (!std::isfinite(opacity) || !Finite(front)) {
-            opacity = 0.0f;
-            front = {};
-            ++fixed_per_chunk[c];
-          }
-          opacity = std::clamp(opacity, 0.0f, 1.0f);
-          if (receivers.occlude_with_distance && receivers.distance) {
-            const float scene_t = receivers.distance->at(x, y);
-            if (scene_t > 0.0f && scene_t < 0.99f * g.t[i]) {  // the scene is in front: keep the frame
-              layers.alpha.pixels[i] = 0.0f;
-              continue;
-            }
-          }
-          const float w = 1.0f - opacity;
-          layers.alpha.pixels[i] = w;
-          // Ĉ = I_α·I_c (opacity-weighted), so this is I_α·I_c + (1 − I_α)·I_v.
-          // Edge pixels: the object over the part of the pixel it covers.
-          const float cover = g.coverage.empty() ? 1.0f : g.coverage[i];
-          if (cover < 1.0f) {
-            InsertLayers::EdgeShare share;
-            share.index = i;
-            for (int ch = 0; ch < 3; ++ch) share.rgb[ch] = (1.0f - cover) * frame.at(x, y, ch);
-            shares[c].push_back(share);
-          }
-          for (int ch = 0; ch < 3; ++ch) {
-            const float composite = front[ch] + w * layers.object.pixels[static_cast<size_t>(i) * 3 + ch];
-            frame.at(x, y, ch) = cover * composite + (1.0f - cover) * frame.at(x, y, ch);
-          }
-        }
+        fixed_per_chunk[c] =
+            CompositeChunk(scene, add, covered, begin, end, clear, receivers, frame, layers, shares[c]);
       },
       1);
   for (size_t f : fixed_per_chunk) layers.nonfinite_fixed += f;

@@ -266,653 +266,808 @@ KappaSpacing KappaSpacingFor(const InsertOptions& options, int width) {
   return s;
 }
 
-void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, std::unique_ptr<KappaCache>& cache_owner,
-                   ImageF& frame, InsertLayers& layers, InsertTimings& times) {
-  const SceneField& scene = in.scene;
-  const InsertOptions& options = in.options;
-  const CameraIntrinsics& camera = in.camera;
-  const Pose& T_world_camera = in.T_world_camera;
-  const std::vector<InsertObject>& objects = in.objects;
-  const std::vector<WorldSphere>& spheres = in.spheres;
-  const std::vector<SgMixture>& lights = in.lights;
-  const ObjectGBuffer& g = in.gbuffer;
-  const ReceiverOverride& receivers = in.receivers;
-  const size_t n_objects = objects.size();
-  const Vec3f eye(T_world_camera.translation);
-  const Aabb box = scene.Box();
-  std::vector<size_t> casters;
-  for (size_t j = 0; j < n_objects; ++j)
-    if (objects[j].visibility && spheres[j].radius > 0) casters.push_back(j);
-  if (options.shadows && !casters.empty()) {
-    PixelRect rect;
-    for (size_t j : casters)
-      rect = Union(rect, ProjectBall(camera, T_world_camera, Vec3(spheres[j].center),
-                                     options.shadow_reach_radii * spheres[j].radius));
-    rect = ClipToImage(rect, camera.width, camera.height);
-    // The world lattice of κ, dropped when a caster or a light changed.
-    const KappaSpacing spacing_px = KappaSpacingFor(options, camera.width);
-    KappaCache* cache = nullptr;
-    double spacing = 0.0;
-    float smallest = std::numeric_limits<float>::infinity();
-    for (size_t j : casters) smallest = std::min(smallest, spheres[j].radius);
-    if (options.kappa_cache_spacing_radii > 0) {
-      spacing = options.kappa_cache_spacing_radii * smallest;
-      // Also what shapes the κ layer kept for an unchanged camera.
-      std::vector<double> key = {spacing,
-                                 options.shadow_reach_radii,
-                                 options.shadow_epsilon,
-                                 double(spacing_px.step),
-                                 double(spacing_px.factor),
-                                 options.kappa_refine_delta,
-                                 options.kappa_plane_upsampling ? 1.0 : 0.0,
-                                 options.shadow_epsilon_snap ? 1.0 : 0.0,
-                                 options.kappa_skip_covered ? 1.0 : 0.0};
-      const std::vector<float> rule = ReceiverRule(in);
-      key.insert(key.end(), rule.begin(), rule.end());
-      for (size_t j : casters) AppendObjectKey(objects[j], key);
-      for (const SgMixture& light : lights) AppendLightKey(light, key);
-      // Near lobes re-aimed at each receiver change κ as much as the light does.
-      for (const LightPrep& prep : preps) {
-        key.push_back(prep.parallax.min_sharpness);
-        key.insert(key.end(), prep.parallax.distance.begin(), prep.parallax.distance.end());
-      }
-      if (!cache_owner) cache_owner = std::make_unique<KappaCache>();
-      if (key != cache_owner->key || cache_owner->lattice.Size() > kKappaCacheMaxNodes) {
-        cache_owner->Clear();
-        cache_owner->key = std::move(key);
-      }
-      cache_owner->lattice.Publish();  // the last frame's nodes: read without locks this frame
-      cache = cache_owner.get();
-    }
-    // A view already passed whole under this cache (receivers marched by
-    // the NeRF, the same camera within a lattice spacing and 0.1 mrad): its
-    // receivers' κ < 1 − ε lie within one spacing of the shadowed nodes'
-    // box, so only that box's projection needs a pass (aligned to the
-    // coarse grid of the whole rectangle, so its values are unchanged).
-    std::vector<double> view = {
-        camera.fx, camera.fy, camera.cx, camera.cy, double(camera.width), double(camera.height)};
-    AppendPoseKey(T_world_camera, 1.0, view);
-    if (cache != nullptr && receivers.distance == nullptr && !rect.empty()) {
-      bool seen = false;
-      for (const std::vector<double>& e : cache->explored) {
-        bool same = e.size() == view.size();
-        for (size_t i = 0; same && i < 6; ++i) same = e[i] == view[i];
-        for (size_t i = 6; same && i < 15; ++i) same = std::abs(e[i] - view[i]) <= 1e-4;            // rotation entries
-        for (size_t i = 15; same && i < 18; ++i) same = std::abs(e[i] - view[i]) <= 0.5 * spacing;  // translation
-        seen = seen || same;
-      }
-      if (!seen) {
-        if (cache->explored.size() >= 16) cache->explored.erase(cache->explored.begin());  // a moving camera
-        cache->explored.push_back(view);
-      } else {
-        PixelRect shadow;
-        const Vec3f lo = cache->lattice.shadow_min(), hi = cache->lattice.shadow_max();
-        if (lo.x <= hi.x) {
-          const Vec3 centre = Vec3((lo + hi) * 0.5f);
-          const double radius = 0.5 * Length(Vec3(hi - lo)) + 1.75 * spacing;  // + the nodes' trilinear support
-          shadow = ClipToImage(ProjectBall(camera, T_world_camera, centre, radius), camera.width, camera.height);
-        }
-        if (shadow.empty()) {
-          rect = {};
-        } else {
-          const int unit = spacing_px.step * static_cast<int>(spacing_px.factor);
-          const auto down = [&](int v, int origin) { return origin + (std::max(v, origin) - origin) / unit * unit; };
-          PixelRect r{down(shadow.x0 - unit, rect.x0), down(shadow.y0 - unit, rect.y0),
-                      down(shadow.x1 + 2 * unit, rect.x0) + 1, down(shadow.y1 + 2 * unit, rect.y0) + 1};
-          r = {std::max(r.x0, rect.x0), std::max(r.y0, rect.y0), std::min(r.x1, rect.x1), std::min(r.y1, rect.y1)};
-          rect = r.empty() ? PixelRect{} : r;
-        }
-      }
-    }
-    layers.kappa_rect = rect;
-    // Every pixel is written by MultiplyKappa (in parallel, once): no fill.
-    layers.kappa = ImageF();
-    layers.kappa.width = rect.width();
-    layers.kappa.height = rect.height();
-    layers.kappa.channels = 1;
-    layers.kappa.pixels.resize(static_cast<size_t>(rect.area()));
+namespace {
+
+ViewKey ViewOf(const CameraIntrinsics& camera, const Pose& T_world_camera) {
+  ViewKey v;
+  v.fx = camera.fx, v.fy = camera.fy, v.cx = camera.cx, v.cy = camera.cy;
+  v.width = camera.width, v.height = camera.height;
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) v.rotation[size_t(3 * r + c)] = T_world_camera.rotation(r, c);
+  for (int c = 0; c < 3; ++c) v.translation[size_t(c)] = T_world_camera.translation[c];
+  return v;
+}
+
+// Whether view `b` sees what `a` saw to within the lattice: the same
+// intrinsics, rotations within 0.1 mrad per entry, the eye within half a
+// lattice spacing (its receivers then fall in the same lattice cells).
+bool SameViewWithin(const ViewKey& a, const ViewKey& b, double spacing) {
+  bool same =
+      a.fx == b.fx && a.fy == b.fy && a.cx == b.cx && a.cy == b.cy && a.width == b.width && a.height == b.height;
+  for (size_t i = 0; same && i < 9; ++i) same = std::abs(a.rotation[i] - b.rotation[i]) <= 1e-4;
+  for (size_t i = 0; same && i < 3; ++i) same = std::abs(a.translation[i] - b.translation[i]) <= 0.5 * spacing;
+  return same;
+}
+
+// One frame's κ pass (RenderShadows), as stages over shared state: the
+// casters' reach rectangle; the world lattice that caches κ while casters
+// and lights stay (narrowed to the known shadow for a view already passed,
+// or the last layer reused whole for the same view); κ at a coarse grid of
+// receivers, refined where its corners disagree or an object's outline
+// crosses (κ varies slowly away from shadow edges); the layer multiplied
+// into the background.
+class KappaPass {
+ public:
+  KappaPass(const ShadowPassInputs& in, std::vector<LightPrep>& preps, std::unique_ptr<KappaCache>& cache_owner,
+            ImageF& frame, InsertLayers& layers, InsertTimings& times)
+      : in_(in),
+        options_(in.options),
+        camera_(in.camera),
+        T_world_camera_(in.T_world_camera),
+        g_(in.gbuffer),
+        receivers_(in.receivers),
+        preps_(preps),
+        cache_owner_(cache_owner),
+        frame_(frame),
+        layers_(layers),
+        times_(times),
+        eye_(in.T_world_camera.translation),
+        box_(in.scene.Box()) {}
+
+  void Run() {
+    for (size_t j = 0; j < in_.objects.size(); ++j)
+      if (in_.objects[j].visibility && in_.spheres[j].radius > 0) casters_.push_back(j);
+    if (!options_.shadows || casters_.empty()) return;
+    ReachRect();
+    if (options_.kappa_cache_spacing_radii > 0) UseLattice();
+    view_ = ViewOf(camera_, T_world_camera_);
+    if (cache_ != nullptr && receivers_.distance == nullptr && !rect_.empty()) NarrowToKnownShadow();
+    AllocateLayer();
     // The same camera exactly, the same rectangle, nothing moved: the last
     // frame's κ layer holds (NeRF receivers only).
-    const bool reuse = cache != nullptr && receivers.distance == nullptr && !rect.empty() && view == cache->last_view &&
-                       rect.x0 == cache->last_rect.x0 && rect.y0 == cache->last_rect.y0 &&
-                       rect.x1 == cache->last_rect.x1 && rect.y1 == cache->last_rect.y1;
+    const bool reuse = cache_ != nullptr && receivers_.distance == nullptr && !rect_.empty() &&
+                       view_ == cache_->last_view && rect_.x0 == cache_->last_rect.x0 &&
+                       rect_.y0 == cache_->last_rect.y0 && rect_.x1 == cache_->last_rect.x1 &&
+                       rect_.y1 == cache_->last_rect.y1;
     if (reuse) {
-      const auto t_multiply = InsertClock::now();
-      std::vector<size_t> multiplied_per_row(static_cast<size_t>(rect.height()), 0);
-      MultiplyKappa(cache->last_xs, cache->last_ys, cache->last_grid, rect, g, layers.kappa, frame, multiplied_per_row);
-      for (size_t q : multiplied_per_row) times.kappa_multiplied += q;
-      times.kappa_multiply_ms = MsSince(t_multiply);
-    } else if (!rect.empty()) {
-      // Light owners: each receiver takes the light of its nearest object
-      // (relative to size); queries of every caster at each owner's lobe axes.
-      for (size_t o = 0; o < n_objects; ++o) PrepareLight(lights[o], objects, preps[o]);
-      const int step = spacing_px.step;
-      const auto grid_axis = [step](int lo, int hi) {
-        std::vector<int> s;
-        for (int v = lo; v < hi; v += step) s.push_back(v);
-        if (s.back() != hi - 1) s.push_back(hi - 1);
-        return s;
-      };
-      const std::vector<int> xs = grid_axis(rect.x0, rect.x1), ys = grid_axis(rect.y0, rect.y1);
-      const size_t nx = xs.size(), ny = ys.size();
-      std::vector<float> kappa_grid(nx * ny, 1.0f);
-      std::vector<size_t> queries_per_row(ny, 0);
-      const float reach = static_cast<float>(options.shadow_reach_radii);
-      const float min_opacity = static_cast<float>(options.receiver_min_opacity);
-      const double one_minus_eps = 1.0 - options.shadow_epsilon;
-      std::vector<size_t> evaluated_per_row(ny, 0), marched_per_row(ny, 0), reused_per_row(ny, 0);
-      std::vector<size_t> looked_up_per_row(ny, 0), receivers_per_row(ny, 0);
-      double find_ms = 0, kappa_ms = 0;
-      // The last frame's receivers, when they can stand for marching.
-      const bool reuse_receivers = cache != nullptr && receivers.distance == nullptr && options.kappa_receiver_reuse &&
-                                   cache->receivers.valid && cache->receivers.rule == ReceiverRule(in);
-      const bool cell_normals = cache != nullptr && receivers.distance == nullptr && options.receiver_normal_per_cell;
-      const float reuse_tolerance = static_cast<float>(options.kappa_reuse_tolerance_radii * smallest);
-      const KappaContext context{&casters, &spheres, &preps, &lights, reach, one_minus_eps, in.sources};
-      const uint64_t pass = ++g_kappa_passes;
-      // κ at receiver x (normal n): exact, or trilinear in the world lattice.
-      const auto exact_or_lattice_kappa = [&](const Vec3f& x, const Vec3f& n, ThreadScratch& sc, size_t row) -> float {
-        if (cache == nullptr) {
-          bool queried = false;
-          const float k = KappaAt(context, x, n, sc.kappa, &queried);
-          ++evaluated_per_row[row];
-          if (queried) ++queries_per_row[row];
-          return k;
-        }
-        ++receivers_per_row[row];
-        // No bound test here: nodes that the bound clears hold κ = 1.
-        // Trilinear over the lattice nodes around x, for x's normal cell.
-        const uint32_t cell = NormalCell(n);
-        const double fx = x.x / spacing, fy = x.y / spacing, fz = x.z / spacing;
-        const double bx = std::floor(fx), by = std::floor(fy), bz = std::floor(fz);
-        const double wx = fx - bx, wy = fy - by, wz = fz - bz;
-        const uint64_t corner_key = LatticeKey(int64_t(bx), int64_t(by), int64_t(bz), cell);
-        if (corner_key != sc.corner_key) {
-          sc.corner_key = corner_key;
-          sc.corner_value.fill(-1.0f);
-        }
-        double sum = 0.0, total = 0.0;
-        for (int corner = 0; corner < 8; ++corner) {
-          const int dx = corner & 1, dy = (corner >> 1) & 1, dz = corner >> 2;
-          const double weight = (dx ? wx : 1 - wx) * (dy ? wy : 1 - wy) * (dz ? wz : 1 - wz);
-          // Nodes that hardly count are not computed (a receiver plane on a
-          // lattice plane would otherwise pull in the layer beyond it).
-          if (weight < 1e-3) continue;
-          total += weight;
-          float& cached = sc.corner_value[size_t(corner)];
-          if (cached >= 0.0f) {
-            sum += weight * cached;
-            continue;
-          }
-          const int64_t i = int64_t(bx) + dx, j = int64_t(by) + dy, k = int64_t(bz) + dz;
-          const uint64_t key = LatticeKey(i, j, k, cell);
-          const size_t slot = LatticeMemo::Slot(key);
-          float value;
-          if (sc.memo.key[slot] == key && sc.memo.value[slot] >= 0.0f) {
-            value = sc.memo.value[slot];
-          } else if (++looked_up_per_row[row], !cache->lattice.Find(key, &value)) {
-            bool queried = false;
-            const Vec3f node(Vec3(double(i), double(j), double(k)) * spacing);
-            value = KappaAt(context, node, CellNormal(cell), sc.kappa, &queried);
-            cache->lattice.Insert(key, value);
-            if (value < one_minus_eps) cache->lattice.GrowShadow(node);
-            ++evaluated_per_row[row];
-            if (queried) ++queries_per_row[row];
-          }
-          sc.memo.key[slot] = key;
-          sc.memo.value[slot] = value;
-          cached = value;
-          sum += weight * value;
-        }
-        return total > 0.0 ? static_cast<float>(std::clamp(sum / total, 0.0, 1.0)) : 1.0f;
-      };
-      // With shadow_epsilon_snap, κ ≥ 1 − ε is 1 (the bound's rule).
-      const bool snap = options.shadow_epsilon_snap;
-      const auto snapped = [&](float k) { return snap && double(k) >= one_minus_eps ? 1.0f : k; };
-      const auto receiver_kappa = [&](const Vec3f& x, const Vec3f& n, ThreadScratch& sc, size_t row) -> float {
-        return snapped(exact_or_lattice_kappa(x, n, sc, row));
-      };
-      // What the receiver pass found at each grid node (for the upsampling).
-      std::vector<Vec3f> node_point(nx * ny), node_normal(nx * ny);
-      std::vector<uint8_t> node_valid(nx * ny, 0);
-      std::vector<uint8_t> node_state(nx * ny, 0);  // 0 not found, 1 surface, 2 no surface (as ReceiverFrame)
-      // Receivers of one pass's nodes found, per row: the surface nodes
-      // (opacity above the threshold, finite point) and their own normals.
-      std::vector<std::vector<CellCandidate>> found(ny);
-      // Marched receivers with a surface (opacity ≥ receiver_min_opacity and
-      // 1/2: `out.depth` is where the transmittance crossed 1/2) taken onto
-      // the support plane, with its normal, where they end on it
-      // (ReceiversOnPlane).
-      const auto place_on_support = [&](const std::vector<size_t>& march, const SceneSamples& out,
-                                        const SceneRays& rays, const std::vector<Vec3f>& dirs,
-                                        const std::vector<float>& opacity, std::vector<Vec3f>& normals,
-                                        std::vector<Vec3f>& points) {
-        std::vector<size_t> surface;
-        std::vector<Vec3f> surface_dirs;
-        std::vector<float> t, t_near;
-        for (size_t m = 0; m < march.size(); ++m) {
-          const size_t ix = march[m];
-          if (opacity[ix] < std::max(min_opacity, 0.5f) || !std::isfinite(out.depth[m])) continue;
-          surface.push_back(ix);
-          surface_dirs.push_back(dirs[ix]);
-          t.push_back(out.depth[m]);
-          t_near.push_back(rays.t_near[m]);
-        }
-        std::vector<uint8_t> on_plane;
-        ReceiversOnPlane(scene, *in.support, eye, surface_dirs, t_near, t, on_plane);
-        for (size_t k = 0; k < surface.size(); ++k)
-          if (on_plane[k]) {
-            points[surface[k]] = eye + dirs[surface[k]] * t[k];
-            normals[surface[k]] = in.support->normal;
-          }
-      };
-      // The receivers at the grid nodes (row, cols[j]) of one row:
-      // node_state 2 (no surface) or 1 with node_point and the receiver's own
-      // normal in node_normal (not yet unit; replaced by its cell's normal
-      // with receiver_normal_per_cell), the surface nodes listed in found[row].
-      const auto find_row = [&](size_t row, const std::vector<size_t>& cols) {
-        found[row].clear();
-        if (cols.empty()) return;
-        const int y = ys[row];
-        const size_t nc = cols.size();
-        SceneRays rays;
-        SceneSamples out;
-        std::vector<Vec3f> points(nc), normals;
-        std::vector<float> opacity(nc, 0.0f);
-        std::vector<Vec3f> dirs(nc);
-        for (size_t ix = 0; ix < nc; ++ix) dirs[ix] = CameraRayDirection(camera, T_world_camera, xs[cols[ix]], y);
-        if (receivers.distance) {
-          for (size_t ix = 0; ix < nc; ++ix) {
-            const float t = receivers.distance->at(xs[cols[ix]], y);
-            opacity[ix] = t > 0.0f && std::isfinite(t) ? 1.0f : 0.0f;
-            points[ix] = eye + dirs[ix] * (opacity[ix] > 0 ? t : 0.0f);
-          }
-        } else {
-          // Receivers the last frame gives (state 1 or 2); the rest marched.
-          std::vector<uint8_t> given(nc, 0);
-          normals.resize(nc);
-          std::vector<size_t> march;
-          march.reserve(nc);
-          for (size_t ix = 0; ix < nc; ++ix) {
-            if (reuse_receivers)
-              given[ix] = static_cast<uint8_t>(ReuseReceiver(cache->receivers, eye, dirs[ix], xs[cols[ix]], y,
-                                                             reuse_tolerance, points[ix], normals[ix]));
-            if (given[ix] == 1) opacity[ix] = 1.0f;
-            if (given[ix] == 0) march.push_back(ix);
-          }
-          reused_per_row[row] += nc - march.size();
-          if (!march.empty()) {
-            rays.Reserve(march.size());
-            for (size_t ix : march) {
-              const auto range = IntersectBox(box, Vec3(eye), Vec3(dirs[ix]));
-              rays.Add(eye, dirs[ix], range ? static_cast<float>(range->first) : 0.0f,
-                       range ? static_cast<float>(range->second) : 0.0f);
-            }
-            scene.RenderRays(rays, out);
-            marched_per_row[row] += march.size();
-            std::vector<Vec3f> marched_points(march.size()), marched_normals;
-            for (size_t m = 0; m < march.size(); ++m) {
-              const size_t ix = march[m];
-              opacity[ix] = std::isfinite(out.opacity[m]) ? out.opacity[m] : 0.0f;
-              const float t = std::isfinite(out.depth[m]) ? out.depth[m] : 0.0f;
-              points[ix] = marched_points[m] = eye + dirs[ix] * t;
-            }
-            scene.Normals(marched_points, marched_normals);
-            for (size_t m = 0; m < march.size(); ++m) normals[march[m]] = marched_normals[m];
-            if (in.support != nullptr) place_on_support(march, out, rays, dirs, opacity, normals, points);
-          }
-        }
-        if (receivers.normal) {
-          normals.resize(nc);
-          for (size_t ix = 0; ix < nc; ++ix)
-            normals[ix] = {receivers.normal->at(xs[cols[ix]], y, 0), receivers.normal->at(xs[cols[ix]], y, 1),
-                           receivers.normal->at(xs[cols[ix]], y, 2)};
-        } else if (receivers.distance) {
-          scene.Normals(points, normals);
-        }
-        for (size_t ix = 0; ix < nc; ++ix) {
-          const size_t node = row * nx + cols[ix];
-          node_state[node] = 2;
-          if (opacity[ix] < min_opacity || !Finite(points[ix])) continue;
-          node_state[node] = 1;
-          node_point[node] = points[ix];
-          node_normal[node] = normals[ix];
-          found[row].push_back({node, points[ix], normals[ix]});
-        }
-      };
-      // With receiver_normal_per_cell, between finding one pass's receivers
-      // and their κ: every receiver in a world cell takes that cell's normal
-      // (CellNormals: kept from earlier passes, else the deterministic pick
-      // among this pass's receivers in it), whatever the threads' order.
-      const auto resolve_cell_normals = [&]() {
-        if (!cell_normals) return;
-        std::vector<CellCandidate> all;
-        for (const std::vector<CellCandidate>& row : found) all.insert(all.end(), row.begin(), row.end());
-        cache->cell_normals.Resolve(spacing, all);
-        for (const CellCandidate& c : all) node_normal[c.node] = c.normal;
-      };
-      // κ at the receivers find_row found in this row (cols as there).
-      const auto kappa_row = [&](size_t row, const std::vector<size_t>& cols) {
-        ThreadScratch& scratch = ScratchFor(pass);
-        for (size_t q : cols) {
-          const size_t node = row * nx + q;
-          if (node_state[node] != 1) continue;
-          Vec3f n = node_normal[node];
-          if (!Finite(n) || Dot(n, n) < 0.25f) {
-            node_state[node] = 2;
-            continue;
-          }
-          n = Normalized(n);
-          node_normal[node] = n;
-          node_valid[node] = 1;
-          kappa_grid[node] = receiver_kappa(node_point[node], n, scratch, row);
-        }
-      };
-      // Coarse to fine: κ at every coarse_factor-th node; cells whose corners
-      // differ by more than kappa_refine_delta get all their nodes, the
-      // others are interpolated (κ varies slowly away from edges).
-      size_t factor = spacing_px.factor;
-      if (nx < 2 * factor || ny < 2 * factor) factor = 1;  // too small a grid to coarsen
-      const auto coarse_axis = [factor](size_t n) {
-        std::vector<size_t> c;
-        for (size_t i = 0; i < n; i += factor) c.push_back(i);
-        if (c.back() != n - 1) c.push_back(n - 1);
-        return c;
-      };
-      const std::vector<size_t> cx = coarse_axis(nx), cy = coarse_axis(ny);
-      auto t_stage = InsertClock::now();
-      // Nodes no background pixel needs (kappa_skip_covered): neither found
-      // nor evaluated, except coarse nodes of a coarse grid (their cells'
-      // refinement compares them).
-      const std::vector<uint8_t> hidden =
-          options.kappa_skip_covered ? HiddenNodes(xs, ys, g) : std::vector<uint8_t>(nx * ny, 0);
-      std::vector<std::vector<size_t>> coarse_cols(cy.size());
-      for (size_t i = 0; i < cy.size(); ++i)
-        for (size_t q : cx)
-          if (factor > 1 || !hidden[cy[i] * nx + q]) coarse_cols[i].push_back(q);
-      for (size_t r = 0; r < ny; ++r)
-        for (size_t q = 0; q < nx; ++q) times.kappa_hidden += hidden[r * nx + q];
-      find_ms += MsSince(t_stage);
-      t_stage = InsertClock::now();
-      ParallelFor(
-          cy.size(), [&](size_t i) { find_row(cy[i], coarse_cols[i]); }, 1);
-      resolve_cell_normals();
-      find_ms += MsSince(t_stage);
-      t_stage = InsertClock::now();
-      ParallelFor(
-          cy.size(), [&](size_t i) { kappa_row(cy[i], coarse_cols[i]); }, 1);
-      kappa_ms += MsSince(t_stage);
-      if (factor > 1) {
-        const float delta = static_cast<float>(options.kappa_refine_delta);
-        // Coarse cells whose four receivers lie on one plane (normals within
-        // 10° of their mean, points within 5% of the cell's size of the
-        // plane through their mean); only where the receivers were marched.
-        std::vector<CellPlane> planes((cy.size() - 1) * (cx.size() - 1));
-        if (options.kappa_plane_upsampling && receivers.distance == nullptr) {
-          for (size_t j = 0; j + 1 < cy.size(); ++j)
-            for (size_t i = 0; i + 1 < cx.size(); ++i) {
-              const size_t corner[4] = {cy[j] * nx + cx[i], cy[j] * nx + cx[i + 1], cy[j + 1] * nx + cx[i],
-                                        cy[j + 1] * nx + cx[i + 1]};
-              CellPlane& plane = planes[j * (cx.size() - 1) + i];
-              Vec3f mean_p{}, mean_n{};
-              bool ok = true;
-              for (size_t c : corner) {
-                ok = ok && node_valid[c];
-                mean_p = mean_p + node_point[c] * 0.25f;
-                mean_n = mean_n + node_normal[c];
-              }
-              if (!ok || !(Dot(mean_n, mean_n) > 1e-6f)) continue;
-              mean_n = Normalized(mean_n);
-              float size = 0.0f, off = 0.0f;
-              plane.t_min = std::numeric_limits<float>::infinity();
-              plane.t_max = 0.0f;
-              for (size_t c : corner) {
-                ok = ok && Dot(node_normal[c], mean_n) > 0.985f;
-                size = std::max(size, Length(node_point[c] - mean_p));
-                off = std::max(off, std::abs(Dot(node_point[c] - mean_p, mean_n)));
-                const float t = Length(node_point[c] - eye);
-                plane.t_min = std::min(plane.t_min, t);
-                plane.t_max = std::max(plane.t_max, t);
-              }
-              if (!ok || off > 0.05f * size) continue;
-              plane.valid = true;
-              plane.point = mean_p;
-              plane.normal = mean_n;
-            }
-        }
-        // Cells of the grid by node index ranges [x0, x1] × [y0, y1], refined
-        // level by level: a cell whose corners differ by more than
-        // kappa_refine_delta gets the nodes that halve it (edge midpoints and
-        // centre), each half then tested the same way with its own corners
-        // down to cells one node apart (a soft gradient stops at the first
-        // half whose corners agree; an edge is followed to every node). Cells
-        // that pass are interpolated from their corners (`smooth`, per level:
-        // a finer level's values win on the edges they share).
-        struct Cell {
-          uint32_t x0, y0, x1, y1;
-        };
-        const auto differ = [&](const Cell& c) {
-          const float a = kappa_grid[c.y0 * nx + c.x0], b = kappa_grid[c.y0 * nx + c.x1];
-          const float d0 = kappa_grid[c.y1 * nx + c.x0], d1 = kappa_grid[c.y1 * nx + c.x1];
-          return std::max({a, b, d0, d1}) - std::min({a, b, d0, d1}) > delta;
-        };
-        std::vector<Cell> refine;
-        std::vector<std::vector<Cell>> smooth(1);
-        // Cells on the objects' outline are refined whatever their corners,
-        // at every level (ObjectPixels).
-        const ObjectPixels object_pixels(g);
-        const auto refined = [&](const Cell& c) {
-          return differ(c) || object_pixels.Outline(xs[c.x0], ys[c.y0], xs[c.x1], ys[c.y1]);
-        };
-        for (size_t j = 0; j + 1 < cy.size(); ++j)
-          for (size_t i = 0; i + 1 < cx.size(); ++i) {
-            const Cell c{uint32_t(cx[i]), uint32_t(cy[j]), uint32_t(cx[i + 1]), uint32_t(cy[j + 1])};
-            (refined(c) ? refine : smooth[0]).push_back(c);
-          }
-        std::vector<uint8_t> known(nx * ny, 0);  // κ set (or scheduled) at the node
-        for (size_t r : cy)
-          for (size_t q : cx) known[r * nx + q] = 1;
-        // A coarse cell left smooth whose border holds nodes its refined
-        // neighbours found differing from its corners by more than the delta
-        // (an edge that entered it between its corners) is refined in turn.
-        const auto border_differs = [&](const Cell& c) {
-          float lo = kappa_grid[c.y0 * nx + c.x0], hi = lo;
-          const auto take = [&](size_t node) {
-            if (!known[node]) return;
-            lo = std::min(lo, kappa_grid[node]);
-            hi = std::max(hi, kappa_grid[node]);
-          };
-          for (uint32_t q = c.x0; q <= c.x1; ++q) take(c.y0 * nx + q), take(c.y1 * nx + q);
-          for (uint32_t r = c.y0; r <= c.y1; ++r) take(r * nx + c.x0), take(r * nx + c.x1);
-          return hi - lo > delta;
-        };
-        std::vector<std::vector<size_t>> new_cols(ny), refine_cols(ny);
-        // Nodes inside a planar coarse cell take their receiver on the plane.
-        struct PlaneNode {
-          size_t q;
-          Vec3f point;
-          const CellPlane* plane;
-        };
-        std::vector<std::vector<PlaneNode>> plane_nodes(ny);
-        for (;;) {
-          while (!refine.empty()) {
-            // This level's nodes per row: each cell's halving nodes; hidden ones
-            // only where no finer cell compares them (the cell's halves hold no
-            // node inside).
-            std::vector<size_t> rows;
-            const auto schedule = [&](uint32_t q, uint32_t r, bool skip_hidden) {
-              const size_t node = size_t(r) * nx + q;
-              if (known[node] || (skip_hidden && hidden[node])) return;
-              known[node] = 1;
-              if (new_cols[r].empty()) rows.push_back(r);
-              new_cols[r].push_back(q);
-            };
-            for (const Cell& c : refine) {
-              const bool last = c.x1 - c.x0 <= 2 && c.y1 - c.y0 <= 2;
-              const uint32_t px[3] = {c.x0, (c.x0 + c.x1) / 2, c.x1}, py[3] = {c.y0, (c.y0 + c.y1) / 2, c.y1};
-              for (uint32_t r : py)
-                for (uint32_t q : px) schedule(q, r, last);
-            }
-            std::sort(rows.begin(), rows.end());
-            for (std::vector<CellCandidate>& f : found) f.clear();
-            // Per row: plane nodes placed, the others found, ...
-            t_stage = InsertClock::now();
-            ParallelFor(
-                rows.size(),
-                [&](size_t k) {
-                  const size_t r = rows[k];
-                  std::vector<size_t>& cols = refine_cols[r];
-                  cols.clear();
-                  plane_nodes[r].clear();
-                  std::sort(new_cols[r].begin(), new_cols[r].end());
-                  const size_t j = std::min<size_t>(r / factor, cy.size() - 2);
-                  for (size_t q : new_cols[r]) {
-                    // Depth-aware upsampling: inside a planar coarse cell the
-                    // receiver is where this node's ray meets the plane.
-                    const CellPlane& plane = planes[j * (cx.size() - 1) + std::min<size_t>(q / factor, cx.size() - 2)];
-                    if (plane.valid) {
-                      const Vec3f d = CameraRayDirection(camera, T_world_camera, xs[q], ys[r]);
-                      const float cosine = Dot(d, plane.normal);
-                      const float t = cosine < -0.05f ? Dot(plane.point - eye, plane.normal) / cosine : -1.0f;
-                      if (t >= 0.9f * plane.t_min && t <= 1.1f * plane.t_max) {
-                        plane_nodes[r].push_back({q, eye + d * t, &plane});
-                        continue;
-                      }
-                    }
-                    cols.push_back(q);
-                  }
-                  new_cols[r].clear();
-                  find_row(r, cols);
-                },
-                1);
-            resolve_cell_normals();
-            // Plane-placed nodes take their world cell's normal too (a new
-            // cell's from their planes' normals), so that their lattice nodes,
-            // like every receiver's, do not change with the view: the mean
-            // normal of a coarse cell's corners changes as the grid slides over
-            // the scene, and each new normal cell costs eight new lattice nodes.
-            if (cell_normals) {
-              std::vector<CellCandidate> placed;
-              for (size_t r : rows)
-                for (const PlaneNode& p : plane_nodes[r]) placed.push_back({r * nx + p.q, p.point, p.plane->normal});
-              cache->cell_normals.Resolve(spacing, placed);
-              for (const CellCandidate& c : placed) node_normal[c.node] = c.normal;
-            }
-            find_ms += MsSince(t_stage);
-            // ... then their κ.
-            t_stage = InsertClock::now();
-            ParallelFor(
-                rows.size(),
-                [&](size_t k) {
-                  const size_t r = rows[k];
-                  ThreadScratch& scratch = ScratchFor(pass);
-                  for (const PlaneNode& p : plane_nodes[r])
-                    kappa_grid[r * nx + p.q] =
-                        receiver_kappa(p.point, cell_normals ? node_normal[r * nx + p.q] : p.plane->normal, scratch, r);
-                  kappa_row(r, refine_cols[r]);
-                },
-                1);
-            kappa_ms += MsSince(t_stage);
-            // The halves of this level's cells (those with nodes inside).
-            std::vector<Cell> next;
-            smooth.emplace_back();
-            for (const Cell& c : refine) {
-              const uint32_t xm = (c.x0 + c.x1) / 2, ym = (c.y0 + c.y1) / 2;
-              const bool split_x = c.x1 - c.x0 >= 2, split_y = c.y1 - c.y0 >= 2;
-              for (int b = 0; b < (split_y ? 2 : 1); ++b)
-                for (int a = 0; a < (split_x ? 2 : 1); ++a) {
-                  const Cell h{split_x ? (a ? xm : c.x0) : c.x0, split_y ? (b ? ym : c.y0) : c.y0,
-                               split_x ? (a ? c.x1 : xm) : c.x1, split_y ? (b ? c.y1 : ym) : c.y1};
-                  if (h.x1 - h.x0 <= 1 && h.y1 - h.y0 <= 1) continue;  // every node a corner
-                  (refined(h) ? next : smooth.back()).push_back(h);
-                }
-            }
-            refine = std::move(next);
-          }
-          std::vector<Cell> still;
-          for (const Cell& c : smooth[0]) (border_differs(c) ? refine : still).push_back(c);
-          if (refine.empty()) break;
-          smooth[0] = std::move(still);
-        }
-        // The rest bilinear in its cell, level by level (each row by one thread).
-        t_stage = InsertClock::now();
-        for (const std::vector<Cell>& level : smooth) {
-          std::vector<std::vector<uint32_t>> by_row(ny);
-          for (size_t k = 0; k < level.size(); ++k)
-            for (uint32_t r = level[k].y0; r <= level[k].y1; ++r) by_row[r].push_back(uint32_t(k));
-          ParallelFor(
-              ny,
-              [&](size_t r) {
-                for (uint32_t k : by_row[r]) {
-                  const Cell& c = level[k];
-                  const float wy = float(r - c.y0) / float(c.y1 - c.y0);
-                  const float a = kappa_grid[c.y0 * nx + c.x0], b = kappa_grid[c.y0 * nx + c.x1];
-                  const float d0 = kappa_grid[c.y1 * nx + c.x0], d1 = kappa_grid[c.y1 * nx + c.x1];
-                  for (size_t q = c.x0; q <= c.x1; ++q) {
-                    if (known[r * nx + q]) continue;
-                    const float wx = float(q - c.x0) / float(c.x1 - c.x0);
-                    kappa_grid[r * nx + q] =
-                        (1 - wx) * (1 - wy) * a + wx * (1 - wy) * b + (1 - wx) * wy * d0 + wx * wy * d1;
-                  }
-                }
-              },
-              8);
-        }
-        kappa_ms += MsSince(t_stage);
-      }
-      // Nodes no background pixel reads hold 1 (κ is not applied there).
-      for (size_t i = 0; i < nx * ny; ++i)
-        if (hidden[i]) kappa_grid[i] = 1.0f;
-      times.kappa_receivers_ms = find_ms;
-      times.kappa_lookup_ms = kappa_ms;
-      for (size_t q : looked_up_per_row) times.kappa_lookups += q;
-      for (size_t q : receivers_per_row) times.kappa_receivers += q;
-      for (size_t q : queries_per_row) layers.kappa_queries += q;
-      for (size_t q : evaluated_per_row) times.kappa_evaluated += q;
-      for (size_t q : marched_per_row) times.kappa_marched += q;
-      for (size_t q : reused_per_row) times.kappa_reused += q;
-      if (cache != nullptr && receivers.distance == nullptr && options.kappa_receiver_reuse) {
-        // Kept for the next frame (nodes only interpolated or plane-placed
-        // stay unknown).
-        ReceiverFrame& kept = cache->receivers;
-        kept.valid = true;
-        kept.rule = ReceiverRule(in);
-        kept.camera = camera;
-        kept.T_world_camera = T_world_camera;
-        kept.T_camera_world = T_world_camera.Inverse();
-        kept.xs = xs;
-        kept.ys = ys;
-        kept.cx = cx;
-        kept.cy = cy;
-        kept.factor = factor;
-        kept.step = step;
-        kept.nearest = std::numeric_limits<float>::infinity();
-        for (size_t i = 0; i < node_state.size(); ++i)
-          if (node_state[i] == 1) kept.nearest = std::min(kept.nearest, Length(node_point[i] - eye));
-        kept.state = std::move(node_state);
-        kept.point = std::move(node_point);
-        kept.normal = std::move(node_normal);
-      }
-      // Bilinear from the sample grid to every pixel; multiply the background
-      // where no object covers it. Cell by cell of the grid: a cell whose
-      // four nodes hold κ = 1 is skipped whole (the layer is 1 already).
-      // Per row, the grid's two rows are first blended in y at the cell's
-      // two columns, then each pixel is one step along x; the multiply runs
-      // over the row's passed pixels, around the objects' pixels.
-      const auto t_multiply = InsertClock::now();
-      std::vector<size_t> multiplied_per_row(static_cast<size_t>(rect.height()), 0);
-      MultiplyKappa(xs, ys, kappa_grid, rect, g, layers.kappa, frame, multiplied_per_row);
-      for (size_t q : multiplied_per_row) times.kappa_multiplied += q;
-      times.kappa_multiply_ms = MsSince(t_multiply);
-      if (cache != nullptr && receivers.distance == nullptr) {
-        cache->last_view = view;
-        cache->last_rect = rect;
-        cache->last_xs = xs;
-        cache->last_ys = ys;
-        cache->last_grid = std::move(kappa_grid);
-      }
+      Multiply(cache_->last_xs, cache_->last_ys, cache_->last_grid);
+    } else if (!rect_.empty()) {
+      ComputeGrid();
     }
   }
+
+ private:
+  // Cells of the grid by node index ranges [x0, x1] × [y0, y1].
+  struct Cell {
+    uint32_t x0, y0, x1, y1;
+  };
+  // A node inside a planar coarse cell, its receiver on the plane.
+  struct PlaneNode {
+    size_t q;
+    Vec3f point;
+    const CellPlane* plane;
+  };
+
+  // The union of the casters' reach balls on screen.
+  void ReachRect() {
+    for (size_t j : casters_)
+      rect_ = Union(rect_, ProjectBall(camera_, T_world_camera_, Vec3(in_.spheres[j].center),
+                                       options_.shadow_reach_radii * in_.spheres[j].radius));
+    rect_ = ClipToImage(rect_, camera_.width, camera_.height);
+    spacing_px_ = KappaSpacingFor(options_, camera_.width);
+    for (size_t j : casters_) smallest_ = std::min(smallest_, in_.spheres[j].radius);
+  }
+
+  // The world lattice of κ, dropped when a caster or a light changed.
+  void UseLattice() {
+    spacing_ = options_.kappa_cache_spacing_radii * smallest_;
+    // Also what shapes the κ layer kept for an unchanged camera.
+    std::vector<double> key = {spacing_,
+                               options_.shadow_reach_radii,
+                               options_.shadow_epsilon,
+                               double(spacing_px_.step),
+                               double(spacing_px_.factor),
+                               options_.kappa_refine_delta,
+                               options_.kappa_plane_upsampling ? 1.0 : 0.0,
+                               options_.shadow_epsilon_snap ? 1.0 : 0.0,
+                               options_.kappa_skip_covered ? 1.0 : 0.0};
+    const std::vector<float> rule = ReceiverRule(in_);
+    key.insert(key.end(), rule.begin(), rule.end());
+    for (size_t j : casters_) AppendObjectKey(in_.objects[j], key);
+    for (const SgMixture& light : in_.lights) AppendLightKey(light, key);
+    // Near lobes re-aimed at each receiver change κ as much as the light does.
+    for (const LightPrep& prep : preps_) {
+      key.push_back(prep.parallax.min_sharpness);
+      key.insert(key.end(), prep.parallax.distance.begin(), prep.parallax.distance.end());
+    }
+    if (!cache_owner_) cache_owner_ = std::make_unique<KappaCache>();
+    if (key != cache_owner_->key || cache_owner_->lattice.Size() > kKappaCacheMaxNodes) {
+      cache_owner_->Clear();
+      cache_owner_->key = std::move(key);
+    }
+    cache_owner_->lattice.Publish();  // the last frame's nodes: read without locks this frame
+    cache_ = cache_owner_.get();
+  }
+
+  // A view already passed whole under this cache (receivers marched by the
+  // NeRF, the same camera within a lattice spacing and 0.1 mrad): its
+  // receivers' κ < 1 − ε lie within one spacing of the shadowed nodes' box,
+  // so only that box's projection needs a pass (aligned to the coarse grid
+  // of the whole rectangle, so its values are unchanged).
+  void NarrowToKnownShadow() {
+    bool seen = false;
+    for (const ViewKey& e : cache_->explored) seen = seen || SameViewWithin(e, view_, spacing_);
+    if (!seen) {
+      if (cache_->explored.size() >= 16) cache_->explored.erase(cache_->explored.begin());  // a moving camera
+      cache_->explored.push_back(view_);
+      return;
+    }
+    PixelRect shadow;
+    const Vec3f lo = cache_->lattice.shadow_min(), hi = cache_->lattice.shadow_max();
+    if (lo.x <= hi.x) {
+      const Vec3 centre = Vec3((lo + hi) * 0.5f);
+      const double radius = 0.5 * Length(Vec3(hi - lo)) + 1.75 * spacing_;  // + the nodes' trilinear support
+      shadow = ClipToImage(ProjectBall(camera_, T_world_camera_, centre, radius), camera_.width, camera_.height);
+    }
+    if (shadow.empty()) {
+      rect_ = {};
+      return;
+    }
+    const int unit = spacing_px_.step * static_cast<int>(spacing_px_.factor);
+    const auto down = [&](int v, int origin) { return origin + (std::max(v, origin) - origin) / unit * unit; };
+    PixelRect r{down(shadow.x0 - unit, rect_.x0), down(shadow.y0 - unit, rect_.y0),
+                down(shadow.x1 + 2 * unit, rect_.x0) + 1, down(shadow.y1 + 2 * unit, rect_.y0) + 1};
+    r = {std::max(r.x0, rect_.x0), std::max(r.y0, rect_.y0), std::min(r.x1, rect_.x1), std::min(r.y1, rect_.y1)};
+    rect_ = r.empty() ? PixelRect{} : r;
+  }
+
+  void AllocateLayer() {
+    layers_.kappa_rect = rect_;
+    // Every pixel is written by MultiplyKappa (in parallel, once): no fill.
+    layers_.kappa = ImageF();
+    layers_.kappa.width = rect_.width();
+    layers_.kappa.height = rect_.height();
+    layers_.kappa.channels = 1;
+    layers_.kappa.pixels.resize(static_cast<size_t>(rect_.area()));
+  }
+
+  // Bilinear from the sample grid to every pixel; multiply the background
+  // where no object covers it (MultiplyKappa).
+  void Multiply(const std::vector<int>& xs, const std::vector<int>& ys, const std::vector<float>& grid) {
+    const auto t_multiply = InsertClock::now();
+    std::vector<size_t> multiplied_per_row(static_cast<size_t>(rect_.height()), 0);
+    MultiplyKappa(xs, ys, grid, rect_, g_, layers_.kappa, frame_, multiplied_per_row);
+    for (size_t q : multiplied_per_row) times_.kappa_multiplied += q;
+    times_.kappa_multiply_ms = MsSince(t_multiply);
+  }
+
+  // κ over the rectangle's grid: coarse nodes, refined, the hidden ones 1;
+  // the receivers and the layer kept for the next frame.
+  void ComputeGrid() {
+    SetUpGrid();
+    CoarsePass();
+    if (factor_ > 1) {
+      FitCellPlanes();
+      Refine();
+      InterpolateSmooth();
+    }
+    // Nodes no background pixel reads hold 1 (κ is not applied there).
+    for (size_t i = 0; i < nx_ * ny_; ++i)
+      if (hidden_[i]) kappa_grid_[i] = 1.0f;
+    Count();
+    if (cache_ != nullptr && receivers_.distance == nullptr && options_.kappa_receiver_reuse) KeepReceivers();
+    // Cell by cell of the grid: a cell whose four nodes hold κ = 1 is skipped
+    // whole (the layer is 1 already). Per row, the grid's two rows are first
+    // blended in y at the cell's two columns, then each pixel is one step
+    // along x; the multiply runs over the row's passed pixels, around the
+    // objects' pixels.
+    Multiply(xs_, ys_, kappa_grid_);
+    if (cache_ != nullptr && receivers_.distance == nullptr) {
+      cache_->last_view = view_;
+      cache_->last_rect = rect_;
+      cache_->last_xs = xs_;
+      cache_->last_ys = ys_;
+      cache_->last_grid = std::move(kappa_grid_);
+    }
+  }
+
+  void SetUpGrid() {
+    // Light owners: each receiver takes the light of its nearest object
+    // (relative to size); queries of every caster at each owner's lobe axes.
+    for (size_t o = 0; o < in_.objects.size(); ++o) PrepareLight(in_.lights[o], in_.objects, preps_[o]);
+    const int step = spacing_px_.step;
+    const auto grid_axis = [step](int lo, int hi) {
+      std::vector<int> s;
+      for (int v = lo; v < hi; v += step) s.push_back(v);
+      if (s.back() != hi - 1) s.push_back(hi - 1);
+      return s;
+    };
+    xs_ = grid_axis(rect_.x0, rect_.x1), ys_ = grid_axis(rect_.y0, rect_.y1);
+    nx_ = xs_.size(), ny_ = ys_.size();
+    kappa_grid_.assign(nx_ * ny_, 1.0f);
+    for (std::vector<size_t>* counts : {&queries_per_row_, &evaluated_per_row_, &marched_per_row_, &reused_per_row_,
+                                        &looked_up_per_row_, &receivers_per_row_})
+      counts->assign(ny_, 0);
+    min_opacity_ = static_cast<float>(options_.receiver_min_opacity);
+    one_minus_eps_ = 1.0 - options_.shadow_epsilon;
+    // The last frame's receivers, when they can stand for marching.
+    reuse_receivers_ = cache_ != nullptr && receivers_.distance == nullptr && options_.kappa_receiver_reuse &&
+                       cache_->receivers.valid && cache_->receivers.rule == ReceiverRule(in_);
+    cell_normals_ = cache_ != nullptr && receivers_.distance == nullptr && options_.receiver_normal_per_cell;
+    reuse_tolerance_ = static_cast<float>(options_.kappa_reuse_tolerance_radii * smallest_);
+    context_ = KappaContext{
+        &casters_,      &in_.spheres, &preps_, &in_.lights, static_cast<float>(options_.shadow_reach_radii),
+        one_minus_eps_, in_.sources};
+    pass_ = ++g_kappa_passes;
+    node_point_.assign(nx_ * ny_, Vec3f{});
+    node_normal_.assign(nx_ * ny_, Vec3f{});
+    node_valid_.assign(nx_ * ny_, 0);
+    node_state_.assign(nx_ * ny_, 0);
+    found_.assign(ny_, {});
+    // Coarse to fine: κ at every coarse_factor-th node; cells whose corners
+    // differ by more than kappa_refine_delta get all their nodes, the others
+    // are interpolated.
+    factor_ = spacing_px_.factor;
+    if (nx_ < 2 * factor_ || ny_ < 2 * factor_) factor_ = 1;  // too small a grid to coarsen
+    const auto coarse_axis = [this](size_t n) {
+      std::vector<size_t> c;
+      for (size_t i = 0; i < n; i += factor_) c.push_back(i);
+      if (c.back() != n - 1) c.push_back(n - 1);
+      return c;
+    };
+    cx_ = coarse_axis(nx_), cy_ = coarse_axis(ny_);
+  }
+
+  // κ at receiver x (normal n): exact, or trilinear in the world lattice.
+  float ExactOrLatticeKappa(const Vec3f& x, const Vec3f& n, ThreadScratch& sc, size_t row) {
+    if (cache_ == nullptr) {
+      bool queried = false;
+      const float k = KappaAt(context_, x, n, sc.kappa, &queried);
+      ++evaluated_per_row_[row];
+      if (queried) ++queries_per_row_[row];
+      return k;
+    }
+    ++receivers_per_row_[row];
+    // No bound test here: nodes that the bound clears hold κ = 1.
+    // Trilinear over the lattice nodes around x, for x's normal cell.
+    const uint32_t cell = NormalCell(n);
+    const double fx = x.x / spacing_, fy = x.y / spacing_, fz = x.z / spacing_;
+    const double bx = std::floor(fx), by = std::floor(fy), bz = std::floor(fz);
+    const double wx = fx - bx, wy = fy - by, wz = fz - bz;
+    const uint64_t corner_key = LatticeKey(int64_t(bx), int64_t(by), int64_t(bz), cell);
+    if (corner_key != sc.corner_key) {
+      sc.corner_key = corner_key;
+      sc.corner_value.fill(-1.0f);
+    }
+    double sum = 0.0, total = 0.0;
+    for (int corner = 0; corner < 8; ++corner) {
+      const int dx = corner & 1, dy = (corner >> 1) & 1, dz = corner >> 2;
+      const double weight = (dx ? wx : 1 - wx) * (dy ? wy : 1 - wy) * (dz ? wz : 1 - wz);
+      // Nodes that hardly count are not computed (a receiver plane on a
+      // lattice plane would otherwise pull in the layer beyond it).
+      if (weight < 1e-3) continue;
+      total += weight;
+      float& cached = sc.corner_value[size_t(corner)];
+      if (cached >= 0.0f) {
+        sum += weight * cached;
+        continue;
+      }
+      const int64_t i = int64_t(bx) + dx, j = int64_t(by) + dy, k = int64_t(bz) + dz;
+      const uint64_t key = LatticeKey(i, j, k, cell);
+      const size_t slot = LatticeMemo::Slot(key);
+      float value;
+      if (sc.memo.key[slot] == key && sc.memo.value[slot] >= 0.0f) {
+        value = sc.memo.value[slot];
+      } else if (++looked_up_per_row_[row], !cache_->lattice.Find(key, &value)) {
+        bool queried = false;
+        const Vec3f node(Vec3(double(i), double(j), double(k)) * spacing_);
+        value = KappaAt(context_, node, CellNormal(cell), sc.kappa, &queried);
+        cache_->lattice.Insert(key, value);
+        if (value < one_minus_eps_) cache_->lattice.GrowShadow(node);
+        ++evaluated_per_row_[row];
+        if (queried) ++queries_per_row_[row];
+      }
+      sc.memo.key[slot] = key;
+      sc.memo.value[slot] = value;
+      cached = value;
+      sum += weight * value;
+    }
+    return total > 0.0 ? static_cast<float>(std::clamp(sum / total, 0.0, 1.0)) : 1.0f;
+  }
+
+  // κ at a receiver; with shadow_epsilon_snap, κ ≥ 1 − ε is 1 (the bound's rule).
+  float ReceiverKappa(const Vec3f& x, const Vec3f& n, ThreadScratch& sc, size_t row) {
+    const float k = ExactOrLatticeKappa(x, n, sc, row);
+    return options_.shadow_epsilon_snap && double(k) >= one_minus_eps_ ? 1.0f : k;
+  }
+
+  // Marched receivers with a surface (opacity ≥ receiver_min_opacity and
+  // 1/2: `out.depth` is where the transmittance crossed 1/2) taken onto the
+  // support plane, with its normal, where they end on it (ReceiversOnPlane).
+  void PlaceOnSupport(const std::vector<size_t>& march, const SceneSamples& out, const SceneRays& rays,
+                      const std::vector<Vec3f>& dirs, const std::vector<float>& opacity, std::vector<Vec3f>& normals,
+                      std::vector<Vec3f>& points) const {
+    std::vector<size_t> surface;
+    std::vector<Vec3f> surface_dirs;
+    std::vector<float> t, t_near;
+    for (size_t m = 0; m < march.size(); ++m) {
+      const size_t ix = march[m];
+      if (opacity[ix] < std::max(min_opacity_, 0.5f) || !std::isfinite(out.depth[m])) continue;
+      surface.push_back(ix);
+      surface_dirs.push_back(dirs[ix]);
+      t.push_back(out.depth[m]);
+      t_near.push_back(rays.t_near[m]);
+    }
+    std::vector<uint8_t> on_plane;
+    ReceiversOnPlane(in_.scene, *in_.support, eye_, surface_dirs, t_near, t, on_plane);
+    for (size_t k = 0; k < surface.size(); ++k)
+      if (on_plane[k]) {
+        points[surface[k]] = eye_ + dirs[surface[k]] * t[k];
+        normals[surface[k]] = in_.support->normal;
+      }
+  }
+
+  // Receivers of the row's nodes `given` by the last frame (state 1 or 2),
+  // the rest marched through the NeRF into points, normals and opacity.
+  void MarchRow(size_t row, const std::vector<size_t>& cols, const std::vector<Vec3f>& dirs, std::vector<Vec3f>& points,
+                std::vector<Vec3f>& normals, std::vector<float>& opacity) {
+    const int y = ys_[row];
+    const size_t nc = cols.size();
+    SceneRays rays;
+    SceneSamples out;
+    std::vector<uint8_t> given(nc, 0);
+    normals.resize(nc);
+    std::vector<size_t> march;
+    march.reserve(nc);
+    for (size_t ix = 0; ix < nc; ++ix) {
+      if (reuse_receivers_)
+        given[ix] = static_cast<uint8_t>(ReuseReceiver(cache_->receivers, eye_, dirs[ix], xs_[cols[ix]], y,
+                                                       reuse_tolerance_, points[ix], normals[ix]));
+      if (given[ix] == 1) opacity[ix] = 1.0f;
+      if (given[ix] == 0) march.push_back(ix);
+    }
+    reused_per_row_[row] += nc - march.size();
+    if (march.empty()) return;
+    rays.Reserve(march.size());
+    for (size_t ix : march) {
+      const auto range = IntersectBox(box_, Vec3(eye_), Vec3(dirs[ix]));
+      rays.Add(eye_, dirs[ix], range ? static_cast<float>(range->first) : 0.0f,
+               range ? static_cast<float>(range->second) : 0.0f);
+    }
+    in_.scene.RenderRays(rays, out);
+    marched_per_row_[row] += march.size();
+    std::vector<Vec3f> marched_points(march.size()), marched_normals;
+    for (size_t m = 0; m < march.size(); ++m) {
+      const size_t ix = march[m];
+      opacity[ix] = std::isfinite(out.opacity[m]) ? out.opacity[m] : 0.0f;
+      const float t = std::isfinite(out.depth[m]) ? out.depth[m] : 0.0f;
+      points[ix] = marched_points[m] = eye_ + dirs[ix] * t;
+    }
+    in_.scene.Normals(marched_points, marched_normals);
+    for (size_t m = 0; m < march.size(); ++m) normals[march[m]] = marched_normals[m];
+    if (in_.support != nullptr) PlaceOnSupport(march, out, rays, dirs, opacity, normals, points);
+  }
+
+  // The receivers at the grid nodes (row, cols[j]) of one row: node_state 2
+  // (no surface) or 1 with node_point and the receiver's own normal in
+  // node_normal (not yet unit; replaced by its cell's normal with
+  // receiver_normal_per_cell), the surface nodes listed in found[row].
+  void FindRow(size_t row, const std::vector<size_t>& cols) {
+    found_[row].clear();
+    if (cols.empty()) return;
+    const int y = ys_[row];
+    const size_t nc = cols.size();
+    std::vector<Vec3f> points(nc), normals;
+    std::vector<float> opacity(nc, 0.0f);
+    std::vector<Vec3f> dirs(nc);
+    for (size_t ix = 0; ix < nc; ++ix) dirs[ix] = CameraRayDirection(camera_, T_world_camera_, xs_[cols[ix]], y);
+    if (receivers_.distance) {
+      for (size_t ix = 0; ix < nc; ++ix) {
+        const float t = receivers_.distance->at(xs_[cols[ix]], y);
+        opacity[ix] = t > 0.0f && std::isfinite(t) ? 1.0f : 0.0f;
+        points[ix] = eye_ + dirs[ix] * (opacity[ix] > 0 ? t : 0.0f);
+      }
+    } else {
+      MarchRow(row, cols, dirs, points, normals, opacity);
+    }
+    if (receivers_.normal) {
+      normals.resize(nc);
+      for (size_t ix = 0; ix < nc; ++ix)
+        normals[ix] = {receivers_.normal->at(xs_[cols[ix]], y, 0), receivers_.normal->at(xs_[cols[ix]], y, 1),
+                       receivers_.normal->at(xs_[cols[ix]], y, 2)};
+    } else if (receivers_.distance) {
+      in_.scene.Normals(points, normals);
+    }
+    for (size_t ix = 0; ix < nc; ++ix) {
+      const size_t node = row * nx_ + cols[ix];
+      node_state_[node] = 2;
+      if (opacity[ix] < min_opacity_ || !Finite(points[ix])) continue;
+      node_state_[node] = 1;
+      node_point_[node] = points[ix];
+      node_normal_[node] = normals[ix];
+      found_[row].push_back({node, points[ix], normals[ix]});
+    }
+  }
+
+  // With receiver_normal_per_cell, between finding one pass's receivers and
+  // their κ: every receiver in a world cell takes that cell's normal
+  // (CellNormals: kept from earlier passes, else the deterministic pick among
+  // this pass's receivers in it), whatever the threads' order.
+  void ResolveCellNormals() {
+    if (!cell_normals_) return;
+    std::vector<CellCandidate> all;
+    for (const std::vector<CellCandidate>& row : found_) all.insert(all.end(), row.begin(), row.end());
+    cache_->cell_normals.Resolve(spacing_, all);
+    for (const CellCandidate& c : all) node_normal_[c.node] = c.normal;
+  }
+
+  // κ at the receivers FindRow found in this row (cols as there).
+  void KappaRow(size_t row, const std::vector<size_t>& cols) {
+    ThreadScratch& scratch = ScratchFor(pass_);
+    for (size_t q : cols) {
+      const size_t node = row * nx_ + q;
+      if (node_state_[node] != 1) continue;
+      Vec3f n = node_normal_[node];
+      if (!Finite(n) || Dot(n, n) < 0.25f) {
+        node_state_[node] = 2;
+        continue;
+      }
+      n = Normalized(n);
+      node_normal_[node] = n;
+      node_valid_[node] = 1;
+      kappa_grid_[node] = ReceiverKappa(node_point_[node], n, scratch, row);
+    }
+  }
+
+  // κ at the coarse nodes. Nodes no background pixel needs
+  // (kappa_skip_covered): neither found nor evaluated, except coarse nodes
+  // of a coarse grid (their cells' refinement compares them).
+  void CoarsePass() {
+    auto t_stage = InsertClock::now();
+    hidden_ = options_.kappa_skip_covered ? HiddenNodes(xs_, ys_, g_) : std::vector<uint8_t>(nx_ * ny_, 0);
+    std::vector<std::vector<size_t>> coarse_cols(cy_.size());
+    for (size_t i = 0; i < cy_.size(); ++i)
+      for (size_t q : cx_)
+        if (factor_ > 1 || !hidden_[cy_[i] * nx_ + q]) coarse_cols[i].push_back(q);
+    for (size_t r = 0; r < ny_; ++r)
+      for (size_t q = 0; q < nx_; ++q) times_.kappa_hidden += hidden_[r * nx_ + q];
+    find_ms_ += MsSince(t_stage);
+    t_stage = InsertClock::now();
+    ParallelFor(
+        cy_.size(), [&](size_t i) { FindRow(cy_[i], coarse_cols[i]); }, 1);
+    ResolveCellNormals();
+    find_ms_ += MsSince(t_stage);
+    t_stage = InsertClock::now();
+    ParallelFor(
+        cy_.size(), [&](size_t i) { KappaRow(cy_[i], coarse_cols[i]); }, 1);
+    kappa_ms_ += MsSince(t_stage);
+  }
+
+  // Coarse cells whose four receivers lie on one plane (normals within 10°
+  // of their mean, points within 5% of the cell's size of the plane through
+  // their mean); only where the receivers were marched.
+  void FitCellPlanes() {
+    planes_.assign((cy_.size() - 1) * (cx_.size() - 1), CellPlane{});
+    if (!options_.kappa_plane_upsampling || receivers_.distance != nullptr) return;
+    for (size_t j = 0; j + 1 < cy_.size(); ++j)
+      for (size_t i = 0; i + 1 < cx_.size(); ++i) {
+        const size_t corner[4] = {cy_[j] * nx_ + cx_[i], cy_[j] * nx_ + cx_[i + 1], cy_[j + 1] * nx_ + cx_[i],
+                                  cy_[j + 1] * nx_ + cx_[i + 1]};
+        CellPlane& plane = planes_[j * (cx_.size() - 1) + i];
+        Vec3f mean_p{}, mean_n{};
+        bool ok = true;
+        for (size_t c : corner) {
+          ok = ok && node_valid_[c];
+          mean_p = mean_p + node_point_[c] * 0.25f;
+          mean_n = mean_n + node_normal_[c];
+        }
+        if (!ok || !(Dot(mean_n, mean_n) > 1e-6f)) continue;
+        mean_n = Normalized(mean_n);
+        float size = 0.0f, off = 0.0f;
+        plane.t_min = std::numeric_limits<float>::infinity();
+        plane.t_max = 0.0f;
+        for (size_t c : corner) {
+          ok = ok && Dot(node_normal_[c], mean_n) > 0.985f;
+          size = std::max(size, Length(node_point_[c] - mean_p));
+          off = std::max(off, std::abs(Dot(node_point_[c] - mean_p, mean_n)));
+          const float t = Length(node_point_[c] - eye_);
+          plane.t_min = std::min(plane.t_min, t);
+          plane.t_max = std::max(plane.t_max, t);
+        }
+        if (!ok || off > 0.05f * size) continue;
+        plane.valid = true;
+        plane.point = mean_p;
+        plane.normal = mean_n;
+      }
+  }
+
+  // Whether the cell's corners differ by more than kappa_refine_delta.
+  bool Differ(const Cell& c) const {
+    const float a = kappa_grid_[c.y0 * nx_ + c.x0], b = kappa_grid_[c.y0 * nx_ + c.x1];
+    const float d0 = kappa_grid_[c.y1 * nx_ + c.x0], d1 = kappa_grid_[c.y1 * nx_ + c.x1];
+    return std::max({a, b, d0, d1}) - std::min({a, b, d0, d1}) > delta_;
+  }
+  // Cells on the objects' outline are refined whatever their corners, at
+  // every level (ObjectPixels).
+  bool Refined(const Cell& c) const {
+    return Differ(c) || object_pixels_->Outline(xs_[c.x0], ys_[c.y0], xs_[c.x1], ys_[c.y1]);
+  }
+  // A coarse cell left smooth whose border holds nodes its refined
+  // neighbours found differing from its corners by more than the delta (an
+  // edge that entered it between its corners) is refined in turn.
+  bool BorderDiffers(const Cell& c) const {
+    float lo = kappa_grid_[c.y0 * nx_ + c.x0], hi = lo;
+    const auto take = [&](size_t node) {
+      if (!known_[node]) return;
+      lo = std::min(lo, kappa_grid_[node]);
+      hi = std::max(hi, kappa_grid_[node]);
+    };
+    for (uint32_t q = c.x0; q <= c.x1; ++q) take(c.y0 * nx_ + q), take(c.y1 * nx_ + q);
+    for (uint32_t r = c.y0; r <= c.y1; ++r) take(r * nx_ + c.x0), take(r * nx_ + c.x1);
+    return hi - lo > delta_;
+  }
+
+  // The coarse cells refined level by level: a cell whose corners differ by
+  // more than kappa_refine_delta gets the nodes that halve it (edge midpoints
+  // and centre), each half then tested the same way with its own corners down
+  // to cells one node apart (a soft gradient stops at the first half whose
+  // corners agree; an edge is followed to every node). Cells that pass are
+  // interpolated from their corners (`smooth_`, per level: a finer level's
+  // values win on the edges they share).
+  void Refine() {
+    delta_ = static_cast<float>(options_.kappa_refine_delta);
+    const ObjectPixels object_pixels(g_);
+    object_pixels_ = &object_pixels;
+    smooth_.assign(1, {});
+    std::vector<Cell> refine;
+    for (size_t j = 0; j + 1 < cy_.size(); ++j)
+      for (size_t i = 0; i + 1 < cx_.size(); ++i) {
+        const Cell c{uint32_t(cx_[i]), uint32_t(cy_[j]), uint32_t(cx_[i + 1]), uint32_t(cy_[j + 1])};
+        (Refined(c) ? refine : smooth_[0]).push_back(c);
+      }
+    known_.assign(nx_ * ny_, 0);  // κ set (or scheduled) at the node
+    for (size_t r : cy_)
+      for (size_t q : cx_) known_[r * nx_ + q] = 1;
+    new_cols_.assign(ny_, {});
+    refine_cols_.assign(ny_, {});
+    plane_nodes_.assign(ny_, {});
+    for (;;) {
+      while (!refine.empty()) refine = RefineLevel(refine);
+      std::vector<Cell> still;
+      for (const Cell& c : smooth_[0]) (BorderDiffers(c) ? refine : still).push_back(c);
+      if (refine.empty()) break;
+      smooth_[0] = std::move(still);
+    }
+    object_pixels_ = nullptr;
+  }
+
+  // One level: κ at the nodes that halve the cells in `refine`; returns their
+  // halves still to refine (the others into a new level of smooth_).
+  std::vector<Cell> RefineLevel(const std::vector<Cell>& refine) {
+    // This level's nodes per row: each cell's halving nodes; hidden ones only
+    // where no finer cell compares them (the cell's halves hold no node
+    // inside).
+    std::vector<size_t> rows;
+    const auto schedule = [&](uint32_t q, uint32_t r, bool skip_hidden) {
+      const size_t node = size_t(r) * nx_ + q;
+      if (known_[node] || (skip_hidden && hidden_[node])) return;
+      known_[node] = 1;
+      if (new_cols_[r].empty()) rows.push_back(r);
+      new_cols_[r].push_back(q);
+    };
+    for (const Cell& c : refine) {
+      const bool last = c.x1 - c.x0 <= 2 && c.y1 - c.y0 <= 2;
+      const uint32_t px[3] = {c.x0, (c.x0 + c.x1) / 2, c.x1}, py[3] = {c.y0, (c.y0 + c.y1) / 2, c.y1};
+      for (uint32_t r : py)
+        for (uint32_t q : px) schedule(q, r, last);
+    }
+    std::sort(rows.begin(), rows.end());
+    for (std::vector<CellCandidate>& f : found_) f.clear();
+    // Per row: plane nodes placed, the others found, ...
+    auto t_stage = InsertClock::now();
+    ParallelFor(
+        rows.size(), [&](size_t k) { FindRefinedRow(rows[k]); }, 1);
+    ResolveCellNormals();
+    // Plane-placed nodes take their world cell's normal too (a new cell's
+    // from their planes' normals), so that their lattice nodes, like every
+    // receiver's, do not change with the view: the mean normal of a coarse
+    // cell's corners changes as the grid slides over the scene, and each new
+    // normal cell costs eight new lattice nodes.
+    if (cell_normals_) {
+      std::vector<CellCandidate> placed;
+      for (size_t r : rows)
+        for (const PlaneNode& p : plane_nodes_[r]) placed.push_back({r * nx_ + p.q, p.point, p.plane->normal});
+      cache_->cell_normals.Resolve(spacing_, placed);
+      for (const CellCandidate& c : placed) node_normal_[c.node] = c.normal;
+    }
+    find_ms_ += MsSince(t_stage);
+    // ... then their κ.
+    t_stage = InsertClock::now();
+    ParallelFor(
+        rows.size(),
+        [&](size_t k) {
+          const size_t r = rows[k];
+          ThreadScratch& scratch = ScratchFor(pass_);
+          for (const PlaneNode& p : plane_nodes_[r])
+            kappa_grid_[r * nx_ + p.q] =
+                ReceiverKappa(p.point, cell_normals_ ? node_normal_[r * nx_ + p.q] : p.plane->normal, scratch, r);
+          KappaRow(r, refine_cols_[r]);
+        },
+        1);
+    kappa_ms_ += MsSince(t_stage);
+    // The halves of this level's cells (those with nodes inside).
+    std::vector<Cell> next;
+    smooth_.emplace_back();
+    for (const Cell& c : refine) {
+      const uint32_t xm = (c.x0 + c.x1) / 2, ym = (c.y0 + c.y1) / 2;
+      const bool split_x = c.x1 - c.x0 >= 2, split_y = c.y1 - c.y0 >= 2;
+      for (int b = 0; b < (split_y ? 2 : 1); ++b)
+        for (int a = 0; a < (split_x ? 2 : 1); ++a) {
+          const Cell h{split_x ? (a ? xm : c.x0) : c.x0, split_y ? (b ? ym : c.y0) : c.y0,
+                       split_x ? (a ? c.x1 : xm) : c.x1, split_y ? (b ? c.y1 : ym) : c.y1};
+          if (h.x1 - h.x0 <= 1 && h.y1 - h.y0 <= 1) continue;  // every node a corner
+          (Refined(h) ? next : smooth_.back()).push_back(h);
+        }
+    }
+    return next;
+  }
+
+  // The receivers of row r's new nodes: inside a planar coarse cell where the
+  // node's ray meets the plane (depth-aware upsampling), else found.
+  void FindRefinedRow(size_t r) {
+    std::vector<size_t>& cols = refine_cols_[r];
+    cols.clear();
+    plane_nodes_[r].clear();
+    std::sort(new_cols_[r].begin(), new_cols_[r].end());
+    const size_t j = std::min<size_t>(r / factor_, cy_.size() - 2);
+    for (size_t q : new_cols_[r]) {
+      const CellPlane& plane = planes_[j * (cx_.size() - 1) + std::min<size_t>(q / factor_, cx_.size() - 2)];
+      if (plane.valid) {
+        const Vec3f d = CameraRayDirection(camera_, T_world_camera_, xs_[q], ys_[r]);
+        const float cosine = Dot(d, plane.normal);
+        const float t = cosine < -0.05f ? Dot(plane.point - eye_, plane.normal) / cosine : -1.0f;
+        if (t >= 0.9f * plane.t_min && t <= 1.1f * plane.t_max) {
+          plane_nodes_[r].push_back({q, eye_ + d * t, &plane});
+          continue;
+        }
+      }
+      cols.push_back(q);
+    }
+    new_cols_[r].clear();
+    FindRow(r, cols);
+  }
+
+  // The nodes no level set, bilinear in their smooth cell, level by level
+  // (each row by one thread).
+  void InterpolateSmooth() {
+    const auto t_stage = InsertClock::now();
+    for (const std::vector<Cell>& level : smooth_) {
+      std::vector<std::vector<uint32_t>> by_row(ny_);
+      for (size_t k = 0; k < level.size(); ++k)
+        for (uint32_t r = level[k].y0; r <= level[k].y1; ++r) by_row[r].push_back(uint32_t(k));
+      ParallelFor(
+          ny_,
+          [&](size_t r) {
+            for (uint32_t k : by_row[r]) {
+              const Cell& c = level[k];
+              const float wy = float(r - c.y0) / float(c.y1 - c.y0);
+              const float a = kappa_grid_[c.y0 * nx_ + c.x0], b = kappa_grid_[c.y0 * nx_ + c.x1];
+              const float d0 = kappa_grid_[c.y1 * nx_ + c.x0], d1 = kappa_grid_[c.y1 * nx_ + c.x1];
+              for (size_t q = c.x0; q <= c.x1; ++q) {
+                if (known_[r * nx_ + q]) continue;
+                const float wx = float(q - c.x0) / float(c.x1 - c.x0);
+                kappa_grid_[r * nx_ + q] =
+                    (1 - wx) * (1 - wy) * a + wx * (1 - wy) * b + (1 - wx) * wy * d0 + wx * wy * d1;
+              }
+            }
+          },
+          8);
+    }
+    kappa_ms_ += MsSince(t_stage);
+  }
+
+  // The per-row counters into the frame's timings (summed in row order).
+  void Count() {
+    times_.kappa_receivers_ms = find_ms_;
+    times_.kappa_lookup_ms = kappa_ms_;
+    for (size_t q : looked_up_per_row_) times_.kappa_lookups += q;
+    for (size_t q : receivers_per_row_) times_.kappa_receivers += q;
+    for (size_t q : queries_per_row_) layers_.kappa_queries += q;
+    for (size_t q : evaluated_per_row_) times_.kappa_evaluated += q;
+    for (size_t q : marched_per_row_) times_.kappa_marched += q;
+    for (size_t q : reused_per_row_) times_.kappa_reused += q;
+  }
+
+  // The receivers kept for the next frame (nodes only interpolated or
+  // plane-placed stay unknown).
+  void KeepReceivers() {
+    ReceiverFrame& kept = cache_->receivers;
+    kept.valid = true;
+    kept.rule = ReceiverRule(in_);
+    kept.camera = camera_;
+    kept.T_world_camera = T_world_camera_;
+    kept.T_camera_world = T_world_camera_.Inverse();
+    kept.xs = xs_;
+    kept.ys = ys_;
+    kept.cx = cx_;
+    kept.cy = cy_;
+    kept.factor = factor_;
+    kept.step = spacing_px_.step;
+    kept.nearest = std::numeric_limits<float>::infinity();
+    for (size_t i = 0; i < node_state_.size(); ++i)
+      if (node_state_[i] == 1) kept.nearest = std::min(kept.nearest, Length(node_point_[i] - eye_));
+    kept.state = std::move(node_state_);
+    kept.point = std::move(node_point_);
+    kept.normal = std::move(node_normal_);
+  }
+
+  // The frame's inputs and outputs (loans for the pass).
+  const ShadowPassInputs& in_;
+  const InsertOptions& options_;
+  const CameraIntrinsics& camera_;
+  const Pose& T_world_camera_;
+  const ObjectGBuffer& g_;
+  const ReceiverOverride& receivers_;
+  std::vector<LightPrep>& preps_;
+  std::unique_ptr<KappaCache>& cache_owner_;
+  ImageF& frame_;
+  InsertLayers& layers_;
+  InsertTimings& times_;
+  const Vec3f eye_;
+  const Aabb box_;
+
+  // The reach rectangle and the lattice.
+  std::vector<size_t> casters_;  // objects that cast: a visibility field and a radius
+  PixelRect rect_;               // κ's pixels this frame
+  KappaSpacing spacing_px_;
+  float smallest_ = std::numeric_limits<float>::infinity();  // the smallest caster's radius
+  KappaCache* cache_ = nullptr;  // the lattice and last layer; nullptr: κ exact per receiver
+  double spacing_ = 0.0;         // the lattice's spacing, metres
+  ViewKey view_;
+
+  // The grid: nodes at pixel columns xs_, rows ys_; coarse nodes cx_, cy_
+  // (indices into them) every factor_ nodes.
+  std::vector<int> xs_, ys_;
+  size_t nx_ = 0, ny_ = 0;
+  std::vector<size_t> cx_, cy_;
+  size_t factor_ = 1;
+  std::vector<float> kappa_grid_;  // κ per node, row-major
+  std::vector<uint8_t> hidden_;    // nodes only the objects' pixels cover (HiddenNodes)
+  // Counters per grid row (summed in order by Count, whatever the threads).
+  std::vector<size_t> queries_per_row_, evaluated_per_row_, marched_per_row_, reused_per_row_, looked_up_per_row_,
+      receivers_per_row_;
+  double find_ms_ = 0, kappa_ms_ = 0;
+  float min_opacity_ = 0;         // InsertOptions::receiver_min_opacity
+  double one_minus_eps_ = 1;      // 1 − InsertOptions::shadow_epsilon
+  bool reuse_receivers_ = false;  // the last frame's receivers may stand for marching
+  bool cell_normals_ = false;     // one normal per world cell (InsertOptions::receiver_normal_per_cell)
+  float reuse_tolerance_ = 0;     // metres
+  KappaContext context_;
+  uint64_t pass_ = 0;  // this pass's number (ScratchFor)
+
+  // What the receiver search found at each node (for the upsampling):
+  // state 0 not found, 1 surface, 2 no surface (as ReceiverFrame).
+  std::vector<Vec3f> node_point_, node_normal_;
+  std::vector<uint8_t> node_valid_, node_state_;
+  // Receivers of one search's nodes found, per row: the surface nodes
+  // (opacity above the threshold, finite point) and their own normals.
+  std::vector<std::vector<CellCandidate>> found_;
+
+  // The refinement (factor_ > 1).
+  float delta_ = 0;                                          // InsertOptions::kappa_refine_delta
+  std::vector<CellPlane> planes_;                            // per coarse cell (FitCellPlanes)
+  const ObjectPixels* object_pixels_ = nullptr;              // during Refine
+  std::vector<uint8_t> known_;                               // κ set (or scheduled) at the node
+  std::vector<std::vector<Cell>> smooth_;                    // per level, cells interpolated from their corners
+  std::vector<std::vector<size_t>> new_cols_, refine_cols_;  // per row: a level's new nodes; those found
+  std::vector<std::vector<PlaneNode>> plane_nodes_;          // per row: a level's nodes placed on a plane
+};
+
+}  // namespace
+
+void RenderShadows(const ShadowPassInputs& in, std::vector<LightPrep>& preps, std::unique_ptr<KappaCache>& cache,
+                   ImageF& frame, InsertLayers& layers, InsertTimings& times) {
+  KappaPass(in, preps, cache, frame, layers, times).Run();
 }
 
 }  // namespace nerfar

@@ -3,8 +3,10 @@
 // background where no object covers it — and what it keeps between frames.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <vector>
 
 #include "render/insert/insert_common.h"
@@ -15,17 +17,27 @@
 
 namespace nerfar {
 
+// The view a κ layer is made for: the camera's intrinsics and pose.
+struct ViewKey {
+  double fx = 0, fy = 0, cx = 0, cy = 0;  // pixels
+  int width = 0, height = 0;              // pixels
+  std::array<double, 9> rotation{};       // T_world_camera's rotation, row-major
+  std::array<double, 3> translation{};    // T_world_camera's translation, metres
+  bool operator==(const ViewKey&) const = default;
+};
+
 // What the shadow pass keeps between frames; `key` says which objects,
-// lights and options the lattice and the last layer hold.
+// lights and options the lattice and the last layer hold (a list of numbers
+// compared exactly as a whole: its length varies with the objects and lobes).
 struct KappaCache {
   std::vector<double> key;
   KappaLattice lattice;
-  // Views (camera pose, intrinsics) whose whole reach rectangle was passed
-  // under the current key: each visible receiver there has its nodes here.
-  std::vector<std::vector<double>> explored;
+  // Views whose whole reach rectangle was passed under the current key:
+  // each visible receiver there has its nodes here.
+  std::vector<ViewKey> explored;
   // The last frame's κ grid (nodes at pixel columns last_xs, rows
-  // last_ys), its rectangle and its exact view.
-  std::vector<double> last_view;
+  // last_ys), its rectangle and its exact view (none after Clear).
+  std::optional<ViewKey> last_view;
   PixelRect last_rect;
   std::vector<int> last_xs, last_ys;
   std::vector<float> last_grid;
@@ -40,7 +52,7 @@ struct KappaCache {
   void Clear() {
     lattice.Clear();
     explored.clear();
-    last_view.clear();
+    last_view.reset();
     last_grid.clear();
   }
 };
