@@ -107,14 +107,13 @@ FitState PrepareFit(const EnvSurfaceSamples& samples, const Aabb& aabb, const En
   st.balance = NormalBalanceWeights(samples.normals, options.normal_balance, &samples.radiance);
   st.emitter = EmitterLikeSamples(samples.radiance);
   st.robust = st.balance;
+  for (size_t i = 0; i < samples.size(); ++i)
+    if (st.emitter[i]) st.robust[i] = 0;  // see Loss
   double mean_y = 0;
   for (const Vec3f& l : samples.radiance) mean_y += Y(ToD(l));
   mean_y /= samples.size();
   const double eps = options.loss_epsilon * std::max(mean_y, 1e-12);
   st.eps = Vec3{eps, eps, eps};
-  st.inv_scale.resize(samples.size());
-  for (size_t i = 0; i < samples.size(); ++i)
-    for (int c = 0; c < 3; ++c) st.inv_scale[i][c] = 1.0 / (std::max(0.0, Channel(samples.radiance[i], c)) + eps);
 
   st.energy_weight = options.light_energy_weight;
   st.typical_irradiance = kPi * mean_y / options.albedo_prior;

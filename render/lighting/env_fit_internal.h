@@ -54,7 +54,6 @@ struct FitState {
   std::vector<double> robust;   // per sample IRLS weight (times balance)
   std::vector<double> balance;  // per sample weight of its normal's direction (NormalBalanceWeights)
   std::vector<bool> emitter;    // per sample: emitter-like (EmitterLikeSamples)
-  std::vector<Vec3> inv_scale;  // per sample and channel 1/(L + ε)
   double prior = 0.5, prior_weight = 0, robust_scale = 0.3;
   double energy_weight = 0, typical_irradiance = 1;
   Vec3 eps;                           // loss floor per channel
@@ -66,9 +65,31 @@ struct FitState {
 
 // Model shading S_ic = g·E_nerf + A μ (without albedo).
 Eigen::MatrixXd Shading(const FitState& st);
+// The data term linearised about the current model M_ic = a_ic/π S_ic (S
+// from Shading): the loss is robust in the log residual
+// r = ln((M + ε)/(L + ε)), whose Gauss-Newton step about M is the weighted
+// least squares Σ weight_ic (target_ic − M'_ic)² in the new model M' with
+// weight = 1/(M + ε)² and target = M + (M + ε)·ln((L + ε)/(M + ε)). Every
+// solve of the alternation takes its step on these (times the robust
+// weights), so each lowers the log loss itself. (Weights from the
+// observation instead, 1/(L + ε)² about L, are the same step only where the
+// model already matches: elsewhere a dark observation the model
+// over-predicts counts (M/L)² times more than a bright one it
+// under-predicts by the same factor, and the fit settles too dark, a cell's
+// albedo and the lights' energy held down by its darkest samples: tag ink,
+// misplaced shadows.)
+struct Linearised {
+  Eigen::MatrixXd weight, target;  // n × 3
+};
+Linearised LineariseAtModel(const FitState& st, const Eigen::MatrixXd& S);
 // Robust (Cauchy on the log residual) loss per sample; with update_robust the
 // IRLS weights of `mutable_st` are refreshed. With `skip`, the samples it
-// marks add nothing (still counted in the per-sample mean).
+// marks add nothing (still counted in the per-sample mean). The IRLS weights
+// of emitter-like samples are 0: the solves minimise the likelihood that the
+// model selection compares (ReflectingGain), which leaves them out. (Their
+// glow is no reflection; their log residual is large, and the log loss's
+// Gauss-Newton step, weighted by the model, not the observation, would
+// still let them pull light onto the emitter from wherever its normals face.)
 double Loss(const FitState& st, const Eigen::MatrixXd& S, bool update_robust, FitState* mutable_st,
             const std::vector<bool>* skip = nullptr);
 // The log-likelihood gain of `with` over `without` (the robust loss as a
@@ -92,19 +113,24 @@ void SolveScale(FitState& st);
 void SolveGain(FitState& st);
 
 // What one more neutral lobe of irradiance b_i per unit amplitude, re-solved
-// jointly with the lobes already lit (the active set, A), would take from the
-// data term Σ_ic w_ic (L_ic − a_ic/π S_ic)²: with p_i = Σ_c w_ic f_ic r_ic,
-// q_i = Σ_c w_ic f_ic² (f_ic = a_ic/π, r the residual) and ⟨x, y⟩ = Σ x_i y_i q_i,
-// the term drops by ⟨b⊥, r⟩² / ⟨b⊥, b⊥⟩, b⊥ = b minus its projection on the
-// active columns (orthogonal least squares): a sharp column that the broad
-// lobes already explain but for its shadows scores by those shadows alone.
-// The weights are the likelihood's own, w_ic = 1/(L_ic + ε)², every sample
-// alike: neither the normal balance (it would hand a few objects' sides the
-// choice over the thousands of table samples that show the shadows) nor the
-// robust weights of the current fit (they discount exactly the shadowed
-// samples a model without the source cannot explain). The source is then
-// kept or not on the robust likelihood itself (env_fit.cpp AddSources).
-// On a subset of the samples.
+// jointly with the lobes already lit (the active set, A) and with the albedo
+// cells, would take from the data term Σ_ic w_ic (L_ic − a_ic/π S_ic)²
+// (linearised about the current fit): the term drops by ⟨b⊥, r⟩² / ⟨b⊥, b⊥⟩,
+// r the residual and b⊥ the column's change of the model, f_ic b_i
+// (f = a/π), minus its projection on the active lobes' changes f_ic A_ik and
+// the albedos' (f_ic S_ic on the samples of one cell and channel), in the
+// inner product ⟨x, y⟩ = Σ_ic w_ic x_ic y_ic (orthogonal least squares).
+// Hence a sharp column that the broad lobes already explain but for its
+// shadows scores by those shadows alone, and only by the part of them that
+// an albedo cell cannot take: a cell that lies all in a shadow is as well
+// explained by a dark albedo (which the fit without the source has already
+// given it), so the evidence is the contrast within cells, and the score
+// does not depend on how much of the shadows the current albedos absorbed.
+// The weights and the residual are the log loss's own, linearised about the
+// current fit (LineariseAtModel), every sample alike: neither the normal balance (it would hand a few objects' sides
+// the choice over the thousands of table samples that show the shadows) nor the robust weights of the current fit (they
+// discount exactly the shadowed samples a model without the source cannot explain). The source is then kept or not on
+// the robust likelihood itself (env_fit.cpp AddSources). On a subset of the samples.
 class ResidualPull {
  public:
   ResidualPull(const FitState& st, std::vector<uint32_t> subset);
@@ -113,11 +139,19 @@ class ResidualPull {
   double Score(const std::vector<double>& b) const;
 
  private:
+  // Σ over each (cell, channel) of the subset of f² w S x: the column's
+  // projection on the albedo directions (unnormalised), cell-major.
+  Eigen::VectorXd AlbedoSums(const double* x) const;
   std::vector<uint32_t> subset_;
-  Eigen::VectorXd p_, q_;
-  Eigen::MatrixXd active_;  // subset × active lobes
+  std::vector<uint32_t> slot_;   // per subset entry: its cell's index among the subset's cells
+  Eigen::VectorXd p_, q_;        // Σ_c w f r and Σ_c w f² per entry
+  Eigen::MatrixXd wfs_;          // per entry and channel: w f² S
+  Eigen::VectorXd inv_d_;        // per (cell, channel): 1 / Σ w f² S² (0 for an empty one)
+  Eigen::VectorXd albedo_pull_;  // per (cell, channel): Σ w f S r
+  Eigen::MatrixXd active_;       // subset × active lobes
+  Eigen::MatrixXd active_sums_;  // AlbedoSums of each active column
   Eigen::LDLT<Eigen::MatrixXd> gram_;
-  Eigen::VectorXd active_pull_;  // Aᵀ p
+  Eigen::VectorXd active_pull_;  // ⟨A⊥, r⟩
 };
 
 // A sharp source: where the search placed it and how much it lowers the data term.

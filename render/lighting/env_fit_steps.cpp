@@ -70,6 +70,19 @@ Eigen::MatrixXd Shading(const FitState& st) {
   return S;
 }
 
+Linearised LineariseAtModel(const FitState& st, const Eigen::MatrixXd& S) {
+  const Eigen::Index n = static_cast<Eigen::Index>(st.s->size());
+  Linearised lin{Eigen::MatrixXd(n, 3), Eigen::MatrixXd(n, 3)};
+  for (Eigen::Index i = 0; i < n; ++i)
+    for (int c = 0; c < 3; ++c) {
+      const double model = std::max(0.0, st.albedo[st.cell[i]][c] / kPi * S(i, c));
+      const double m = model + st.eps[c], l = std::max(0.0, Channel(st.s->radiance[i], c)) + st.eps[c];
+      lin.weight(i, c) = 1.0 / (m * m);
+      lin.target(i, c) = model + m * std::log(l / m);
+    }
+  return lin;
+}
+
 double Loss(const FitState& st, const Eigen::MatrixXd& S, bool update_robust, FitState* mutable_st,
             const std::vector<bool>* skip) {
   double total = 0;
@@ -86,7 +99,7 @@ double Loss(const FitState& st, const Eigen::MatrixXd& S, bool update_robust, Fi
     }
     const double q = r2 / (st.robust_scale * st.robust_scale);
     if (skip == nullptr || !(*skip)[i]) total += std::log1p(q);  // Cauchy
-    if (update_robust) mutable_st->robust[i] = st.balance[i] / (1.0 + q);
+    if (update_robust) mutable_st->robust[i] = st.emitter[i] ? 0.0 : st.balance[i] / (1.0 + q);
   }
   return total * st.robust_scale * st.robust_scale / std::max<size_t>(n, 1);
 }
@@ -109,14 +122,15 @@ void SolveLight(FitState& st) {
   const auto slot = [&](Eigen::Index k, int c) { return first[k] + (st.lobes.coloured[k] ? c : 0); };
   Eigen::MatrixXd G_all = Eigen::MatrixXd::Zero(m, m);
   Eigen::VectorXd h_all = Eigen::VectorXd::Zero(m);
+  const Linearised lin = LineariseAtModel(st, Shading(st));
   for (int c = 0; c < 3; ++c) {
     Eigen::MatrixXd B(n, d);
     Eigen::VectorXd y(n);
     for (size_t i = 0; i < n; ++i) {
-      const double w = std::sqrt(st.robust[i]) * st.inv_scale[i][c];
+      const double w = std::sqrt(st.robust[i] * lin.weight(i, c));
       const double a = st.albedo[st.cell[i]][c] / kPi;
       B.row(i) = st.A.row(i) * (w * a);
-      y[i] = w * (Channel(st.s->radiance[i], c) - a * st.gain * Channel(st.s->e_nerf[i], c));
+      y[i] = w * (lin.target(i, c) - a * st.gain * Channel(st.s->e_nerf[i], c));
     }
     const Eigen::MatrixXd G = B.transpose() * B;
     Eigen::VectorXd h = B.transpose() * y;
@@ -138,11 +152,12 @@ void SolveAlbedo(FitState& st, const Eigen::MatrixXd& S) {
   const size_t cells = st.albedo.size();
   std::vector<Vec3> num(cells), den(cells);
   std::vector<double> weight(cells, 0);
+  const Linearised lin = LineariseAtModel(st, S);
   for (size_t i = 0; i < st.s->size(); ++i)
     for (int c = 0; c < 3; ++c) {
-      const double w = st.robust[i] * st.inv_scale[i][c] * st.inv_scale[i][c];
+      const double w = st.robust[i] * lin.weight(i, c);
       const double s = S(i, c) / kPi;
-      num[st.cell[i]][c] += w * s * Channel(st.s->radiance[i], c);
+      num[st.cell[i]][c] += w * s * lin.target(i, c);
       den[st.cell[i]][c] += w * s * s;
       weight[st.cell[i]] += st.robust[i] / 3;
     }
@@ -159,19 +174,20 @@ void SolveAlbedo(FitState& st, const Eigen::MatrixXd& S) {
 // prior are quadratic in t: solved exactly.
 void SolveScale(FitState& st) {
   const Eigen::MatrixXd Amu = st.A * st.mu;
+  const Linearised lin = LineariseAtModel(st, Shading(st));
   double qa = 0, qb = 0;  // minimise qa t² − 2 qb t
   for (size_t i = 0; i < st.s->size(); ++i)
     for (int c = 0; c < 3; ++c) {
-      const double w = st.robust[i] * st.inv_scale[i][c] * st.inv_scale[i][c];
+      const double w = st.robust[i] * lin.weight(i, c);
       const double a = st.albedo[st.cell[i]][c] / kPi;
-      const double e = a * st.gain * Channel(st.s->e_nerf[i], c), rest = Channel(st.s->radiance[i], c) - a * Amu(i, c);
+      const double e = a * st.gain * Channel(st.s->e_nerf[i], c), rest = lin.target(i, c) - a * Amu(i, c);
       qa += w * e * e;
       qb += w * e * rest;
     }
   // Prior Σ γ (a t − a0)², γ per cell relative to the samples' mean weight.
   double mean_w = 0;
   for (size_t i = 0; i < st.s->size(); ++i)
-    for (int c = 0; c < 3; ++c) mean_w += st.robust[i] * st.inv_scale[i][c] * st.inv_scale[i][c];
+    for (int c = 0; c < 3; ++c) mean_w += st.robust[i] * lin.weight(i, c);
   mean_w /= std::max<size_t>(1, 3 * st.s->size());
   // In units of one sample's data term at the typical irradiance, so that
   // the prior's pull does not depend on the radiance scale (HDR: 1e-3..1e3).
@@ -196,17 +212,58 @@ void SolveScale(FitState& st) {
   st.mu /= t;
 }
 
+// The albedo's tint against the coloured lobes': per channel c, a_c → a_c·t_c
+// in every cell and μ_kc → μ_kc/t_c for each coloured lobe k keeps a·A_k μ_k
+// and scales the rest of the model (near field and grey lobes) by t_c: the
+// data term is quadratic in t_c, solved exactly (the prior's pull on the
+// albedo is the scale's, SolveScale, and left to it). Without it the
+// alternation creeps along this valley: the light and the albedo solves each
+// hold the other fixed.
+void SolveTint(FitState& st) {
+  std::vector<bool> coloured(st.mu.rows());
+  bool any = false;
+  for (Eigen::Index k = 0; k < st.mu.rows(); ++k) any = (coloured[k] = st.lobes.coloured[k]) || any;
+  if (!any) return;
+  Eigen::MatrixXd mu_coloured = st.mu, mu_rest = st.mu;
+  for (Eigen::Index k = 0; k < st.mu.rows(); ++k) (coloured[k] ? mu_rest : mu_coloured).row(k).setZero();
+  const Eigen::MatrixXd invariant = st.A * mu_coloured, scaled = st.A * mu_rest;
+  const Linearised lin = LineariseAtModel(st, Shading(st));
+  Vec3 qa, qb;
+  for (size_t i = 0; i < st.s->size(); ++i)
+    for (int c = 0; c < 3; ++c) {
+      const double w = st.robust[i] * lin.weight(i, c);
+      const double a = st.albedo[st.cell[i]][c] / kPi;
+      const double e = a * (st.gain * Channel(st.s->e_nerf[i], c) + scaled(i, c));
+      const double rest = lin.target(i, c) - a * invariant(i, c);
+      qa[c] += w * e * e;
+      qb[c] += w * e * rest;
+    }
+  double a_max[3] = {0, 0, 0};
+  for (const Vec3& a : st.albedo)
+    for (int c = 0; c < 3; ++c) a_max[c] = std::max(a_max[c], a[c]);
+  for (int c = 0; c < 3; ++c) {
+    if (!(qa[c] > 0) || !(a_max[c] > 0)) continue;
+    double t = qb[c] / qa[c];
+    if (!(t > 0) || !std::isfinite(t)) continue;
+    t = std::clamp(std::min(t, 1.0 / a_max[c]), 0.1, 10.0);
+    for (Vec3& a : st.albedo) a[c] *= t;
+    for (Eigen::Index k = 0; k < st.mu.rows(); ++k)
+      if (coloured[k]) st.mu(k, c) /= t;
+  }
+}
+
 // The near-field gain g for fixed albedo and light: the data term is
 // quadratic in g, solved exactly and clamped to [1, gain_max].
 void SolveGain(FitState& st) {
   if (!(st.gain_max > 1)) return;
   const Eigen::MatrixXd Amu = st.A * st.mu;
+  const Linearised lin = LineariseAtModel(st, Shading(st));
   double qa = 0, qb = 0;
   for (size_t i = 0; i < st.s->size(); ++i)
     for (int c = 0; c < 3; ++c) {
-      const double w = st.robust[i] * st.inv_scale[i][c] * st.inv_scale[i][c];
+      const double w = st.robust[i] * lin.weight(i, c);
       const double a = st.albedo[st.cell[i]][c] / kPi;
-      const double e = a * Channel(st.s->e_nerf[i], c), rest = Channel(st.s->radiance[i], c) - a * Amu(i, c);
+      const double e = a * Channel(st.s->e_nerf[i], c), rest = lin.target(i, c) - a * Amu(i, c);
       qa += w * e * e;
       qb += w * e * rest;
     }
@@ -221,6 +278,7 @@ double AlternationStep(FitState& st) {
   SolveLight(st);
   SolveAlbedo(st, Shading(st));
   SolveScale(st);
+  SolveTint(st);
   return Loss(st, Shading(st), true, &st);
 }
 

@@ -74,7 +74,6 @@ void ComputeNearField(const NerfField& field, const EnvEstimateOptions& options,
           Vec3 t, b;
           OrthonormalBasis(normal, t, b);
           const double turn = 2 * kPi * Uniform(options.seed, kRayTurn, i, 0);
-          const Vec3f origin = samples.positions[i] + samples.normals[i] * offset;
           const double ct = std::cos(turn), st = std::sin(turn);
           for (int j = 0; j < R; ++j) {
             const Vec3& l = local[j];
@@ -82,10 +81,11 @@ void ComputeNearField(const NerfField& field, const EnvEstimateOptions& options,
             const Vec3f dir(Normalized(t * lx + b * ly + normal * l.z));
             samples.ray_dirs[i * R + j] = dir;
             if (options.ignore_near_field) continue;
+            const EnvSurfaceRay surface_ray = SurfaceRay(samples, i, dir);
             NerfRay& ray = rays[k * R + j];
-            ray = NerfRay{origin, dir, 0, 0};
-            if (!IntersectAabb(field.aabb, origin, dir, ray.t_near, ray.t_far)) continue;
-            results[k * R + j] = RenderSurfaceRay(field, SurfaceRay(samples, i, dir), options.render, through_layer);
+            ray = NerfRay{surface_ray.origin, dir, 0, 0};
+            if (!IntersectAabb(field.aabb, ray.origin, dir, ray.t_near, ray.t_far)) continue;
+            results[k * R + j] = RenderSurfaceRay(field, surface_ray, options.render, through_layer);
           }
         },
         1);

@@ -29,7 +29,7 @@ struct EnvSurfaceSamples {
   // Filled by ComputeNearField:
   std::vector<Vec3f> e_nerf;  // near-field irradiance
   int rays_per_point = 0;     // R
-  float ray_offset_m = 0;     // rays start at position + normal·ray_offset_m (off the surface)
+  float ray_offset_m = 0;     // rays start where they have risen this far above the surface (SurfaceRay)
   // Rays leaving a sample pass density up to this (1/m) as empty while they
   // cross its own layer (EnvSurfaceRay): the median σ at their start points,
   // the layer's own density there. Occluders and emitters are denser.

@@ -18,7 +18,7 @@ using env_internal::Uniform;
 EnvSurfaceRay SurfaceRay(const EnvSurfaceSamples& samples, size_t i, const Vec3f& dir) {
   const float layer = i < samples.layer_m.size() ? samples.layer_m[i] : 0.0f;
   const float slant = 1.0f / std::max(Dot(samples.normals[i], dir), 1.0f / kLayerSlant);
-  return {samples.positions[i] + samples.normals[i] * samples.ray_offset_m, dir, layer * slant};
+  return {samples.positions[i] + dir * (samples.ray_offset_m * slant), dir, layer * slant};
 }
 
 NerfRayResult RenderSurfaceRay(const NerfField& field, const EnvSurfaceRay& surface_ray,

@@ -25,10 +25,18 @@ struct EnvSurfaceRay {
   Vec3f origin, dir;
   float layer_length = 0;
 };
-// The ray from sample i along `dir` (n·dir > 0): from position +
-// normal·ray_offset_m; the layer's height over n·dir, the slant capped at
-// kLayerSlant (near grazing the cosine weights a ray little, and a long
-// stretch could hide a real occluder).
+// The ray from sample i along `dir` (n·dir > 0). It starts on the line from
+// the sample's position towards `dir`, where that line has risen
+// ray_offset_m above the surface (t = ray_offset_m / n·dir): off the surface
+// and its own fog, yet aimed from the sample itself, so that a shadow's edge
+// is where the occluder's silhouette is seen from the sample. (A start lifted
+// along the normal would see every occluder from ray_offset_m higher up:
+// shadows on a table shortened by ray_offset_m / tan(elevation), and a light
+// fitted to them placed too high.) The slant 1/(n·dir) is capped at
+// kLayerSlant, for the start and for the layer's length: near grazing the
+// cosine weights a ray little, and a long stretch could pass a real occluder.
+// The layer is the sample's own (EnvSurfaceSamples::layer_m) beyond the
+// start, over n·dir.
 inline constexpr float kLayerSlant = 4.0f;
 EnvSurfaceRay SurfaceRay(const EnvSurfaceSamples& samples, size_t i, const Vec3f& dir);
 

@@ -118,41 +118,75 @@ SourceCandidate ChooseSize(const FitState& st, const ResidualPull& pull, const E
 
 ResidualPull::ResidualPull(const FitState& st, std::vector<uint32_t> subset) : subset_(std::move(subset)) {
   const Eigen::MatrixXd S = Shading(st);
+  const Linearised lin = LineariseAtModel(st, S);
   const Eigen::Index m = static_cast<Eigen::Index>(subset_.size());
+  std::vector<uint32_t> cell_slot(st.albedo.size(), UINT32_MAX);
+  uint32_t cells = 0;
+  slot_.resize(subset_.size());
+  for (size_t a = 0; a < subset_.size(); ++a) {
+    uint32_t& slot = cell_slot[st.cell[subset_[a]]];
+    if (slot == UINT32_MAX) slot = cells++;
+    slot_[a] = slot;
+  }
   p_ = Eigen::VectorXd::Zero(m);
   q_ = Eigen::VectorXd::Zero(m);
+  wfs_ = Eigen::MatrixXd::Zero(m, 3);
+  Eigen::VectorXd d = Eigen::VectorXd::Zero(3 * cells);
+  albedo_pull_ = Eigen::VectorXd::Zero(3 * cells);
   for (Eigen::Index a = 0; a < m; ++a) {
     const size_t i = subset_[a];
     for (int c = 0; c < 3; ++c) {
-      const double w = st.inv_scale[i][c] * st.inv_scale[i][c];
-      const double f = st.albedo[st.cell[i]][c] / kPi;
-      const double r = Channel(st.s->radiance[i], c) - f * S(static_cast<Eigen::Index>(i), c);
+      const double w = lin.weight(i, c);
+      const double f = st.albedo[st.cell[i]][c] / kPi, s = S(static_cast<Eigen::Index>(i), c);
+      const double r = lin.target(i, c) - f * s;
       p_[a] += w * f * r;
       q_[a] += w * f * f;
+      wfs_(a, c) = w * f * f * s;
+      d[3 * slot_[a] + c] += w * f * f * s * s;
+      albedo_pull_[3 * slot_[a] + c] += w * f * s * r;
     }
   }
+  inv_d_ = Eigen::VectorXd::Zero(d.size());
+  for (Eigen::Index j = 0; j < d.size(); ++j)
+    if (d[j] > 0) inv_d_[j] = 1.0 / d[j];
   std::vector<Eigen::Index> lit;
   for (Eigen::Index k = 0; k < st.mu.rows(); ++k)
     if (st.mu.row(k).maxCoeff() > 0) lit.push_back(k);
-  active_.resize(m, static_cast<Eigen::Index>(lit.size()));
-  for (size_t k = 0; k < lit.size(); ++k)
+  const Eigen::Index active = static_cast<Eigen::Index>(lit.size());
+  active_.resize(m, active);
+  active_sums_.resize(3 * cells, active);
+  for (Eigen::Index k = 0; k < active; ++k) {
     for (Eigen::Index a = 0; a < m; ++a) active_(a, k) = st.A(subset_[a], lit[k]);
-  Eigen::MatrixXd gram = active_.transpose() * q_.asDiagonal() * active_;
+    active_sums_.col(k) = AlbedoSums(active_.col(k).data());
+  }
+  Eigen::MatrixXd gram =
+      active_.transpose() * q_.asDiagonal() * active_ - active_sums_.transpose() * inv_d_.asDiagonal() * active_sums_;
   if (gram.rows() > 0) gram.diagonal().array() += 1e-9 * std::max(1e-300, gram.diagonal().maxCoeff());
   gram_.compute(gram);
-  active_pull_ = active_.transpose() * p_;
+  active_pull_ = active_.transpose() * p_ - active_sums_.transpose() * inv_d_.cwiseProduct(albedo_pull_);
+}
+
+Eigen::VectorXd ResidualPull::AlbedoSums(const double* x) const {
+  Eigen::VectorXd sums = Eigen::VectorXd::Zero(inv_d_.size());
+  for (Eigen::Index a = 0; a < wfs_.rows(); ++a)
+    for (int c = 0; c < 3; ++c) sums[3 * slot_[a] + c] += wfs_(a, c) * x[a];
+  return sums;
 }
 
 double ResidualPull::Score(const std::vector<double>& b) const {
   const Eigen::Map<const Eigen::VectorXd> column(b.data(), static_cast<Eigen::Index>(b.size()));
-  double num = column.dot(p_), den = column.dot(q_.cwiseProduct(column));
+  const Eigen::VectorXd sums = AlbedoSums(b.data());
+  const double open = column.dot(q_.cwiseProduct(column));
+  double num = column.dot(p_) - sums.dot(inv_d_.cwiseProduct(albedo_pull_));
+  double den = open - sums.dot(inv_d_.cwiseProduct(sums));
   if (active_.cols() > 0) {
-    const Eigen::VectorXd c = active_.transpose() * q_.cwiseProduct(column);
+    const Eigen::VectorXd c =
+        active_.transpose() * q_.cwiseProduct(column) - active_sums_.transpose() * inv_d_.cwiseProduct(sums);
     const Eigen::VectorXd g_c = gram_.solve(c);
     num -= g_c.dot(active_pull_);
     den -= g_c.dot(c);
   }
-  return num > 0 && den > 1e-12 * column.dot(q_.cwiseProduct(column)) ? num * num / den : 0.0;
+  return num > 0 && den > 1e-12 * open ? num * num / den : 0.0;
 }
 
 SourceCandidate FindSource(const FitState& st, const EnvShadowRays& shadow, const EnvEstimateOptions& o) {

@@ -28,7 +28,7 @@ struct Ball {
   double radius;
 };
 const Ball kBalls[3] = {{{-0.15, 0.05, 0.08}, 0.08}, {{0.2, -0.15, 0.1}, 0.1}, {{0.1, 0.25, 0.06}, 0.06}};
-constexpr double kOffset = 1e-3;  // rays start this far along the normal
+constexpr double kOffset = 1e-3;  // rays start where they have risen this far above the surface (SurfaceRay)
 
 Vec3 Direction(double azimuth_deg, double elevation_deg) {
   const double az = azimuth_deg * kPi / 180, el = elevation_deg * kPi / 180;
@@ -44,6 +44,12 @@ bool Blocked(const Vec3& o, const Vec3& d) {
     if (disc > 0 && -half_b + std::sqrt(disc) > 0) return true;
   }
   return false;
+}
+
+// Whether the ray from x (normal n) towards d is blocked, started as
+// SurfaceRay starts it: on the ray, kOffset above the surface.
+bool BlockedFrom(const Vec3& x, const Vec3& n, const Vec3& d) {
+  return Blocked(x + d * (kOffset / std::max(Dot(n, d), 1.0 / kLayerSlant)), d);
 }
 
 EnvShadowRays AnalyticShadows() {
@@ -69,7 +75,7 @@ double LobeIrradianceBruteForce(const Vec3& x, const Vec3& n, const Vec3& axis, 
       const double phi = 2 * kPi * (s + 0.5) / sectors;
       const Vec3 d = axis * std::cos(t) + (u * std::cos(phi) + v * std::sin(phi)) * std::sin(t);
       const double c = Dot(n, d);
-      if (c <= 0 || Blocked(x + n * kOffset, d)) continue;
+      if (c <= 0 || BlockedFrom(x, n, d)) continue;
       sum += std::exp(sharpness * (std::cos(t) - 1)) * c * ring_area;
     }
   }
@@ -81,7 +87,7 @@ double SkyIrradianceBruteForce(const Vec3& x, const Vec3& n) {
   static const std::vector<Vec3> dirs = FibonacciSphere(4000);
   double sum = 0;
   for (const Vec3& d : dirs)
-    if (d.z > 0 && Dot(n, d) > 0 && !Blocked(x + n * kOffset, d)) sum += Dot(n, d);
+    if (d.z > 0 && Dot(n, d) > 0 && !BlockedFrom(x, n, d)) sum += Dot(n, d);
   return sum * 4 * kPi / dirs.size();
 }
 
@@ -124,7 +130,7 @@ EnvSurfaceSamples MakeSamples(const Scene& scene) {
       Vec3 t = Normalized(Cross(std::fabs(n.z) < 0.9 ? Vec3{0, 0, 1} : Vec3{1, 0, 0}, n));
       const Vec3 d = Normalized(t * (r * std::cos(phi)) + Cross(n, t) * (r * std::sin(phi)) + n * std::sqrt(1 - r * r));
       s.ray_dirs.push_back(Vec3f(d));
-      s.opacity.push_back(Blocked(x + n * kOffset, d) ? 1.0f : 0.0f);
+      s.opacity.push_back(BlockedFrom(x, n, d) ? 1.0f : 0.0f);
     }
     const double sun = kSunAmplitude * LobeIrradianceBruteForce(x, n, scene.sun_axis, scene.sun_sharpness);
     const double sky = kSkyRadiance * SkyIrradianceBruteForce(x, n);
