@@ -1136,11 +1136,9 @@ void NerfTrainer::LoadCheckpoint(const std::string& path) {
   f.aabb = s.data.aabb;
   f.origin = Vec3f(s.data.aabb.min);
   f.voxel_m = r.Get<float>("voxel size");
-  for (int a = 0; a < 3; ++a) {
-    f.res[a] = r.Get<int32_t>("resolution");
-    f.bricks[a] = (f.res[a] + 3) / 4;
-  }
+  for (int a = 0; a < 3; ++a) f.res[a] = r.Get<int32_t>("resolution");
   CheckGridOfLevel(f, level, s.options, path);
+  for (int a = 0; a < 3; ++a) f.bricks[a] = (f.res[a] + 3) / 4;
   const uint64_t n_coords = r.Get<uint64_t>("brick list");
   if (n_coords % 3 != 0 || n_coords / 3 > size_t(f.bricks[0]) * f.bricks[1] * f.bricks[2])
     ThrowInputError(path, "checkpoint brick list is inconsistent");
