@@ -39,7 +39,7 @@ constexpr float kJpegClipLevels = 5.0f;
 
 // The file as OpenCV decodes it, 8 or 16 bits, 1 or 3 channels in RGB order.
 cv::Mat ReadDisplayReferred(const std::string& path) {
-  CheckPngOrJpegSignature(path);
+  CheckPngOrJpegHeader(path);
   cv::Mat mat;
   try {
     mat = cv::imread(path, cv::IMREAD_UNCHANGED);

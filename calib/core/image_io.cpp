@@ -7,28 +7,80 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
+#include <tuple>
+#include <utility>
 
 #include "calib/core/atomic_file.h"
 #include "calib/core/error.h"
 
 namespace nerfar {
 
-void CheckPngOrJpegSignature(const std::string& path) {
+namespace {
+
+int64_t BigEndian(const unsigned char* bytes, int count) {
+  int64_t value = 0;
+  for (int i = 0; i < count; ++i) value = value << 8 | bytes[i];
+  return value;
+}
+
+// A JPEG's frame size from its SOF segment, walking the segments from after
+// the SOI marker (a valid file states it before its first scan).
+std::pair<int64_t, int64_t> JpegFrameSize(std::ifstream& file, const std::string& path) {
+  file.clear();
+  file.seekg(2);
+  for (int segment = 0; segment < 4096; ++segment) {
+    int byte = file.get();
+    if (byte != 0xff) break;
+    while (byte == 0xff) byte = file.get();  // fill bytes
+    const int marker = byte;
+    if (marker == 0x01 || (marker >= 0xd0 && marker <= 0xd8)) continue;  // no length
+    if (marker < 0 || marker == 0xd9 || marker == 0xda) break;           // end or a scan before any frame
+    unsigned char length_bytes[2];
+    if (!file.read(reinterpret_cast<char*>(length_bytes), 2)) break;
+    const int64_t length = BigEndian(length_bytes, 2);
+    if (length < 2) break;
+    const bool frame = marker >= 0xc0 && marker <= 0xcf && marker != 0xc4 && marker != 0xc8 && marker != 0xcc;
+    if (frame) {
+      unsigned char sof[5];
+      if (!file.read(reinterpret_cast<char*>(sof), 5)) break;
+      return {BigEndian(sof + 3, 2), BigEndian(sof + 1, 2)};  // width, height
+    }
+    file.seekg(length - 2, std::ios::cur);
+  }
+  ThrowInputError(path, "JPEG without a readable frame header (the file is corrupt)");
+}
+
+}  // namespace
+
+void CheckPngOrJpegHeader(const std::string& path) {
   static constexpr unsigned char kPng[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
   static constexpr unsigned char kJpeg[3] = {0xff, 0xd8, 0xff};
-  unsigned char head[8] = {};
+  unsigned char head[24] = {};
   std::ifstream file(path, std::ios::binary);
   file.read(reinterpret_cast<char*>(head), sizeof head);
   const std::streamsize got = file.gcount();
-  if (got == 8 && std::equal(kPng, kPng + 8, head)) return;
-  if (got >= 3 && std::equal(kJpeg, kJpeg + 3, head)) return;
-  ThrowInputError(path, "not a PNG or JPEG file (its first bytes are neither signature)");
+  int64_t width = 0, height = 0;
+  if (got >= 8 && std::equal(kPng, kPng + 8, head)) {
+    // The first chunk is IHDR: length, type, then width and height.
+    if (got < 24 || !std::equal(head + 12, head + 16, "IHDR"))
+      ThrowInputError(path, "PNG without its IHDR header (the file is corrupt)");
+    width = BigEndian(head + 16, 4);
+    height = BigEndian(head + 20, 4);
+  } else if (got >= 3 && std::equal(kJpeg, kJpeg + 3, head)) {
+    std::tie(width, height) = JpegFrameSize(file, path);
+  } else {
+    ThrowInputError(path, "not a PNG or JPEG file (its first bytes are neither signature)");
+  }
+  if (width < 1 || height < 1 || width > kMaxImageSide || height > kMaxImageSide || width * height > kMaxImagePixels)
+    ThrowInputError(path, "header states " + std::to_string(width) + "x" + std::to_string(height) +
+                              " pixels (expected 1.." + std::to_string(kMaxImageSide) + " a side, at most " +
+                              std::to_string(kMaxImagePixels) + " pixels)");
 }
 
 Image8 ReadImage8(const std::string& path) {
   std::error_code error;
   if (!std::filesystem::is_regular_file(path, error)) ThrowInputError(path, "no such file (expected an image)");
-  CheckPngOrJpegSignature(path);
+  CheckPngOrJpegHeader(path);
   cv::Mat mat;
   try {
     mat = cv::imread(path, cv::IMREAD_UNCHANGED);

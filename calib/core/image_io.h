@@ -13,11 +13,13 @@ namespace nerfar {
 // Reads an 8-bit image with 1 (grey) or 3 (RGB) channels as stored; alpha is
 // dropped. InputError naming the file if it is missing or not a PNG or JPEG.
 Image8 ReadImage8(const std::string& path);
-// InputError naming the file unless it starts as a PNG or a JPEG does. Files
-// are checked before OpenCV decodes them: OpenCV picks a decoder by content
-// among every format it was built with, and some of those libraries abort
-// the process on a malformed file (a DICOM header in a corrupt frame).
-void CheckPngOrJpegSignature(const std::string& path);
+// InputError naming the file unless it starts as a PNG or a JPEG does and its
+// header states a size within kMaxImageSide and kMaxImagePixels. Files are
+// checked before OpenCV decodes them: OpenCV picks a decoder by content among
+// every format it was built with, and some of those libraries abort the
+// process on a malformed file (a DICOM header in a corrupt frame); and a
+// small file can state a size whose decoding takes gigabytes and seconds.
+void CheckPngOrJpegHeader(const std::string& path);
 // Writes PNG or JPEG by extension (atomic). 1, 3 or 4 channels.
 void WriteImage8(const std::string& path, const Image8& image);
 

@@ -129,8 +129,9 @@ TEST(LinearImage, BadFilesAreNamed) {
     m = e.what();
   }
   EXPECT_NE(m.find(tmp.File("a.jpg") + ": not a PNG or JPEG file"), std::string::npos) << m;
-  // A JPEG's signature over a broken body reaches the decoder, which refuses it.
-  WriteText(tmp.File("b.jpg"), std::string("\xff\xd8\xff\xe0") + "truncated");
+  // A JPEG's signature and a 16x16 frame header over a broken body reach the
+  // decoder, which refuses it.
+  WriteText(tmp.File("b.jpg"), std::string("\xff\xd8\xff\xc0\x00\x11\x08\x00\x10\x00\x10\x03", 12) + "truncated");
   m.clear();
   try {
     ReadLinearImage(tmp.File("b.jpg"), Linearisation{});
@@ -138,6 +139,16 @@ TEST(LinearImage, BadFilesAreNamed) {
     m = e.what();
   }
   EXPECT_NE(m.find(tmp.File("b.jpg") + ": cannot decode image"), std::string::npos) << m;
+  // A PNG header stating 100000x100000 pixels is refused before decoding.
+  WriteText(tmp.File("c.png"),
+            std::string("\x89PNG\r\n\x1a\n\0\0\0\x0dIHDR\0\x01\x86\xa0\0\x01\x86\xa0\x08\x02\0\0\0", 29));
+  m.clear();
+  try {
+    ReadLinearImage(tmp.File("c.png"), Linearisation{});
+  } catch (const InputError& e) {
+    m = e.what();
+  }
+  EXPECT_NE(m.find(tmp.File("c.png") + ": header states 100000x100000 pixels"), std::string::npos) << m;
   cv::Mat mask(3, 5, CV_8UC1, cv::Scalar(0));
   ASSERT_TRUE(cv::imwrite(tmp.File("m.png"), mask));
   EXPECT_EQ(ReadMask(tmp.File("m.png"), 5, 3).width, 5);
