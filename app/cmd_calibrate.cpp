@@ -73,7 +73,8 @@ int RunCalibrate(const CommandArgs& args) {
   parser.Flag("--no-tangential", &job.no_tangential, "keep p1 = p2 = 0 (a centred lens; steadier with few views)");
   parser.Flag("--square-pixels", &job.square_pixels, "force fx = fy (steadier with few views)");
   parser.Option("--max-rms", &job.max_rms_px, "PX", "gate: RMS reprojection error to pass (default 0.5)");
-  parser.Option("--detector", &job.detector_preset, "P", "tag detector preset fast|balanced|accurate");
+  parser.Option("--detector", &job.detector_preset, "P",
+                "tag detector preset fast|balanced|accurate (default accurate)");
   parser.Epilog(SourceHelp() +
                 "\nExit code 0 when the calibration passes its gate, 1 when it does not (the file is\n"
                 "still written, with the verdict), 2 for bad input.");

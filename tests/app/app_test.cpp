@@ -47,6 +47,14 @@ TEST(App, EveryCommandHasHelp) {
   }
 }
 
+// A user reading `calibrate --help` must learn which detector preset runs
+// when --detector is left out.
+TEST(App, CalibrateHelpStatesTheDetectorDefault) {
+  const Result result = RunNerfar("calibrate --help");
+  EXPECT_EQ(result.exit_code, 0);
+  EXPECT_NE(result.output.find("(default accurate)"), std::string::npos) << result.output;
+}
+
 TEST(App, UnknownCommandAndBadFlagsExitTwo) {
   Result result = RunNerfar("frobnicate");
   EXPECT_EQ(result.exit_code, 2);
