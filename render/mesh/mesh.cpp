@@ -232,6 +232,37 @@ bool CheckPlyHeaderLine(const std::string& path, int number, const std::string& 
   return true;
 }
 
+// A binary glTF (GLB: "glTF", version, total length, then chunks of length,
+// type and data): the lengths it states must fit the file. assimp allocates
+// a chunk by its stated length before reading it, so a corrupt length in a
+// small file asked for gigabytes.
+void CheckGlbHeader(const std::string& path, uintmax_t file_bytes) {
+  std::ifstream file(path, std::ios::binary);
+  const auto read_u32 = [&file](uint32_t& value) {
+    unsigned char b[4];
+    if (!file.read(reinterpret_cast<char*>(b), 4)) return false;
+    value = uint32_t(b[0]) | uint32_t(b[1]) << 8 | uint32_t(b[2]) << 16 | uint32_t(b[3]) << 24;
+    return true;
+  };
+  uint32_t magic = 0, version = 0, total = 0;
+  if (!read_u32(magic) || magic != 0x46546c67u) return;  // not a GLB ("glTF" little-endian)
+  if (!read_u32(version) || !read_u32(total)) ThrowInputError(path, "GLB header is truncated (the file is corrupt)");
+  if (total != file_bytes)
+    ThrowInputError(path, "GLB header states " + std::to_string(total) + " bytes, the file has " +
+                              std::to_string(file_bytes) + " (the file is corrupt)");
+  uintmax_t at = 12;
+  while (at < file_bytes) {
+    uint32_t length = 0, type = 0;
+    if (!read_u32(length) || !read_u32(type))
+      ThrowInputError(path, "GLB chunk header at byte " + std::to_string(at) + " is truncated (the file is corrupt)");
+    if (length > file_bytes - at - 8)
+      ThrowInputError(path, "GLB chunk at byte " + std::to_string(at) + " states " + std::to_string(length) +
+                                " bytes, past the end of the file (the file is corrupt)");
+    at += 8 + uintmax_t(length);
+    file.seekg(std::streamoff(at));
+  }
+}
+
 // The header of a PLY file, line by line, up to end_header.
 void CheckPlyHeader(const std::string& path, uintmax_t file_bytes) {
   std::ifstream in(path, std::ios::binary);
@@ -318,6 +349,7 @@ TriangleMesh ReadMesh(const std::string& path) {
     ThrowInputError(path, "unknown mesh extension '" + extension + "' (expected .obj, .ply, .gltf or .glb)");
 
   if (extension == ".ply") CheckPlyHeader(path, bytes);
+  CheckGlbHeader(path, bytes);  // by content: assimp reads a GLB whatever its extension
 
   Assimp::Importer importer;
   const aiScene* scene = ImportScene(importer, path);
