@@ -56,6 +56,38 @@ bool ViewFromDetections(const std::vector<TagDetection>& detections, const Board
   return tags >= min_tags;
 }
 
+// camera.json's content: the intrinsics and the record of how well they fit.
+CameraFile CameraFileOf(const IntrinsicsResult& result) {
+  CameraFile file;
+  file.camera = result.camera;
+  CalibrationRecord record;
+  record.rms_px = result.rms_px;
+  record.views_used = result.views_used;
+  for (const ViewReport& v : result.views) record.views_rejected += v.rejected ? 1 : 0;
+  record.coverage = result.coverage.FractionCovered();
+  record.sigma_fx = result.sigma.fx;
+  record.sigma_fy = result.sigma.fy;
+  record.sigma_cx = result.sigma.cx;
+  record.sigma_cy = result.sigma.cy;
+  file.calibration = record;
+  return file;
+}
+
+// The intrinsics with their uncertainties, the errors, the coverage map and the verdict.
+void PrintCalibration(const IntrinsicsResult& result, const CalibrationRecord& record, const std::string& output) {
+  const CameraIntrinsics& c = result.camera;
+  std::printf("camera %dx%d  fx %.2f ± %.2f  fy %.2f ± %.2f  cx %.2f ± %.2f  cy %.2f ± %.2f\n", c.width, c.height, c.fx,
+              result.sigma.fx, c.fy, result.sigma.fy, c.cx, result.sigma.cx, c.cy, result.sigma.cy);
+  std::printf("distortion k1 %.5f k2 %.5f p1 %.5f p2 %.5f k3 %.5f\n", c.k1, c.k2, c.p1, c.p2, c.k3);
+  std::printf("RMS %.3f px over %d views (%d rejected)\n", result.rms_px, result.views_used, record.views_rejected);
+  for (const ViewReport& v : result.views)
+    if (v.rejected || GetLogLevel() == LogLevel::kVerbose)
+      std::printf("  %-24s %4d points  RMS %.3f px%s\n", v.name.c_str(), v.points, v.rms_px,
+                  v.rejected ? "  rejected" : "");
+  std::printf("coverage (%.0f%% of cells):\n%s", record.coverage * 100, result.coverage.Render().c_str());
+  std::printf("%s\nwrote %s\n", result.verdict.c_str(), output.c_str());
+}
+
 }  // namespace
 
 int RunCalibrate(const CommandArgs& args) {
@@ -156,31 +188,9 @@ int RunCalibrate(const CommandArgs& args) {
                         " frames had too few)");
 
   const IntrinsicsResult result = CalibrateIntrinsics(views, width, height, options);
-  CameraFile file;
-  file.camera = result.camera;
-  CalibrationRecord record;
-  record.rms_px = result.rms_px;
-  record.views_used = result.views_used;
-  for (const ViewReport& v : result.views) record.views_rejected += v.rejected ? 1 : 0;
-  record.coverage = result.coverage.FractionCovered();
-  record.sigma_fx = result.sigma.fx;
-  record.sigma_fy = result.sigma.fy;
-  record.sigma_cx = result.sigma.cx;
-  record.sigma_cy = result.sigma.cy;
-  file.calibration = record;
+  const CameraFile file = CameraFileOf(result);
   WriteCameraFile(job.output, file);
-
-  const CameraIntrinsics& c = result.camera;
-  std::printf("camera %dx%d  fx %.2f ± %.2f  fy %.2f ± %.2f  cx %.2f ± %.2f  cy %.2f ± %.2f\n", c.width, c.height, c.fx,
-              result.sigma.fx, c.fy, result.sigma.fy, c.cx, result.sigma.cx, c.cy, result.sigma.cy);
-  std::printf("distortion k1 %.5f k2 %.5f p1 %.5f p2 %.5f k3 %.5f\n", c.k1, c.k2, c.p1, c.p2, c.k3);
-  std::printf("RMS %.3f px over %d views (%d rejected)\n", result.rms_px, result.views_used, record.views_rejected);
-  for (const ViewReport& v : result.views)
-    if (v.rejected || GetLogLevel() == LogLevel::kVerbose)
-      std::printf("  %-24s %4d points  RMS %.3f px%s\n", v.name.c_str(), v.points, v.rms_px,
-                  v.rejected ? "  rejected" : "");
-  std::printf("coverage (%.0f%% of cells):\n%s", record.coverage * 100, result.coverage.Render().c_str());
-  std::printf("%s\nwrote %s\n", result.verdict.c_str(), job.output.c_str());
+  PrintCalibration(result, *file.calibration, job.output);
   return result.passed ? 0 : 1;
 }
 
