@@ -23,6 +23,34 @@
 
 namespace nerfar {
 
+namespace {
+
+// The per-view scores as a table on stdout (with the means) and as report.json's "views".
+Json PrintViewScores(const NerfEvaluation& eval) {
+  const bool reference = eval.mean_psnr_reference >= 0;
+  std::printf("%-10s %18s %22s %16s %10s\n", "view", "psnr_tm_dataset_db", "psnr_tm_reference_db", "depth_median_mm",
+              "render_ms");
+  Json views = Json::array();
+  for (const NerfViewScore& v : eval.views) {
+    std::printf("%-10s %18.2f %22s %16s %10.1f\n", v.name.c_str(), v.psnr_dataset,
+                v.psnr_reference >= 0 ? std::to_string(v.psnr_reference).substr(0, 6).c_str() : "-",
+                v.depth_median_m >= 0 ? std::to_string(v.depth_median_m * 1e3).substr(0, 6).c_str() : "-", v.render_ms);
+    Json j = {{"name", v.name}, {"psnr_tm_dataset_db", v.psnr_dataset}, {"render_ms", v.render_ms}};
+    if (v.psnr_reference >= 0) j["psnr_tm_reference_db"] = v.psnr_reference;
+    if (v.depth_median_m >= 0) j["depth_median_error_m"] = v.depth_median_m;
+    if (v.surface_depth_median_m >= 0) j["surface_depth_median_error_m"] = v.surface_depth_median_m;
+    views.push_back(j);
+  }
+  std::printf("%-10s %18.2f %22s %16s\n", "mean", eval.mean_psnr_dataset,
+              reference ? std::to_string(eval.mean_psnr_reference).substr(0, 6).c_str() : "-",
+              eval.depth_median_m >= 0 ? std::to_string(eval.depth_median_m * 1e3).substr(0, 6).c_str() : "-");
+  if (reference)
+    std::printf("reference: %s/bg_XXX.exr (low-noise renders of the same cameras)\n", eval.reference_folder.c_str());
+  return views;
+}
+
+}  // namespace
+
 int RunRender(const CommandArgs& args) {
   std::string model, dataset, output;
   NerfEvalOptions options;
@@ -106,24 +134,7 @@ int RunRender(const CommandArgs& args) {
   const NerfEvaluation eval = EvaluateNerf(field, dataset, options);
 
   const bool reference = eval.mean_psnr_reference >= 0;
-  std::printf("%-10s %18s %22s %16s %10s\n", "view", "psnr_tm_dataset_db", "psnr_tm_reference_db", "depth_median_mm",
-              "render_ms");
-  Json views = Json::array();
-  for (const NerfViewScore& v : eval.views) {
-    std::printf("%-10s %18.2f %22s %16s %10.1f\n", v.name.c_str(), v.psnr_dataset,
-                v.psnr_reference >= 0 ? std::to_string(v.psnr_reference).substr(0, 6).c_str() : "-",
-                v.depth_median_m >= 0 ? std::to_string(v.depth_median_m * 1e3).substr(0, 6).c_str() : "-", v.render_ms);
-    Json j = {{"name", v.name}, {"psnr_tm_dataset_db", v.psnr_dataset}, {"render_ms", v.render_ms}};
-    if (v.psnr_reference >= 0) j["psnr_tm_reference_db"] = v.psnr_reference;
-    if (v.depth_median_m >= 0) j["depth_median_error_m"] = v.depth_median_m;
-    if (v.surface_depth_median_m >= 0) j["surface_depth_median_error_m"] = v.surface_depth_median_m;
-    views.push_back(j);
-  }
-  std::printf("%-10s %18.2f %22s %16s\n", "mean", eval.mean_psnr_dataset,
-              reference ? std::to_string(eval.mean_psnr_reference).substr(0, 6).c_str() : "-",
-              eval.depth_median_m >= 0 ? std::to_string(eval.depth_median_m * 1e3).substr(0, 6).c_str() : "-");
-  if (reference)
-    std::printf("reference: %s/bg_XXX.exr (low-noise renders of the same cameras)\n", eval.reference_folder.c_str());
+  const Json views = PrintViewScores(eval);
   Json report = {{"model", model},
                  {"dataset", dataset},
                  {"split", options.split},
