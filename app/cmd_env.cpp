@@ -57,6 +57,61 @@ void LogFitResidual(const EnvLight& env) {
   LogInfo(text);
 }
 
+// --dump-samples: every surface sample with what was observed and modelled there, as CSV.
+void WriteSamplesCsv(const std::string& path, const EnvEstimateReport& report) {
+  std::string csv =
+      "x,y,z,nx,ny,nz,L_r,L_g,L_b,Enerf_r,Enerf_g,Enerf_b,Eenv_r,Eenv_g,Eenv_b,Lmodel_r,Lmodel_g,Lmodel_b\n";
+  const EnvSurfaceSamples& s = report.surface;
+  const std::vector<Vec3f>& model = report.fit.modelled;
+  for (size_t i = 0; i < s.size(); ++i) {
+    char row[500];
+    std::snprintf(row, sizeof row,
+                  "%.5f,%.5f,%.5f,%.4f,%.4f,%.4f,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g\n",
+                  s.positions[i].x, s.positions[i].y, s.positions[i].z, s.normals[i].x, s.normals[i].y, s.normals[i].z,
+                  s.radiance[i].x, s.radiance[i].y, s.radiance[i].z, s.e_nerf[i].x, s.e_nerf[i].y, s.e_nerf[i].z,
+                  report.e_env[i].x, report.e_env[i].y, report.e_env[i].z, model[i].x, model[i].y, model[i].z);
+    csv += row;
+  }
+  WriteFileAtomic(path, csv);
+}
+
+// What the estimate found and why it is kept or judged negligible.
+void LogEstimate(const EnvLight& env, const EnvEstimateReport& report) {
+  char line[512];
+  std::snprintf(line, sizeof line,
+                "env: %d views rendered, %d kept; %zu surface samples; %d lobes (dictionary %d); fit relative RMS "
+                "%.3f, mean albedo %.3f, near-field gain %.2f; times: views %.1fs, rays %.1fs, fit %.1fs",
+                report.views.rendered, report.views.accepted, report.samples, report.fit.active_lobes,
+                report.fit.dictionary_size, report.fit.relative_rms, report.fit.mean_albedo, report.fit.near_field_gain,
+                report.seconds_views, report.seconds_near_field, report.seconds_fit);
+  LogInfo(line);
+  std::snprintf(line, sizeof line,
+                "env: of %ld picked pixels, %ld dropped as not surface-like (fog), %ld without a normal (depth "
+                "edges), %ld seen too grazing",
+                report.views.pixels_tried, report.views.pixels_not_surface, report.views.pixels_no_normal,
+                report.views.pixels_grazing);
+  LogInfo(line);
+  std::snprintf(line, sizeof line,
+                "env: environment / near-field irradiance: %.4f over the surface samples, %.4f at the volume centre",
+                env.env_to_near_surface, env.env_to_near_center);
+  LogInfo(line);
+  if (env.evidence_needed > 0) {
+    std::snprintf(line, sizeof line,
+                  "env: model selection: the environment's log-likelihood gain over the near field alone %.1f, "
+                  "BIC penalty for its %d lobes %.1f: %s",
+                  env.evidence, report.fit.active_lobes, env.evidence_needed,
+                  report.fit.environment_supported ? "supported by the data" : "not supported by the data");
+    LogInfo(line);
+  }
+  if (env.negligible)
+    LogInfo(std::string("env: the estimate is negligible (") +
+            (report.fit.environment_supported
+                 ? "below " + std::to_string(env.threshold) + " of the near field"
+                 : "the near field alone explains the observations as well, up to the environment's parameters") +
+            "): all light is inside the NeRF; env.json says so and insertion drops the environment term");
+  LogFitResidual(env);
+}
+
 }  // namespace
 
 int RunEnv(const CommandArgs& args) {
@@ -124,59 +179,11 @@ int RunEnv(const CommandArgs& args) {
   env.source = nerf_path;
   WriteEnvLight(output, env);
   if (!preview.empty()) WriteEnvPreview(preview, env);
-  if (!dump.empty()) {
-    std::string csv =
-        "x,y,z,nx,ny,nz,L_r,L_g,L_b,Enerf_r,Enerf_g,Enerf_b,Eenv_r,Eenv_g,Eenv_b,Lmodel_r,Lmodel_g,Lmodel_b\n";
-    const EnvSurfaceSamples& s = report.surface;
-    const std::vector<Vec3f>& model = report.fit.modelled;
-    for (size_t i = 0; i < s.size(); ++i) {
-      char row[500];
-      std::snprintf(row, sizeof row,
-                    "%.5f,%.5f,%.5f,%.4f,%.4f,%.4f,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g\n",
-                    s.positions[i].x, s.positions[i].y, s.positions[i].z, s.normals[i].x, s.normals[i].y,
-                    s.normals[i].z, s.radiance[i].x, s.radiance[i].y, s.radiance[i].z, s.e_nerf[i].x, s.e_nerf[i].y,
-                    s.e_nerf[i].z, report.e_env[i].x, report.e_env[i].y, report.e_env[i].z, model[i].x, model[i].y,
-                    model[i].z);
-      csv += row;
-    }
-    WriteFileAtomic(dump, csv);
-  }
-
-  char line[512];
-  std::snprintf(line, sizeof line,
-                "env: %d views rendered, %d kept; %zu surface samples; %d lobes (dictionary %d); fit relative RMS "
-                "%.3f, mean albedo %.3f, near-field gain %.2f; times: views %.1fs, rays %.1fs, fit %.1fs",
-                report.views.rendered, report.views.accepted, report.samples, report.fit.active_lobes,
-                report.fit.dictionary_size, report.fit.relative_rms, report.fit.mean_albedo, report.fit.near_field_gain,
-                report.seconds_views, report.seconds_near_field, report.seconds_fit);
-  LogInfo(line);
-  std::snprintf(line, sizeof line,
-                "env: of %ld picked pixels, %ld dropped as not surface-like (fog), %ld without a normal (depth "
-                "edges), %ld seen too grazing",
-                report.views.pixels_tried, report.views.pixels_not_surface, report.views.pixels_no_normal,
-                report.views.pixels_grazing);
-  LogInfo(line);
-  std::snprintf(line, sizeof line,
-                "env: environment / near-field irradiance: %.4f over the surface samples, %.4f at the volume centre",
-                env.env_to_near_surface, env.env_to_near_center);
-  LogInfo(line);
-  if (env.evidence_needed > 0) {
-    std::snprintf(line, sizeof line,
-                  "env: model selection: the environment's log-likelihood gain over the near field alone %.1f, "
-                  "BIC penalty for its %d lobes %.1f: %s",
-                  env.evidence, report.fit.active_lobes, env.evidence_needed,
-                  report.fit.environment_supported ? "supported by the data" : "not supported by the data");
-    LogInfo(line);
-  }
-  if (env.negligible)
-    LogInfo(std::string("env: the estimate is negligible (") +
-            (report.fit.environment_supported
-                 ? "below " + std::to_string(env.threshold) + " of the near field"
-                 : "the near field alone explains the observations as well, up to the environment's parameters") +
-            "): all light is inside the NeRF; env.json says so and insertion drops the environment term");
-  LogFitResidual(env);
+  if (!dump.empty()) WriteSamplesCsv(dump, report);
+  LogEstimate(env, report);
   if (!truth.empty()) {
     const ImageF estimate = RenderEquirect(env.lobes, truth.width, truth.height);
+    char line[512];
     std::snprintf(line, sizeof line,
                   "env: irradiance error against %s (luminance, relative RMS; eval/metrics.py irradiance): %.4f over "
                   "the 32 upper-hemisphere normals (--upper), %.4f over all 64",
