@@ -26,6 +26,11 @@ inline uint64_t LatticeKey(int64_t i, int64_t j, int64_t k, uint32_t cell) {
          (uint64_t((k + kOffset) & kMask) << 10) | cell;
 }
 constexpr size_t kKappaCacheMaxNodes = size_t(1) << 22;  // ~4 M nodes (~100 MB): cleared beyond
+// Levels below the lattice's own, each of half the spacing above it: four
+// take the default spacing (0.15 caster radii) under 0.01 radii, finer than
+// a sun's penumbra (λ ~ 1e4: 0.024 radii wide) half a radius from the
+// caster.
+constexpr size_t kKappaFineLevels = 4;
 
 // The lattice nodes one thread looked up last (direct-mapped by key; value
 // -1: empty): neighbouring receivers of a row share most of their 8 nodes,

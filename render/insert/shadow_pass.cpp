@@ -381,11 +381,11 @@ class KappaPass {
       key.insert(key.end(), prep.parallax.distance.begin(), prep.parallax.distance.end());
     }
     if (!cache_owner_) cache_owner_ = std::make_unique<KappaCache>();
-    if (key != cache_owner_->key || cache_owner_->lattice.Size() > kKappaCacheMaxNodes) {
+    if (key != cache_owner_->key || cache_owner_->Size() > kKappaCacheMaxNodes) {
       cache_owner_->Clear();
       cache_owner_->key = std::move(key);
     }
-    cache_owner_->lattice.Publish();  // the last frame's nodes: read without locks this frame
+    cache_owner_->Publish();  // the last frame's nodes: read without locks this frame
     cache_ = cache_owner_.get();
   }
 
@@ -498,6 +498,7 @@ class KappaPass {
     context_ = KappaContext{
         &casters_,      &in_.spheres, &preps_, &in_.lights, static_cast<float>(options_.shadow_reach_radii),
         one_minus_eps_, in_.sources};
+    SharpestPenumbra();
     pass_ = ++g_kappa_passes;
     node_point_.assign(nx_ * ny_, Vec3f{});
     node_normal_.assign(nx_ * ny_, Vec3f{});
@@ -518,19 +519,62 @@ class KappaPass {
     cx_ = coarse_axis(nx_), cy_ = coarse_axis(ny_);
   }
 
-  // κ at receiver x (normal n): exact, or trilinear in the world lattice.
+  // The lattice's cells are trusted where their corners agree within
+  // kappa_refine_delta (the screen grid's rule) or where the sharpest light's
+  // penumbra is wider than a cell; elsewhere κ is exact at the receiver.
+  void SharpestPenumbra() {
+    double sharpest = 0;
+    for (const SgMixture& light : in_.lights)
+      for (const Sg& lobe : light) sharpest = std::max(sharpest, lobe.sharpness);
+    penumbra_per_metre_ = sharpest > 0 ? 2.0 * std::sqrt(2.0 * std::log(2.0) / sharpest) : 1.0;
+    delta_lattice_ = static_cast<float>(options_.kappa_refine_delta);
+    sample_angle_ = double(spacing_px_.step) / camera_.fx;
+  }
+
+  // κ at receiver x (normal n): exact, or trilinear in the world lattice,
+  // in a finer level of it where the level's cell cannot hold a sharp
+  // penumbra (its corners disagree and the penumbra is narrower than the
+  // cell) and the cell is wider than what one κ sample covers on screen
+  // (finer nodes than samples would be computed anew as the camera moves).
+  // Every level's nodes are kept across frames.
   float ExactOrLatticeKappa(const Vec3f& x, const Vec3f& n, ThreadScratch& sc, size_t row) {
-    if (cache_ == nullptr) {
-      bool queried = false;
-      const float k = KappaAt(context_, x, n, sc.kappa, &queried);
-      ++evaluated_per_row_[row];
-      if (queried) ++queries_per_row_[row];
-      return k;
-    }
+    if (cache_ == nullptr) return ExactKappa(x, n, sc, row);
     ++receivers_per_row_[row];
-    // No bound test here: nodes that the bound clears hold κ = 1.
-    // Trilinear over the lattice nodes around x, for x's normal cell.
     const uint32_t cell = NormalCell(n);
+    double spacing = spacing_;
+    for (size_t level = 0;; ++level, spacing *= 0.5) {
+      Spread spread;
+      const float k = level == 0 ? CoarseLatticeKappa(x, cell, sc, row, &spread)
+                                 : FineLatticeKappa(cache_->fine[level - 1], spacing, x, cell, sc, row, &spread);
+      if (level == kKappaFineLevels || spread.highest - spread.lowest <= delta_lattice_ ||
+          !PenumbraNarrowerThan(x, spacing) || !WiderThanAPixel(x, spacing))
+        return k;
+    }
+  }
+
+  // The lowest and highest corner value of a trilinear look-up.
+  struct Spread {
+    float lowest = 1.0f, highest = 0.0f;
+    void Add(float v) { lowest = std::min(lowest, v), highest = std::max(highest, v); }
+  };
+
+  // One lattice node's κ (computed and kept on a miss).
+  float NodeKappa(KappaLattice& lattice, uint64_t key, const Vec3f& node, uint32_t cell, ThreadScratch& sc,
+                  size_t row) {
+    float value;
+    if (++looked_up_per_row_[row], lattice.Find(key, &value)) return value;
+    bool queried = false;
+    value = KappaAt(context_, node, CellNormal(cell), sc.kappa, &queried);
+    lattice.Insert(key, value);
+    if (value < one_minus_eps_) cache_->lattice.GrowShadow(node);
+    ++evaluated_per_row_[row];
+    if (queried) ++queries_per_row_[row];
+    return value;
+  }
+
+  // Trilinear κ over the top level's nodes around x for x's normal cell,
+  // through this thread's corner values and memo.
+  float CoarseLatticeKappa(const Vec3f& x, uint32_t cell, ThreadScratch& sc, size_t row, Spread* spread) {
     const double fx = x.x / spacing_, fy = x.y / spacing_, fz = x.z / spacing_;
     const double bx = std::floor(fx), by = std::floor(fy), bz = std::floor(fz);
     const double wx = fx - bx, wy = fy - by, wz = fz - bz;
@@ -548,31 +592,68 @@ class KappaPass {
       if (weight < 1e-3) continue;
       total += weight;
       float& cached = sc.corner_value[size_t(corner)];
-      if (cached >= 0.0f) {
-        sum += weight * cached;
-        continue;
+      if (cached < 0.0f) {
+        const int64_t i = int64_t(bx) + dx, j = int64_t(by) + dy, k = int64_t(bz) + dz;
+        const uint64_t key = LatticeKey(i, j, k, cell);
+        const size_t slot = LatticeMemo::Slot(key);
+        if (sc.memo.key[slot] != key || sc.memo.value[slot] < 0.0f) {
+          sc.memo.key[slot] = key;
+          sc.memo.value[slot] =
+              NodeKappa(cache_->lattice, key, Vec3f(Vec3(double(i), double(j), double(k)) * spacing_), cell, sc, row);
+        }
+        cached = sc.memo.value[slot];
       }
-      const int64_t i = int64_t(bx) + dx, j = int64_t(by) + dy, k = int64_t(bz) + dz;
-      const uint64_t key = LatticeKey(i, j, k, cell);
-      const size_t slot = LatticeMemo::Slot(key);
-      float value;
-      if (sc.memo.key[slot] == key && sc.memo.value[slot] >= 0.0f) {
-        value = sc.memo.value[slot];
-      } else if (++looked_up_per_row_[row], !cache_->lattice.Find(key, &value)) {
-        bool queried = false;
-        const Vec3f node(Vec3(double(i), double(j), double(k)) * spacing_);
-        value = KappaAt(context_, node, CellNormal(cell), sc.kappa, &queried);
-        cache_->lattice.Insert(key, value);
-        if (value < one_minus_eps_) cache_->lattice.GrowShadow(node);
-        ++evaluated_per_row_[row];
-        if (queried) ++queries_per_row_[row];
-      }
-      sc.memo.key[slot] = key;
-      sc.memo.value[slot] = value;
-      cached = value;
-      sum += weight * value;
+      sum += weight * cached;
+      spread->Add(cached);
     }
     return total > 0.0 ? static_cast<float>(std::clamp(sum / total, 0.0, 1.0)) : 1.0f;
+  }
+
+  // Trilinear κ over a finer level's nodes (spacing `spacing`) around x:
+  // reached only inside a sharp penumbra, straight from the level's table.
+  float FineLatticeKappa(KappaLattice& lattice, double spacing, const Vec3f& x, uint32_t cell, ThreadScratch& sc,
+                         size_t row, Spread* spread) {
+    const double fx = x.x / spacing, fy = x.y / spacing, fz = x.z / spacing;
+    const double bx = std::floor(fx), by = std::floor(fy), bz = std::floor(fz);
+    const double wx = fx - bx, wy = fy - by, wz = fz - bz;
+    double sum = 0.0, total = 0.0;
+    for (int corner = 0; corner < 8; ++corner) {
+      const int dx = corner & 1, dy = (corner >> 1) & 1, dz = corner >> 2;
+      const double weight = (dx ? wx : 1 - wx) * (dy ? wy : 1 - wy) * (dz ? wz : 1 - wz);
+      if (weight < 1e-3) continue;
+      total += weight;
+      const int64_t i = int64_t(bx) + dx, j = int64_t(by) + dy, k = int64_t(bz) + dz;
+      const float value = NodeKappa(lattice, LatticeKey(i, j, k, cell),
+                                    Vec3f(Vec3(double(i), double(j), double(k)) * spacing), cell, sc, row);
+      sum += weight * value;
+      spread->Add(value);
+    }
+    return total > 0.0 ? static_cast<float>(std::clamp(sum / total, 0.0, 1.0)) : 1.0f;
+  }
+
+  float ExactKappa(const Vec3f& x, const Vec3f& n, ThreadScratch& sc, size_t row) {
+    bool queried = false;
+    const float k = KappaAt(context_, x, n, sc.kappa, &queried);
+    ++evaluated_per_row_[row];
+    if (queried) ++queries_per_row_[row];
+    return k;
+  }
+
+  // Whether a lattice cell of `spacing` at x is wider than the table's width
+  // one κ sample (kappa_step pixels) covers there.
+  bool WiderThanAPixel(const Vec3f& x, double spacing) const {
+    return spacing > double(Length(x - eye_)) * sample_angle_;
+  }
+
+  // Whether the sharpest light's penumbra at x is narrower than a lattice
+  // cell of `spacing`, so that trilinear κ would widen it: the penumbra
+  // spans the light's angular width (the lobe's full width at half maximum,
+  // 2·sqrt(2 ln 2 / λ)) times the distance to the caster, at least x's
+  // distance to the nearest caster's bounding sphere.
+  bool PenumbraNarrowerThan(const Vec3f& x, double spacing) const {
+    float nearest = std::numeric_limits<float>::infinity();
+    for (size_t j : casters_) nearest = std::min(nearest, Length(x - in_.spheres[j].center) - in_.spheres[j].radius);
+    return double(std::max(nearest, 0.0f)) * penumbra_per_metre_ < spacing;
   }
 
   // κ at a receiver; with shadow_epsilon_snap, κ ≥ 1 − ε is 1 (the bound's rule).
@@ -1021,8 +1102,11 @@ class KappaPass {
   PixelRect rect_;               // κ's pixels this frame
   KappaSpacing spacing_px_;
   float smallest_ = std::numeric_limits<float>::infinity();  // the smallest caster's radius
-  KappaCache* cache_ = nullptr;  // the lattice and last layer; nullptr: κ exact per receiver
-  double spacing_ = 0.0;         // the lattice's spacing, metres
+  KappaCache* cache_ = nullptr;    // the lattice and last layer; nullptr: κ exact per receiver
+  double spacing_ = 0.0;           // the lattice's spacing, metres
+  double penumbra_per_metre_ = 1;  // the sharpest light's penumbra width per metre from the caster
+  float delta_lattice_ = 0;        // corners further apart than this are not interpolated (when sharp)
+  double sample_angle_ = 0;        // radians between κ samples on screen (kappa_step pixels)
   ViewKey view_;
 
   // The grid: nodes at pixel columns xs_, rows ys_; coarse nodes cx_, cy_

@@ -32,6 +32,9 @@ struct ViewKey {
 struct KappaCache {
   std::vector<double> key;
   KappaLattice lattice;
+  // Finer levels (spacing halved at each) where a sharp light's penumbra is
+  // narrower than a cell of the level above.
+  std::array<KappaLattice, kKappaFineLevels> fine;
   // Views whose whole reach rectangle was passed under the current key:
   // each visible receiver there has its nodes here.
   std::vector<ViewKey> explored;
@@ -51,9 +54,21 @@ struct KappaCache {
   // Drops the lattice, the explored views and the last layer.
   void Clear() {
     lattice.Clear();
+    for (KappaLattice& level : fine) level.Clear();
     explored.clear();
     last_view.reset();
     last_grid.clear();
+  }
+  // Nodes in every level.
+  size_t Size() {
+    size_t n = lattice.Size();
+    for (KappaLattice& level : fine) n += level.Size();
+    return n;
+  }
+  // Every level's nodes of the last frame made readable without locks.
+  void Publish() {
+    lattice.Publish();
+    for (KappaLattice& level : fine) level.Publish();
   }
 };
 
