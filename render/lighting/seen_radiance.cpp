@@ -67,67 +67,65 @@ Vec3f AveragedGradientNormal(const NerfField& field, const Vec3f& p) {
   return len > 0.0f && std::isfinite(len) ? g * (-1.0f / len) : Vec3f{};
 }
 
-size_t ApplySeenRadiance(const NerfField& field, const std::vector<NerfRay>& rays, std::vector<NerfRayResult>& results,
-                         const SeenRadianceOptions& options, const NerfRenderOptions& render, uint64_t* samples,
-                         SeenRadianceCache* cache) {
-  NERFAR_CHECK_EQ(rays.size(), results.size());
-  if (cache) {
-    // What the cells' answers depend on: the field (its arrays and layout)
-    // and every option the views use.
-    const auto address = [](const void* p) { return static_cast<double>(reinterpret_cast<uintptr_t>(p)); };
-    const std::vector<double> key = {address(&field),
-                                     address(field.density.data()),
-                                     double(field.density.size()),
-                                     address(field.color.data()),
-                                     double(field.color.size()),
-                                     address(field.occupancy.data()),
-                                     double(field.occupancy.size()),
-                                     double(field.RenderCopyCurrent()),
-                                     address(field.render_copy.bytes.data()),
-                                     field.voxel_m,
-                                     field.origin.x,
-                                     field.origin.y,
-                                     field.origin.z,
-                                     field.aabb.min.x,
-                                     field.aabb.min.y,
-                                     field.aabb.min.z,
-                                     field.aabb.max.x,
-                                     field.aabb.max.y,
-                                     field.aabb.max.z,
-                                     options.min_elevation_deg,
-                                     options.max_elevation_deg,
-                                     double(options.views),
-                                     options.reach_m,
-                                     options.min_opacity,
-                                     double(options.see_through),
-                                     options.see_through_min_opacity,
-                                     options.see_through_reach_m,
-                                     options.group_m,
-                                     double(options.face_views),
-                                     options.face_min_cosine,
-                                     options.face_reach_m,
-                                     options.agree_fraction,
-                                     render.step_voxels,
-                                     render.min_transmittance,
-                                     render.min_alpha,
-                                     double(render.use_render_copy)};
-    if (cache->key != key) {
-      cache->Clear();
-      cache->key = key;
-    }
-  }
-  const double z_min = std::sin(options.min_elevation_deg * kPi / 180);
-  // The view directions (from the point towards the camera): a spiral over
-  // the capture band, the same for every point.
-  const double lo = options.min_elevation_deg * kPi / 180, hi = options.max_elevation_deg * kPi / 180;
-  const std::vector<Vec3f> view_dirs = BandSpiral(lo, hi, options.views);
-  // Candidates of the face views: a denser spiral, the same for every point.
-  const std::vector<Vec3f> face_candidates =
-      options.face_views ? BandSpiral(lo, hi, kFaceCandidatesPerView * options.views) : std::vector<Vec3f>{};
-  // Rays to treat, grouped by the cell (group_m, or one voxel) of their
-  // surface point and by kind: rays opaque enough for the seen radiance never
-  // share a point with fainter (see-through) ones, whose point may lie off
-  // any surface.
+namespace {
+
+// What a cache's answers depend on: the field (its arrays and layout) and
+// every option the views use.
+std::vector<double> SeenRadianceKey(const NerfField& field, const SeenRadianceOptions& options,
+                                    const NerfRenderOptions& render) {
+  const auto address = [](const void* p) { return static_cast<double>(reinterpret_cast<uintptr_t>(p)); };
+  return {address(&field),
+          address(field.density.data()),
+          double(field.density.size()),
+          address(field.color.data()),
+          double(field.color.size()),
+          address(field.occupancy.data()),
+          double(field.occupancy.size()),
+          double(field.RenderCopyCurrent()),
+          address(field.render_copy.bytes.data()),
+          field.voxel_m,
+          field.origin.x,
+          field.origin.y,
+          field.origin.z,
+          field.aabb.min.x,
+          field.aabb.min.y,
+          field.aabb.min.z,
+          field.aabb.max.x,
+          field.aabb.max.y,
+          field.aabb.max.z,
+          options.min_elevation_deg,
+          options.max_elevation_deg,
+          double(options.views),
+          options.reach_m,
+          options.min_opacity,
+          double(options.see_through),
+          options.see_through_min_opacity,
+          options.see_through_reach_m,
+          options.group_m,
+          double(options.face_views),
+          options.face_min_cosine,
+          options.face_reach_m,
+          options.agree_fraction,
+          render.step_voxels,
+          render.min_transmittance,
+          render.min_alpha,
+          double(render.use_render_copy)};
+}
+
+// The rays to treat, grouped by the cell (group_m, or one voxel) of their
+// surface point and by kind: rays opaque enough for the seen radiance never
+// share a point with fainter (see-through) ones, whose point may lie off any
+// surface.
+struct PointCells {
+  std::vector<Vec3f> points;           // one per cell: the first ray's surface point
+  std::vector<Vec3f> dirs;             // the first ray's direction (turns the face normal towards it)
+  std::vector<unsigned char> surface;  // some ray there is opaque enough for the seen radiance
+  std::vector<int64_t> keys;           // the cell and kind of each point (the cache's key)
+  std::vector<size_t> ray_slot;        // each ray's point (SIZE_MAX: not treated)
+};
+
+PointCells GroupRaysByCell(const NerfField& field, const std::vector<NerfRay>& rays,
+                           const std::vector<NerfRayResult>& results, const SeenRadianceOptions& options) {
   struct Key {
     int64_t v;
     bool operator==(const Key& o) const { return v == o.v; }
@@ -136,11 +134,9 @@ size_t ApplySeenRadiance(const NerfField& field, const std::vector<NerfRay>& ray
     size_t operator()(const Key& k) const { return std::hash<int64_t>()(k.v); }
   };
   std::unordered_map<Key, size_t, KeyHash> slot_of;
-  std::vector<Vec3f> points;                 // one per cell: the first ray's surface point
-  std::vector<Vec3f> point_dirs;             // the first ray's direction (turns the face normal towards it)
-  std::vector<unsigned char> point_surface;  // some ray there is opaque enough for the seen radiance
-  std::vector<int64_t> point_keys;           // the cell and kind of each point (the cache's key)
-  std::vector<size_t> ray_slot(rays.size(), SIZE_MAX);
+  PointCells cells;
+  cells.ray_slot.assign(rays.size(), SIZE_MAX);
+  const double z_min = std::sin(options.min_elevation_deg * kPi / 180);
   const float voxel = options.group_m > 0.0 ? static_cast<float>(options.group_m) : field.voxel_m;
   for (size_t r = 0; r < rays.size(); ++r) {
     const NerfRayResult& res = results[r];
@@ -153,131 +149,197 @@ size_t ApplySeenRadiance(const NerfField& field, const std::vector<NerfRay>& ray
     const int64_t i = static_cast<int64_t>(std::floor(g.x)), j = static_cast<int64_t>(std::floor(g.y)),
                   k = static_cast<int64_t>(std::floor(g.z));
     const Key key{((i * 4096 + j) * 4096 + k) * 2 + (res.opacity > options.min_opacity ? 1 : 0)};
-    const auto it = slot_of.emplace(key, points.size()).first;
-    if (it->second == points.size()) {
-      points.push_back(x);
-      point_keys.push_back(key.v);
-      point_dirs.push_back(rays[r].dir);
-      point_surface.push_back(0);
+    const auto it = slot_of.emplace(key, cells.points.size()).first;
+    if (it->second == cells.points.size()) {
+      cells.points.push_back(x);
+      cells.keys.push_back(key.v);
+      cells.dirs.push_back(rays[r].dir);
+      cells.surface.push_back(0);
     }
-    ray_slot[r] = it->second;
-    if (res.opacity > options.min_opacity) point_surface[it->second] = 1;
+    cells.ray_slot[r] = it->second;
+    if (res.opacity > options.min_opacity) cells.surface[it->second] = 1;
   }
-  // The seen radiance of each point: mean colour over the views that reach it.
-  std::vector<Vec3f> seen(points.size());
-  std::vector<unsigned char> reached(points.size(), 0);  // bytes: written from several threads
-  std::vector<uint64_t> point_samples(points.size(), 0);
-  // Views that meet a surface at the point, and views that pass it (see-through).
-  std::vector<int> meet(points.size(), 0), pass(points.size(), 0);
-  // Cells answered by an earlier call (cache): their answers, no views.
-  std::vector<unsigned char> cached(points.size(), 0);
-  if (cache) {
-    size_t fresh = 0;
-    for (size_t p = 0; p < points.size(); ++p) {
-      const auto it = cache->cells.find(point_keys[p]);
-      if (it == cache->cells.end()) {
-        ++fresh;
-        continue;
-      }
-      cached[p] = 1;
-      seen[p] = it->second.seen;
-      reached[p] = it->second.reached ? 1 : 0;
-      meet[p] = it->second.meet;
-      pass[p] = it->second.pass;
+  return cells;
+}
+
+// Each point's answer (its seen radiance and see-through votes), the density
+// samples its views took, and whether an earlier call's cache gave it.
+struct PointAnswers {
+  std::vector<Vec3f> seen;
+  std::vector<unsigned char> reached;  // bytes: written from several threads
+  std::vector<uint64_t> samples;
+  std::vector<int> meet, pass;  // views that meet a surface at the point, and views that pass it (see-through)
+  std::vector<unsigned char> cached;
+  explicit PointAnswers(size_t n) : seen(n), reached(n, 0), samples(n, 0), meet(n, 0), pass(n, 0), cached(n, 0) {}
+};
+
+// The points of cells an earlier call answered take that answer.
+void AnswerFromCache(const PointCells& cells, SeenRadianceCache& cache, PointAnswers& answers) {
+  size_t fresh = 0;
+  for (size_t p = 0; p < cells.points.size(); ++p) {
+    const auto it = cache.cells.find(cells.keys[p]);
+    if (it == cache.cells.end()) {
+      ++fresh;
+      continue;
     }
-    cache->hits += points.size() - fresh;
-    cache->misses += fresh;
-    if (fresh > 0 && cache->cells.size() + fresh > cache->max_cells) cache->cells.clear();  // answers copied above
+    answers.cached[p] = 1;
+    answers.seen[p] = it->second.seen;
+    answers.reached[p] = it->second.reached ? 1 : 0;
+    answers.meet[p] = it->second.meet;
+    answers.pass[p] = it->second.pass;
   }
-  ParallelFor(
-      points.size(),
-      [&](size_t p) {
-        if (cached[p]) return;
-        // One view from outside the volume towards the point, along -u
-        // (false where it misses the volume).
-        const auto look = [&](const Vec3f& u, NerfRayResult& res) {
-          NerfRay ray{points[p] + u * kFar, -u, 0, 0};
-          if (!IntersectAabb(field.aabb, ray.origin, ray.dir, ray.t_near, ray.t_far)) return false;
-          res = field.RenderRay(ray, render);
-          point_samples[p] += res.samples;
-          return true;
-        };
-        // The radiance (per unit opacity) of each view that sees the point,
-        // and the seen radiance they agree on (AgreeingRadiance).
-        std::vector<Vec3f> found;
-        const auto keep = [&](const NerfRayResult& res) { found.push_back(res.color * (1.0f / res.opacity)); };
-        const auto settle = [&] {
-          if (AgreeingRadiance(found, options.agree_fraction, seen[p])) reached[p] = 1;
-          found.clear();
-        };
-        // Face views first: the band's directions in front of the point's face.
-        if (options.face_views && point_surface[p]) {
-          Vec3f n = AveragedGradientNormal(field, points[p]);
-          if (Dot(n, point_dirs[p]) > 0.0f) n = -n;  // the face the ray meets
-          std::vector<const Vec3f*> facing;
-          if (Dot(n, n) > 0.5f)
-            for (const Vec3f& u : face_candidates)
-              if (Dot(u, n) >= options.face_min_cosine) facing.push_back(&u);
-          const size_t count = std::min(facing.size(), static_cast<size_t>(options.views));
-          for (size_t i = 0; i < count; ++i) {
-            // Evenly over the facing candidates (they run up the band's elevations).
-            NerfRayResult res;
-            if (!look(*facing[(2 * i + 1) * facing.size() / (2 * count)], res)) continue;
-            if (res.opacity > options.min_opacity && std::fabs(res.surface_depth - kFar) <= options.face_reach_m)
-              keep(res);
-          }
-          settle();
-        }
-        // The whole band: the see-through votes, and the seen radiance of a
-        // point no face view saw.
-        const bool face_seen = reached[p] != 0;
-        if (face_seen && !options.see_through) return;
-        for (const Vec3f& u : view_dirs) {
-          NerfRayResult res;
-          if (!look(u, res)) continue;
-          // The point lies kFar along the view. The vote (see-through): a
-          // view still more than half transparent past the point sees
-          // through it, one whose surface lies at it (within
-          // see_through_reach_m) meets matter, one stopped before it is
-          // hidden and says nothing.
-          const bool opaque = res.opacity > options.min_opacity;
-          const float offset = opaque ? res.surface_depth - kFar : std::numeric_limits<float>::infinity();
-          if (offset > options.see_through_reach_m)
-            ++pass[p];
-          else if (offset >= -options.see_through_reach_m)
-            ++meet[p];
-          // The seen radiance: a surface within reach_m of the point.
-          if (!face_seen && opaque && !(std::fabs(offset) > options.reach_m)) keep(res);
-        }
-        if (!face_seen) settle();
-      },
-      8);
-  if (samples)
-    for (uint64_t s : point_samples) *samples += s;
-  if (cache)
-    for (size_t p = 0; p < points.size(); ++p)
-      if (!cached[p]) cache->cells[point_keys[p]] = {seen[p], reached[p] != 0, meet[p], pass[p]};
+  cache.hits += cells.points.size() - fresh;
+  cache.misses += fresh;
+  if (fresh > 0 && cache.cells.size() + fresh > cache.max_cells) cache.cells.clear();  // answers copied above
+}
+
+// The views that answer one point: the face views (the band's directions in
+// front of the point's face) first, then the whole band for the see-through
+// votes and the seen radiance of a point no face view saw.
+class PointViews {
+ public:
+  PointViews(const NerfField& field, const SeenRadianceOptions& options, const NerfRenderOptions& render,
+             const PointCells& cells, PointAnswers& answers)
+      : field_(field), options_(options), render_(render), cells_(cells), answers_(answers) {
+    // The view directions (from the point towards the camera): a spiral
+    // over the capture band, the same for every point.
+    const double lo = options.min_elevation_deg * kPi / 180, hi = options.max_elevation_deg * kPi / 180;
+    view_dirs_ = BandSpiral(lo, hi, options.views);
+    // Candidates of the face views: a denser spiral, the same for every point.
+    if (options.face_views) face_candidates_ = BandSpiral(lo, hi, kFaceCandidatesPerView * options.views);
+  }
+
+  void Answer(size_t p) const {
+    if (answers_.cached[p]) return;
+    std::vector<Vec3f> found;
+    if (options_.face_views && cells_.surface[p]) {
+      FaceViews(p, found);
+      Settle(p, found);
+    }
+    const bool face_seen = answers_.reached[p] != 0;
+    if (face_seen && !options_.see_through) return;
+    BandViews(p, face_seen, found);
+    if (!face_seen) Settle(p, found);
+  }
+
+ private:
+  // One view from outside the volume towards the point, along -u (false
+  // where it misses the volume).
+  bool Look(size_t p, const Vec3f& u, NerfRayResult& res) const {
+    NerfRay ray{cells_.points[p] + u * kFar, -u, 0, 0};
+    if (!IntersectAabb(field_.aabb, ray.origin, ray.dir, ray.t_near, ray.t_far)) return false;
+    res = field_.RenderRay(ray, render_);
+    answers_.samples[p] += res.samples;
+    return true;
+  }
+  // The radiance (per unit opacity) of a view that sees the point.
+  static void Keep(const NerfRayResult& res, std::vector<Vec3f>& found) {
+    found.push_back(res.color * (1.0f / res.opacity));
+  }
+  // The seen radiance the views found agree on (AgreeingRadiance).
+  void Settle(size_t p, std::vector<Vec3f>& found) const {
+    if (AgreeingRadiance(found, options_.agree_fraction, answers_.seen[p])) answers_.reached[p] = 1;
+    found.clear();
+  }
+
+  void FaceViews(size_t p, std::vector<Vec3f>& found) const {
+    Vec3f n = AveragedGradientNormal(field_, cells_.points[p]);
+    if (Dot(n, cells_.dirs[p]) > 0.0f) n = -n;  // the face the ray meets
+    std::vector<const Vec3f*> facing;
+    if (Dot(n, n) > 0.5f)
+      for (const Vec3f& u : face_candidates_)
+        if (Dot(u, n) >= options_.face_min_cosine) facing.push_back(&u);
+    const size_t count = std::min(facing.size(), static_cast<size_t>(options_.views));
+    for (size_t i = 0; i < count; ++i) {
+      // Evenly over the facing candidates (they run up the band's elevations).
+      NerfRayResult res;
+      if (!Look(p, *facing[(2 * i + 1) * facing.size() / (2 * count)], res)) continue;
+      if (res.opacity > options_.min_opacity && std::fabs(res.surface_depth - kFar) <= options_.face_reach_m)
+        Keep(res, found);
+    }
+  }
+
+  void BandViews(size_t p, bool face_seen, std::vector<Vec3f>& found) const {
+    for (const Vec3f& u : view_dirs_) {
+      NerfRayResult res;
+      if (!Look(p, u, res)) continue;
+      // The point lies kFar along the view. The vote (see-through): a view
+      // still more than half transparent past the point sees through it,
+      // one whose surface lies at it (within see_through_reach_m) meets
+      // matter, one stopped before it is hidden and says nothing.
+      const bool opaque = res.opacity > options_.min_opacity;
+      const float offset = opaque ? res.surface_depth - kFar : std::numeric_limits<float>::infinity();
+      if (offset > options_.see_through_reach_m)
+        ++answers_.pass[p];
+      else if (offset >= -options_.see_through_reach_m)
+        ++answers_.meet[p];
+      // The seen radiance: a surface within reach_m of the point.
+      if (!face_seen && opaque && !(std::fabs(offset) > options_.reach_m)) Keep(res, found);
+    }
+  }
+
+  const NerfField& field_;
+  const SeenRadianceOptions& options_;
+  const NerfRenderOptions& render_;
+  const PointCells& cells_;
+  PointAnswers& answers_;
+  std::vector<Vec3f> view_dirs_, face_candidates_;
+};
+
+// The answers applied to the rays: the seen radiance where brighter than
+// the ray's own colour, the see-through share on the opacity. How many rays
+// changed.
+size_t ApplyAnswers(const PointCells& cells, const PointAnswers& answers, const SeenRadianceOptions& options,
+                    std::vector<NerfRayResult>& results) {
   size_t changed = 0;
-  for (size_t r = 0; r < rays.size(); ++r) {
-    const size_t p = ray_slot[r];
+  for (size_t r = 0; r < results.size(); ++r) {
+    const size_t p = cells.ray_slot[r];
     if (p == SIZE_MAX) continue;
     bool change = false;
-    if (reached[p] && results[r].opacity > options.min_opacity) {
-      const Vec3f color = seen[p] * results[r].opacity;
+    if (answers.reached[p] && results[r].opacity > options.min_opacity) {
+      const Vec3f color = answers.seen[p] * results[r].opacity;
       if (LuminanceOf(Vec3(color)) > LuminanceOf(Vec3(results[r].color))) {
         results[r].color = color;
         change = true;
       }
     }
-    if (options.see_through && pass[p] > 0) {
+    if (options.see_through && answers.pass[p] > 0) {
       // The share of the informative views that find matter at the point.
-      const float share = static_cast<float>(meet[p]) / static_cast<float>(meet[p] + pass[p]);
+      const float share = static_cast<float>(answers.meet[p]) / static_cast<float>(answers.meet[p] + answers.pass[p]);
       results[r].opacity *= share;
       change = true;
     }
     changed += change ? 1 : 0;
   }
   return changed;
+}
+
+}  // namespace
+
+size_t ApplySeenRadiance(const NerfField& field, const std::vector<NerfRay>& rays, std::vector<NerfRayResult>& results,
+                         const SeenRadianceOptions& options, const NerfRenderOptions& render, uint64_t* samples,
+                         SeenRadianceCache* cache) {
+  NERFAR_CHECK_EQ(rays.size(), results.size());
+  if (cache) {
+    std::vector<double> key = SeenRadianceKey(field, options, render);
+    if (cache->key != key) {
+      cache->Clear();
+      cache->key = std::move(key);
+    }
+  }
+  const PointCells cells = GroupRaysByCell(field, rays, results, options);
+  PointAnswers answers(cells.points.size());
+  if (cache) AnswerFromCache(cells, *cache, answers);
+  const PointViews views(field, options, render, cells, answers);
+  ParallelFor(
+      cells.points.size(), [&](size_t p) { views.Answer(p); }, 8);
+  if (samples)
+    for (uint64_t s : answers.samples) *samples += s;
+  if (cache)
+    for (size_t p = 0; p < cells.points.size(); ++p)
+      if (!answers.cached[p])
+        cache->cells[cells.keys[p]] = {answers.seen[p], answers.reached[p] != 0, answers.meet[p], answers.pass[p]};
+  return ApplyAnswers(cells, answers, options, results);
 }
 
 }  // namespace nerfar
