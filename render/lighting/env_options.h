@@ -32,16 +32,16 @@ struct EnvEstimateOptions {
   // A pixel passes through the NeRF when its opacity exceeds this. Trained
   // grids can hold translucent surfaces (a table of opacity 0.1-0.5 seen from
   // above on a black background); surface-likeness is judged by
-  // max_surface_spread_voxels instead (at 0.95 the lamps NeRF of session 3
-  // gave 2 table samples of 2400, at 0.2 811).
+  // max_surface_spread_voxels instead (at 0.95 such a table gives almost no
+  // samples).
   double min_pixel_opacity = 0.2;
   // A pixel's surface x = o + t50·d lies where its accumulated opacity reaches
   // half of the ray's total (not the expected depth, which fog pulls towards
   // the camera). Pixels whose opacity builds up over more than this many
   // voxels between its quarter and three quarters (a layer of fog, not a
   // surface) are dropped.
-  // The trained tables of session 3 spread their opacity over 10-60 voxels
-  // along the ray (the median still within ~2 cm of the top): 20 keeps them
+  // Trained tables can spread their opacity over tens of voxels along the
+  // ray with the median still within a few voxels of the top: 20 keeps them
   // and drops deeper fog.
   double max_surface_spread_voxels = 20;
   // At most this many pixels per wanted sample are tried in a view (bounds
@@ -108,7 +108,7 @@ struct EnvEstimateOptions {
   // The near field enters the model as g·E_nerf with one gain g in [1, this]
   // fitted with the rest. A trained NeRF's emitters are often much dimmer
   // towards directions no camera saw (the underside of a lamp seen from the
-  // table: 3-5x too dark on the shared lamps scene); without g the fit makes
+  // table: several times too dark); without g the fit makes
   // up the missing light with a bright environment. Light that E_nerf's
   // pattern cannot explain (a window's shadows and lit sides) still goes to
   // the environment. 1 disables it.

@@ -3,8 +3,8 @@
 // A trained NeRF's colour is only constrained towards the captures'
 // directions. The shared scenes (and hand-held captures of a tabletop) are
 // taken from above; seen from below, a surface's colour is whatever the
-// optimisation left there. On the session-3 lamps NeRF the bulb seen from the
-// table is 3-8x too dark (its underside was never photographed), so the near
+// optimisation left there. A lamp's bulb seen from the table can be several
+// times too dark (its underside was never photographed), so the near
 // field E_nerf misses most of the light and an environment estimate makes it
 // up. Here the radiance along a near-field ray that meets a surface from
 // below the capture hemisphere is replaced by the brightest radiance that
@@ -86,11 +86,11 @@ struct SeenRadianceOptions {
   // lamp within a few centimetres). 0: one cell per voxel of the field.
   double group_m = 0.0;
   // Face views (above): aim the views at the face the ray meets. false: the
-  // whole band for every point (the rule before session 8).
+  // whole band for every point.
   bool face_views = true;
   // A band direction u sees the face of normal n when n·u is at least this
-  // (0.1: up to 84° from the normal; the shared lamps captures see the
-  // panel's front at cosines 0.02-0.33).
+  // (0.1: up to 84° from the normal: captures from above see an upright
+  // panel's front at grazing cosines).
   double face_min_cosine = 0.1;
   // A face view sees the point when its surface lies within this distance
   // of it (4 voxels of the shared scenes' 5 mm grids: two live march steps
@@ -100,11 +100,12 @@ struct SeenRadianceOptions {
   // The seen radiance of a point is the mean of the views that see it
   // (face views, or the whole band's when no face view does) whose
   // luminance is at least this fraction of the brightest's. 1: the
-  // brightest alone (the rule before session 10). Why not the brightest: a
+  // brightest alone. Why not the brightest: a
   // trained emitter's radiance varies from view to view around its true
   // value (the field blurs the emitter's edge and the training compensates
   // with a brighter core along some directions), and the maximum of 12 such
-  // views is biased high (lamps bulb: 122-343 against a true 120); a point's
+  // views is biased high (up to about three times a small bulb's true
+  // radiance); a point's
   // views that are far darker than the brightest meet another surface at
   // it (a lamp's dark frame or backing, a pole), and would drag the mean of
   // an emitter down. 0: the plain mean of every view that sees the point.

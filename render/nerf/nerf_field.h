@@ -81,7 +81,7 @@ struct NerfRenderOptions {
   // ray, with psnr_tm within 0.05 dB and surface depth within 0.1 mm of "full" on the shared
   // scenes' balanced models (docs/BENCHMARKS.md); a ray's opacity is then at most 0.97.
   // "preview" (small interactive views): 3-voxel steps, stop at 3e-2 - a third fewer samples than
-  // live, at a cost: psnr_tm 0.10 dB (lamps) to 0.3 dB (window) below full, surface depth +0.1 mm.
+  // live, at a cost: psnr_tm 0.1-0.3 dB below full, surface depth +0.1 mm.
   // Throws InputError for any other name.
   static NerfRenderOptions Preset(const std::string& name);
   // Every problem as "field: what is wrong (expected ...)"; empty when valid.

@@ -8,13 +8,11 @@
 // density, then the 12 colour coefficients), u8 compression (0 none, 1 zlib),
 // u16 0, u64 payload bytes, u64 stored payload bytes, the payload (zlib
 // deflated when compression is 1), u64 checksum of everything before it
-// (the magic, version and checksum are calib/core/binary_file.h's). Payload: per brick i32 coords[3] + u64 mask of stored vertices + u64
-// cell occupancy; then per brick and per channel (density, colour 0..11) an
-// i8 exponent e, an i32 base b and the brick's stored vertices' codes q
-// (bits[channel] bits each, little-endian bit order, padded to a byte): the
-// value is (b + q)·2^e. The writer picks per brick and channel the smallest e
-// whose 2^bits - 1 levels span the brick's values (and keeps |value|/2^e <=
-// 2^23), so the error of a value is at most 2^(e-1) < max((brick max - brick
+// (the magic, version and checksum are calib/core/binary_file.h's). Payload: per brick i32 coords[3] + u64 mask of
+// stored vertices + u64 cell occupancy; then per brick and per channel (density, colour 0..11) an i8 exponent e, an i32
+// base b and the brick's stored vertices' codes q (bits[channel] bits each, little-endian bit order, padded to a byte):
+// the value is (b + q)·2^e. The writer picks per brick and channel the smallest e whose 2^bits - 1 levels span the
+// brick's values (and keeps |value|/2^e <= 2^23), so the error of a value is at most 2^(e-1) < max((brick max - brick
 // min) / (2^bits - 3), 2^-23 · brick max |value|).
 // Loading a loaded field's file again gives exactly the loaded values, and
 // from the second save on the bytes repeat.
@@ -36,8 +34,8 @@ inline constexpr size_t kNerfMaxFileBytes = size_t{1} << 31;
 
 // How the writer quantises and compresses (the reader takes whatever the file says).
 struct NerfFileOptions {
-  // Defaults measured on the balanced lamps / window models (165 / 178 MB as
-  // version 1): 54 / 59 MB, psnr_tm and depth unchanged to 0.01 dB / 0.01 mm.
+  // The defaults store a balanced model in about a third of the bytes of
+  // float storage, psnr_tm and depth unchanged to 0.01 dB / 0.01 mm.
   // Bits per stored raw log-density (8..16). At 12 the error is < 1/4093 of
   // the brick's log-density span (< 0.011 over the full -30..14 range: σ within 1.1 %).
   int density_bits = 12;

@@ -109,37 +109,31 @@ NerfTrainData ReadNerfTrainData(const std::string& dataset_dir) {
 NerfTrainOptions NerfTrainOptions::Preset(const std::string& name) {
   NerfTrainOptions o;
   if (name == "fast") {
-    // 1100 steps, the 5 mm level from step 242, the log-density's learning rate
-    // doubled (session 5, lamps under load 8-10; docs/BENCHMARKS.md): with 0.1
-    // the density ramps of surfaces stay soft (the table's T = 0.5 point lies
-    // 1-5 cm in front of it). 900 steps at 0.1: 26.31 dB, surface depth 20.0 mm,
-    // 196 CPU-s, 33 samples per rendered ray; 900 at 0.2: 26.48 dB, 14.6 mm,
-    // 128 CPU-s, 25 samples (fewer occupied cells, so cheaper steps); 900 at
-    // 0.4: 26.49 dB, 17.2 mm; 1100 at 0.2: 27.27 dB, 12.4 mm, 161 CPU-s, 24 samples.
+    // 1100 steps, the 5 mm level from step 242. The log-density's learning
+    // rate is doubled: in so short a schedule the density ramps of surfaces
+    // otherwise stay soft (their T = 0.5 point centimetres in front of them),
+    // and sharper ramps also leave fewer occupied cells, so steps get cheaper;
+    // twice that gains nothing more (docs/history/nerf.md, "Preset choices").
     o.steps = 1100;
     o.rays_per_step = 4096;
     o.coarse_voxel_m = 0.01;
     o.levels = 2;
     o.last_level_start = 0.22;
     o.lr_density = 0.2;
-    // Saved at 5/m (measured, full schedule): lamps +0.14 dB, window -0.31 dB;
-    // surface depth 22.9 -> 21.2 mm / 8.4 -> 7.1 mm; files 35 -> 21 MB / 34 -> 22 MB.
-    // At 2.5 mm (balanced) it costs 0.3 dB for 24 % of the file: not set there.
+    // Cells under σ = 5/m are dropped from the saved model: at 5 mm voxels
+    // that is faint fog, and the file shrinks by about 40 % with psnr within
+    // ±0.3 dB; at balanced's 2.5 mm voxels the same cut removes real detail.
     o.save_occupancy_sigma = 5.0;
-    // Training at the saved model's threshold once the 5 mm level has settled:
-    // lamps 371 -> 168 CPU-s for the 700-step schedule (with the slot-ordered
-    // Adam), same quality (25.20 -> 25.21 dB, surface depth 21.2 -> 22.1 mm).
+    // Once the 5 mm level has settled, training skips the cells the saved
+    // model will drop anyway: about half the CPU time, the same quality.
     o.occupancy_sigma_finest = 5.0;
-    // Session 6, under load 11-13 (docs/BENCHMARKS.md): the slope decay 1 takes
-    // lamps 27.27 -> 28.32 dB, surface depth 12.42 -> 12.25 mm (median signed
-    // error -2.9 -> -0.1 mm), window 30.19 -> 30.43 dB, 6.30 -> 5.92 mm, and
-    // less fog (fewer samples: 109 / 126 user CPU-s against 161 / 168).
+    // The slope decay returns view-dependence the captures do not constrain
+    // to the view-independent colour: in a short schedule that colour would
+    // otherwise be explained by fog (more samples per ray) and psnr is lower.
     o.color_slope_decay = 1.0;
-    // Session 7, under load 13-14 (docs/BENCHMARKS.md): the foreground penalty
-    // at 1 (from 0.1) takes lamps 28.32 -> 29.90 dB, surface depth 12.25 ->
-    // 7.35 mm (surface pixels below opacity 0.9: 31 % -> 1 %: the far, grazing
-    // part of the table was translucent and its T = 0.5 point fell behind),
-    // window 30.43 -> 30.66 dB, 5.92 -> 6.24 mm.
+    // The foreground penalty at full weight: surfaces seen only at grazing
+    // angles (the far part of a table) otherwise stay translucent and their
+    // T = 0.5 point falls behind them (NerfTrainOptions::foreground_weight).
     o.foreground_weight = 1.0;
   } else if (name == "balanced") {
     o.steps = 2500;
@@ -154,18 +148,11 @@ NerfTrainOptions NerfTrainOptions::Preset(const std::string& name) {
     o.levels = 3;
     // The coarse levels take balanced's step counts (1 cm: steps 0-562, 5 mm:
     // 563-1124; level l starts at last_level_start · l / (levels - 1)), the
-    // rest is the 2.5 mm level. With 0.4 (1000 steps each) window's plain table
-    // was learnt on the coarse levels as a 2-3 cm translucent slab under its
-    // top that the finest level never removed: surface depth 12.57 mm, 31.99 dB
-    // (session 7). Session 8, window, live renders after step 1300 (under load
-    // 9-10): 0.225 gives 8.75 mm, 0.225 with foreground_weight 1 7.97 mm
-    // (31.16 / 31.30 dB); the old schedule at step 2262 had 11.79 mm. Full
-    // run with both (66 min at load 9-13): window 32.37 dB, surface depth
-    // 8.22 mm (balanced 30.51 dB, 7.09 mm); lamps after step 1300: 32.15 dB,
-    // 4.19 mm (balanced 30.86 dB, 5.51 mm).
+    // rest is the 2.5 mm level. Longer coarse levels learn a plain, textureless
+    // table as a translucent slab under its top, which the finest level does
+    // not remove (docs/history/nerf.md, "Preset choices").
     o.last_level_start = 0.225;
-    // As fast (session 7): the foreground penalty at 1. With the old schedule
-    // alone it took window 12.57 -> 10.87 mm, 31.99 -> 32.22 dB.
+    // As fast: the foreground penalty at full weight.
     o.foreground_weight = 1.0;
     o.step_voxels = 0.4;
   } else {

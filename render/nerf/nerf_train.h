@@ -9,7 +9,7 @@
 // with a total-variation prior. Loss per ray and channel:
 //   (C - y)² / (sg(C) + ε)²,  ε = loss_epsilon · (99th-percentile luminance)
 // For C ≪ ε this is plain L2 scaled like the psnr_tm metric; for bright
-// pixels (lamps, 1e3) it is the relative error, so radiance is right across
+// pixels (an emitter, 1e3) it is the relative error, so radiance is right across
 // the range and MC noise averages out (the target enters linearly). Pixels
 // that are exactly 0 (rays that hit nothing) also pull the ray's opacity to 0.
 // A channel an 8-bit sensor clipped is a lower bound (no loss above it), and
@@ -91,8 +91,9 @@ struct NerfTrainOptions {
   // The learning rates decay exponentially to this factor of their start by the last step.
   double lr_final_factor = 0.05;
   // Total-variation weights (squared differences to the 6 neighbours), per step. The data
-  // gradients are means over the batch (~1e-6 per vertex), so 1e-6 here smoothed away
-  // detail (lamps fast 23.5 dB) where 1e-8 keeps it (25.0 dB) and 0 lets floaters grow.
+  // gradients are means over the batch (~1e-6 per vertex), so a weight of that order
+  // competes with the data and smooths detail away; two orders below it keeps detail
+  // and still stops floaters, which grow with none at all.
   double tv_density = 1e-8, tv_color = 1e-8;
   // Weight of the opacity penalty O² on rays whose pixel is exactly 0 (nothing hit).
   double background_weight = 0.1;
@@ -102,15 +103,15 @@ struct NerfTrainOptions {
   // radiance c/O render the same pixel, and the fit settles on translucent
   // surfaces with brighter colour (tiny test scene: table top O ≈ 0.3), the fog
   // that leaves receivers without opacity and depth without a surface. The fast
-  // preset uses 1: at 0.1 surfaces seen only at grazing angles (the far part of
-  // lamps' table) stayed translucent and their T = 0.5 depth fell behind them.
+  // and accurate presets use 1: at 0.1 surfaces seen only at grazing angles (the
+  // far part of a table) stay translucent and their T = 0.5 depth falls behind them.
   double foreground_weight = 0.1;
   // Weight (1/m) of the distortion prior on every ray, Σ_ij w_i w_j |t_i - t_j| + Σ_i w_i² δ_i / 3
   // (w_i = T_i α_i, t in metres): it gathers each ray's weights into one short
   // interval. Off in every preset: it gathers the weights but does not place
-  // them (session 5, lamps fast: 0.03 changes nothing; 0.3 takes 19 -> 14
-  // samples per rendered ray past T = 0.5 but moves surfaces forward, surface
-  // depth 20 -> 24 mm, -0.9 dB). The log-density learning rate sharpened more.
+  // them (strong enough to shorten the rays' weights, it moves surfaces forward
+  // and costs psnr); a higher log-density learning rate sharpens surfaces
+  // without that (docs/history/nerf.md, "Preset choices").
   double distortion_weight = 0.0;
   // Weight of the sparsity prior Σ_i α_i on every ray (α_i the opacity of sample i).
   // Its density gradient λ (1 - α) σ δ vanishes on opaque surfaces (α -> 1) and
