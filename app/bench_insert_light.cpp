@@ -15,9 +15,9 @@
 #include "calib/core/log.h"
 #include "calib/core/parallel.h"
 #include "calib/object.h"
-#include "render/insert/incident_light.h"
 #include "render/insert/insert_options.h"
 #include "render/insert/nerf_scene.h"
+#include "render/lighting/incident_light.h"
 #include "render/mesh/mesh.h"
 #include "render/nerf/nerf_file.h"
 

@@ -34,7 +34,7 @@
 #include "calib/core/math.h"
 #include "render/insert/inserter.h"
 #include "render/insert/object_visibility.h"
-#include "render/insert/scene_field.h"
+#include "render/lighting/scene_field.h"
 #include "render/mesh/mesh.h"
 #include "render/sg/brdf.h"
 #include "render/ssdf/ssdf.h"

@@ -18,8 +18,8 @@
 
 #include "calib/board.h"
 #include "calib/camera_file.h"
-#include "render/insert/scene_field.h"
 #include "render/lighting/env_light.h"
+#include "render/lighting/scene_field.h"
 #include "render/mesh/mesh.h"
 #include "render/nerf/nerf_field.h"
 #include "render/sg/brdf.h"

@@ -5,7 +5,7 @@
 #include <string>
 #include <vector>
 
-#include "render/insert/incident_light.h"
+#include "render/lighting/incident_light.h"
 
 namespace nerfar {
 

@@ -6,9 +6,9 @@
 #include <memory>
 #include <vector>
 
-#include "render/insert/incident_light.h"
 #include "render/insert/inserter.h"
 #include "render/insert/object_visibility.h"
+#include "render/lighting/incident_light.h"
 #include "render/sg/brdf.h"
 #include "render/sg/visibility.h"
 

@@ -10,7 +10,7 @@
 #include <string>
 #include <vector>
 
-#include "render/insert/scene_field.h"
+#include "render/lighting/scene_field.h"
 #include "render/lighting/seen_radiance.h"
 #include "render/nerf/nerf_field.h"
 

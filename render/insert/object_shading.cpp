@@ -7,8 +7,8 @@
 #include <limits>
 
 #include "calib/core/parallel.h"
-#include "render/insert/incident_light.h"
 #include "render/insert/shadow_terms.h"
+#include "render/lighting/incident_light.h"
 
 namespace nerfar {
 

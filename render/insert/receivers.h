@@ -10,7 +10,7 @@
 
 #include "calib/camera.h"
 #include "calib/core/math.h"
-#include "render/insert/scene_field.h"
+#include "render/lighting/scene_field.h"
 
 namespace nerfar {
 

@@ -20,6 +20,7 @@
 #include "calib/core/json.h"
 #include "render/mesh/mesh.h"
 #include "tests/app/live_scene.h"
+#include "tests/support/analytic_scene.h"
 #include "tests/support/support.h"
 
 namespace nerfar {
@@ -67,7 +68,7 @@ class FailingScene : public SceneField {
   void FailIfAsked() const {
     if (throws.load() > 0 && throws.fetch_sub(1) > 0) throw std::runtime_error("scene query failed");
   }
-  AnalyticScene table_;
+  testing::AnalyticScene table_;
 };
 
 struct FailingRun {

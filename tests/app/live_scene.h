@@ -3,7 +3,7 @@
 // table (testing::PlainTable), so an inserted ball is the only thing that changes.
 #pragma once
 
-#include "render/insert/scene_field.h"
+#include "render/lighting/scene_field.h"
 #include "render/synth/camera_stream.h"
 #include "tests/insert/insert_fixtures.h"
 

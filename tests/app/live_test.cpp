@@ -14,11 +14,12 @@
 
 #include "app/live/pipeline.h"
 #include "render/insert/rasterizer.h"
-#include "render/insert/scene_field.h"
+#include "render/lighting/scene_field.h"
 #include "render/mesh/mesh.h"
 #include "render/ssdf/ssdf.h"
 #include "render/synth/camera_stream.h"
 #include "tests/app/live_scene.h"
+#include "tests/support/analytic_scene.h"
 
 namespace nerfar {
 namespace {
@@ -36,13 +37,13 @@ SgMaterial Red() {
 // One pipeline over its own stream (every run renders the same frames).
 struct LiveRun {
   std::unique_ptr<synth::SyntheticCameraSource> source;
-  std::unique_ptr<AnalyticScene> scene;
+  std::unique_ptr<testing::AnalyticScene> scene;
   TriangleMesh ball;
   std::unique_ptr<LivePipeline> pipeline;
 
   LiveRun(const SgMaterial& material, const std::string& preset, const SsdfField* field = nullptr) {
     source = std::make_unique<synth::SyntheticCameraSource>(NearlyStillLampsStream());
-    scene = std::make_unique<AnalyticScene>(testing::PlainTable());
+    scene = std::make_unique<testing::AnalyticScene>(testing::PlainTable());
     ball = MakeUvSphere(kRadius, 32, 16);
     LiveAsset asset;
     asset.name = "ball";
@@ -290,13 +291,13 @@ TEST(LivePipeline, MedianHitDistanceFindsTheTableBehindFog) {
   // ray straight down through the fog: the expected depth Σ T α t / Ô is
   // pulled ~5 cm towards the camera by the fog; the median stays on the
   // table (opacity there jumps from 0.45 to 1 > half of 1).
-  AnalyticSceneParams p;
+  testing::AnalyticSceneParams p;
   p.has_sphere = false;
   p.checker_size_m = 0;
   p.medium_center = {0.0, 0.0, 0.12};
   p.medium_radius = 0.1;
   p.medium_density = 3.0;
-  const AnalyticScene scene(p);
+  const testing::AnalyticScene scene(p);
   const Vec3 origin{0.0, 0.0, 0.5}, down{0, 0, -1};
   const std::optional<double> t = MedianHitDistance(scene, origin, down, 0.0, 0.55);
   ASSERT_TRUE(t.has_value());

@@ -18,10 +18,11 @@
 #include "app/live/live_ui.h"
 #include "app/live/pipeline.h"
 #include "calib/core/image_io.h"
-#include "render/insert/scene_field.h"
+#include "render/lighting/scene_field.h"
 #include "render/mesh/mesh.h"
 #include "render/synth/camera_stream.h"
 #include "tests/app/live_scene.h"
+#include "tests/support/analytic_scene.h"
 #include "tests/support/support.h"
 #include "tracking/frame_sources.h"
 
@@ -154,7 +155,7 @@ class LiveAppTest : public WindowTest {
     if (IsSkipped() || HasFatalFailure()) return;
     NERFAR_REQUIRE(XdotoolInstalled(), "xdotool not installed");
     source_ = std::make_unique<synth::SyntheticCameraSource>(NearlyStillLampsStream());
-    scene_ = std::make_unique<AnalyticScene>(testing::PlainTable());
+    scene_ = std::make_unique<testing::AnalyticScene>(testing::PlainTable());
     ball_ = MakeUvSphere(kRadius, 32, 16);
     LiveAsset asset;
     asset.name = "ball";
@@ -209,7 +210,7 @@ class LiveAppTest : public WindowTest {
   }
 
   std::unique_ptr<synth::SyntheticCameraSource> source_;
-  std::unique_ptr<AnalyticScene> scene_;
+  std::unique_ptr<testing::AnalyticScene> scene_;
   TriangleMesh ball_, cube_;
   std::unique_ptr<LivePipeline> pipeline_;
 };

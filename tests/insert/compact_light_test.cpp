@@ -10,11 +10,12 @@
 #include <cmath>
 #include <cstdio>
 
-#include "render/insert/incident_light.h"
-#include "render/insert/scene_field.h"
+#include "render/lighting/incident_light.h"
+#include "render/lighting/scene_field.h"
 #include "render/sg/prefiltered.h"
 #include "render/sg/sphere.h"
 #include "render/sg/visibility.h"
+#include "tests/support/analytic_scene.h"
 
 namespace nerfar {
 namespace {
@@ -68,13 +69,13 @@ TEST(CompactLobes, SplitKeepsTheMostEnergeticCompactLobesWithinTheBudget) {
 // A table (the analytic scene's plane, no sphere or medium) under a sun of
 // sharpness λ (energy 8.7 in luminance, about the sunroom's) and a dim sky.
 struct SunnyTable {
-  AnalyticScene scene;
+  testing::AnalyticScene scene;
   Vec3 center{0.05, -0.02, 0.06};
   SgMixture environment;
   explicit SunnyTable(
-      double sharpness, AnalyticSceneParams params =
+      double sharpness, testing::AnalyticSceneParams params =
                             [] {
-                              AnalyticSceneParams p;
+                              testing::AnalyticSceneParams p;
                               p.has_sphere = p.has_medium = false;
                               return p;
                             }())
@@ -187,7 +188,7 @@ TEST(CompactLobes, IncidentLightKeepsASmallSunsEnergyAndDirection) {
 // bundle's 16 rays resolve it in such steps); the sun wholly hidden and
 // wholly free at the ends.
 TEST(CompactLobes, TransmittanceOfAHalfHiddenSun) {
-  AnalyticSceneParams p;
+  testing::AnalyticSceneParams p;
   p.has_medium = false;
   p.sphere_center = {-0.2, 0.1, 0.08};
   p.sphere_radius = 0.08;

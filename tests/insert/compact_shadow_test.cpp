@@ -20,6 +20,7 @@
 #include "render/sg/sphere.h"
 #include "render/ssdf/ssdf.h"
 #include "tests/insert/test_camera.h"
+#include "tests/support/analytic_scene.h"
 
 namespace nerfar {
 namespace {
@@ -118,8 +119,8 @@ Profile Measure(const Sun& sun, bool lattice) {
   object.light_override = &light;
   std::vector<double> no_distances(light.size(), std::numeric_limits<double>::infinity());
   object.light_distances = &no_distances;  // a distant light
-  const AnalyticScene scene([] {
-    AnalyticSceneParams p;
+  const testing::AnalyticScene scene([] {
+    testing::AnalyticSceneParams p;
     p.has_sphere = p.has_medium = false;
     p.checker_size_m = 0;
     return p;

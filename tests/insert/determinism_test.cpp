@@ -17,6 +17,7 @@
 #include "render/insert/inserter.h"
 #include "tests/insert/insert_fixtures.h"
 #include "tests/insert/test_camera.h"
+#include "tests/support/analytic_scene.h"
 
 namespace nerfar {
 namespace {
@@ -97,9 +98,9 @@ void ExpectIdentical(const Sequence& a, const Sequence& b, const char* what) {
 }
 
 TEST(Determinism, HandHeldKappaIsTheSameOnOneAndTwoThreads) {
-  AnalyticSceneParams params = PlainTable();
+  testing::AnalyticSceneParams params = PlainTable();
   params.has_sphere = true;  // curved receivers: several normal cells per lattice cell
-  const AnalyticScene exact(params);
+  const testing::AnalyticScene exact(params);
   const ScatteredNormals scene(exact);
   for (const char* preset : {"fast", "balanced"}) {
     const InsertOptions options = InsertOptions::Preset(preset);
@@ -117,8 +118,8 @@ TEST(Determinism, HandHeldKappaIsTheSameOnOneAndTwoThreads) {
 // inserter that never had it gives on its second frame (the same history of
 // receivers), not the last frame's κ.
 TEST(Determinism, KappaKeptBetweenFramesFollowsTheParallaxOption) {
-  AnalyticSceneParams params = PlainTable();
-  const AnalyticScene scene(params);
+  testing::AnalyticSceneParams params = PlainTable();
+  const testing::AnalyticScene scene(params);
   const SphereObject object({-0.04, 0.1, 0.05}, 0.04);
   const CameraIntrinsics camera = testing::TestCamera(240, 180);
   const Pose cam = LookAt({0.22, -0.3, 0.35}, {-0.1, 0.1, 0.02});
@@ -169,7 +170,7 @@ TEST(Determinism, KappaKeptBetweenFramesFollowsTheParallaxOption) {
 // ever saw the new inputs; each change must move the composite, or the
 // comparison shows nothing.
 TEST(Determinism, PreparedLightKeptBetweenFramesFollowsItsInputs) {
-  const AnalyticScene scene(PlainTable());
+  const testing::AnalyticScene scene(PlainTable());
   const SphereObject object({-0.04, 0.1, 0.05}, 0.04), other({0.02, 0.06, 0.05}, 0.04);
   const CameraIntrinsics camera = testing::TestCamera(240, 180);
   const Pose cam = LookAt({0.22, -0.3, 0.35}, {-0.1, 0.1, 0.02});

@@ -13,6 +13,7 @@
 #include "render/sg/sphere.h"
 #include "tests/insert/insert_fixtures.h"
 #include "tests/insert/test_camera.h"
+#include "tests/support/analytic_scene.h"
 
 namespace nerfar {
 namespace {
@@ -32,7 +33,7 @@ double KappaByQuadrature(const SgMixture& light, const Vec3& x, const Vec3& c, d
 }
 
 TEST(EdgeShadow, PartlyCoveredPixelsShowTheShadowedBackground) {
-  const AnalyticScene scene(testing::PlainTable());
+  const testing::AnalyticScene scene(testing::PlainTable());
   // A sphere resting on the table, lit from nearly straight above: its
   // contact shadow surrounds the lower silhouette.
   const testing::SphereObject object({0.0, 0.0, 0.05}, 0.05);

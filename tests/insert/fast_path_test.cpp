@@ -12,6 +12,7 @@
 #include "tests/insert/insert_fixtures.h"
 #include "tests/insert/kappa_compare.h"
 #include "tests/insert/test_camera.h"
+#include "tests/support/analytic_scene.h"
 
 namespace nerfar {
 namespace {
@@ -23,7 +24,7 @@ using testing::SphereObject;
 TEST(FastPath, VertexGammaMatchesPerPixelGamma) {
   // The upper ball half-shadows the lower one under a tilted lobe and a sky:
   // γ varies over the lower ball's surface from 0 to 1.
-  const AnalyticScene scene(PlainTable());
+  const testing::AnalyticScene scene(PlainTable());
   const SphereObject lower({0.0, 0.0, 0.05}, 0.05), upper({0.04, 0.0, 0.19}, 0.05);
   const CameraIntrinsics camera = testing::TestCamera(160, 120);
   const Pose cam = LookAt({0.35, -0.15, 0.15}, lower.center);
@@ -67,9 +68,9 @@ TEST(FastPath, VertexGammaMatchesPerPixelGamma) {
 TEST(FastPath, CoarseOcclusionMatchesARayPerPixel) {
   // The translucent medium ball and the opaque sphere of the analytic scene
   // partly hide the object: blocks near their silhouettes must be marched.
-  AnalyticSceneParams params;
+  testing::AnalyticSceneParams params;
   params.sphere_center = {0.1, 0.06, 0.12};
-  const AnalyticScene scene(params);
+  const testing::AnalyticScene scene(params);
   const SphereObject object({0.0, -0.02, 0.1}, 0.05);
   const Pose cam = LookAt({0.6, -0.02, 0.1}, object.center);
   const CameraIntrinsics camera = testing::TestCamera(160, 120);
@@ -100,7 +101,7 @@ TEST(FastPath, CoarseOcclusionMatchesARayPerPixel) {
 }
 
 TEST(FastPath, KappaLatticeMatchesExactKappaAndIsKeptWhileStill) {
-  const AnalyticScene scene(PlainTable());
+  const testing::AnalyticScene scene(PlainTable());
   SphereObject object({0.0, 0.0, 0.06}, 0.05);
   // κ at every pixel: receivers ~1.5 mm apart, denser than the 5 mm lattice
   // (as at 1280x720), so that views share lattice nodes.
@@ -153,7 +154,7 @@ TEST(FastPath, KappaLatticeMatchesExactKappaAndIsKeptWhileStill) {
 // value for value (the restricted grid is aligned to the whole one's coarse
 // grid, and outside it κ was ≥ 1 − ε).
 TEST(FastPath, RepeatedViewPassesOnlyTheShadowedArea) {
-  const AnalyticScene scene(PlainTable());
+  const testing::AnalyticScene scene(PlainTable());
   const SphereObject object({0.0, 0.0, 0.06}, 0.05);
   const CameraIntrinsics camera = testing::TestCamera(240, 180);
   const Pose cam = LookAt({0.25, -0.3, 0.35}, {0.02, 0.0, 0.0});
@@ -205,9 +206,9 @@ TEST(FastPath, RepeatedViewPassesOnlyTheShadowedArea) {
 // the table and on the scene's sphere (curved: its cells fail the plane test
 // and are marched).
 TEST(FastPath, HandHeldFramesReuseReceivers) {
-  AnalyticSceneParams params = PlainTable();
+  testing::AnalyticSceneParams params = PlainTable();
   params.has_sphere = true;
-  const AnalyticScene scene(params);
+  const testing::AnalyticScene scene(params);
   const SphereObject object({-0.04, 0.1, 0.05}, 0.04);
   const CameraIntrinsics camera = testing::TestCamera(240, 180);
   SgMixture light = OneLobe({0.8, -0.1, 1.0}, 40.0, 5.0);
@@ -261,7 +262,7 @@ TEST(FastPath, HandHeldFramesReuseReceivers) {
 }
 
 TEST(FastPath, VertexGammaIsKeptWhileStillAndRebuiltWhenTheLightChanges) {
-  const AnalyticScene scene(PlainTable());
+  const testing::AnalyticScene scene(PlainTable());
   const SphereObject object({0.0, 0.0, 0.05}, 0.05);
   const CameraIntrinsics camera = testing::TestCamera(96, 72);
   const Pose cam = LookAt({0.3, -0.2, 0.25}, object.center);

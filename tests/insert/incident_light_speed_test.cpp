@@ -10,11 +10,12 @@
 #include <string>
 #include <utility>
 
-#include "render/insert/incident_light.h"
 #include "render/insert/nerf_scene.h"
+#include "render/lighting/incident_light.h"
 #include "render/lighting/seen_radiance.h"
 #include "render/mesh/mesh.h"
 #include "render/sg/sphere.h"
+#include "tests/support/analytic_scene.h"
 
 namespace nerfar {
 namespace {
@@ -33,11 +34,11 @@ class BatchedAnalytic final : public SceneField {
   mutable int calls_ = 0;
 
  private:
-  AnalyticScene inner_;
+  testing::AnalyticScene inner_;
 };
 
 TEST(IncidentLightSpeed, WholeBatchMatchesChunksBitForBit) {
-  const AnalyticScene plain;
+  const testing::AnalyticScene plain;
   const BatchedAnalytic batched;
   const std::vector<Vec3> dirs = FibonacciSphere(1024);
   std::vector<float> starts(dirs.size());

@@ -4,7 +4,7 @@
 // from the capture band see through lets the environment behind it through,
 // a ray seen from the band keeps the NeRF's opacity) against the closed-form
 // transmittance.
-#include "render/insert/incident_light.h"
+#include "render/lighting/incident_light.h"
 
 #include <gtest/gtest.h>
 
@@ -14,8 +14,9 @@
 #include <random>
 
 #include "render/insert/nerf_scene.h"
-#include "render/insert/scene_field.h"
+#include "render/lighting/scene_field.h"
 #include "render/sg/sphere.h"
+#include "tests/support/analytic_scene.h"
 
 namespace nerfar {
 namespace {
@@ -115,8 +116,8 @@ TEST(LightReport, SourcesRegionHoldsTheBrightPatchAndItsFlux) {
 
 // A scene holding only a small opaque sphere of constant radiance (a lamp):
 // the table dark, no medium, the box large enough to hold it.
-AnalyticScene LampScene(const Vec3& lamp, double radius, float radiance) {
-  AnalyticSceneParams p;
+testing::AnalyticScene LampScene(const Vec3& lamp, double radius, float radiance) {
+  testing::AnalyticSceneParams p;
   p.box = Aabb{{-1, -1, -1}, {1, 1, 1}};
   p.plane_radiance = {0, 0, 0};
   p.checker_size_m = 0;
@@ -124,7 +125,7 @@ AnalyticScene LampScene(const Vec3& lamp, double radius, float radiance) {
   p.sphere_center = lamp;
   p.sphere_radius = radius;
   p.sphere_radiance = {radiance, radiance, radiance};
-  return AnalyticScene(p);
+  return testing::AnalyticScene(p);
 }
 
 // Σ Y(L_i) ω_i over the samples: the flux they carry.
@@ -158,7 +159,7 @@ TEST(LightRefinement, ALampAboutOneDirectionWideKeepsItsFlux) {
   for (int k = 0; k < 24; ++k) {
     const double az = 2.0 * kPi * k / 24.0, el = 0.6 + 0.013 * k;
     const Vec3 to{std::cos(el) * std::cos(az), std::cos(el) * std::sin(az), std::sin(el)};
-    const AnalyticScene scene = LampScene(center + to * dist, r, static_cast<float>(le));
+    const testing::AnalyticScene scene = LampScene(center + to * dist, r, static_cast<float>(le));
     size_t refined = 0;
     const RadianceSamples fine = SampleIncidentLight(scene, {}, center, dirs, LightSource::kNearFieldOnly, nullptr,
                                                      nullptr, nullptr, 16, 2.0, &refined);
@@ -186,11 +187,11 @@ TEST(LightRefinement, SmoothLightIsLeftAsItWas) {
   // directions differ by 2×, so none is refined and the samples are
   // bit-identical to the unrefined ones. (A table edge against a dark sky
   // is an edge, and is refined.)
-  AnalyticSceneParams p;
+  testing::AnalyticSceneParams p;
   p.box = Aabb{{-50, -50, -0.05}, {50, 50, 50}};
   p.has_sphere = false;
   p.has_medium = false;
-  const AnalyticScene scene(p);
+  const testing::AnalyticScene scene(p);
   const SgMixture env = {Sg{{0, 0, 1}, 0.01, {0.5, 0.5, 0.5}}};
   const std::vector<Vec3> dirs = FibonacciSphere(512);
   const Vec3 center{0.0, 0.0, 0.1};
@@ -222,7 +223,7 @@ TEST(LightRefinement, ARefinedDirectionIsTheMeanOverItsCell) {
   const Vec3 side = Normalized(Cross(d, std::abs(d.x) < 0.9 ? Vec3{1, 0, 0} : Vec3{0, 1, 0}));
   const double dist = 0.5, cell = 2.0 / std::sqrt(double(n));
   const Vec3 lamp = center + Normalized(d + side * (0.5 * cell)) * dist;
-  const AnalyticScene scene = LampScene(lamp, 0.6 * cell * dist, 10.0f);
+  const testing::AnalyticScene scene = LampScene(lamp, 0.6 * cell * dist, 10.0f);
   size_t refined = 0;
   const RadianceSamples s = SampleIncidentLight(scene, {}, center, dirs, LightSource::kNearFieldOnly, nullptr, nullptr,
                                                 nullptr, 16, 2.0, &refined);

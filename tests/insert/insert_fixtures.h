@@ -8,14 +8,15 @@
 
 #include "render/insert/inserter.h"
 #include "render/insert/object_visibility.h"
-#include "render/insert/scene_field.h"
+#include "render/lighting/scene_field.h"
 #include "render/mesh/mesh.h"
+#include "tests/support/analytic_scene.h"
 
 namespace nerfar::testing {
 
 // A table alone (no sphere, no medium, no checker), plain radiance.
-inline AnalyticSceneParams PlainTable() {
-  AnalyticSceneParams p;
+inline testing::AnalyticSceneParams PlainTable() {
+  testing::AnalyticSceneParams p;
   p.has_sphere = false;
   p.has_medium = false;
   p.checker_size_m = 0;

@@ -11,9 +11,10 @@
 
 #include "calib/core/parallel.h"
 #include "render/insert/rasterizer.h"
-#include "render/insert/scene_field.h"
+#include "render/lighting/scene_field.h"
 #include "render/mesh/mesh.h"
 #include "tests/insert/test_camera.h"
+#include "tests/support/analytic_scene.h"
 #include "tests/support/support.h"
 
 namespace nerfar {
@@ -239,8 +240,8 @@ TEST(SceneField, IntersectBox) {
 
 // Numerical volume rendering of the analytic scene (midpoint rule on a fine
 // grid; the surfaces as a hard stop), an independent check of the closed form.
-void MarchReference(const AnalyticScene& scene, const Vec3& o, const Vec3& d, double t0, double t1, Vec3& colour,
-                    double& opacity, double& depth) {
+void MarchReference(const testing::AnalyticScene& scene, const Vec3& o, const Vec3& d, double t0, double t1,
+                    Vec3& colour, double& opacity, double& depth) {
   const auto& p = scene.params();
   const int steps = 200000;
   const double dt = (t1 - t0) / steps;
@@ -275,7 +276,7 @@ void MarchReference(const AnalyticScene& scene, const Vec3& o, const Vec3& d, do
 }
 
 TEST(SceneField, AnalyticMatchesNumericalVolumeRendering) {
-  const AnalyticScene scene;
+  const testing::AnalyticScene scene;
   const auto& p = scene.params();
   struct Ray {
     Vec3 o, d;
@@ -310,7 +311,7 @@ TEST(SceneField, AnalyticMatchesNumericalVolumeRendering) {
 }
 
 TEST(SceneField, ClippedRangeRemovesWhatLiesBehind) {
-  const AnalyticScene scene;
+  const testing::AnalyticScene scene;
   const auto& p = scene.params();
   const Vec3 o{p.medium_center.x, p.medium_center.y, 0.4};
   const Vec3 d{0, 0, -1};

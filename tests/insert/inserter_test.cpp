@@ -19,6 +19,7 @@
 #include "tests/insert/insert_fixtures.h"
 #include "tests/insert/kappa_compare.h"
 #include "tests/insert/test_camera.h"
+#include "tests/support/analytic_scene.h"
 #include "tests/support/support.h"
 
 namespace nerfar {
@@ -39,9 +40,9 @@ bool AllFinite(const ImageF& image) {
 TEST(Composite, ClippedRangeAndTranslucentOccluder) {
   // The medium ball (translucent, σ = 20/m, r = 7 cm) stands between the
   // camera and the object; the object stands in front of the table.
-  AnalyticSceneParams params;
+  testing::AnalyticSceneParams params;
   params.has_sphere = false;
-  const AnalyticScene scene(params);
+  const testing::AnalyticScene scene(params);
   const SphereObject object({0.0, -0.1, 0.1}, 0.04);  // behind the medium seen from +x
   const Vec3 eye{0.6, -0.1, 0.1};
   const Pose cam = LookAt(eye, object.center);
@@ -91,11 +92,11 @@ TEST(Composite, ClippedRangeAndTranslucentOccluder) {
 }
 
 TEST(Composite, OpaqueSceneInFrontHidesTheObject) {
-  AnalyticSceneParams params = PlainTable();
+  testing::AnalyticSceneParams params = PlainTable();
   params.has_sphere = true;
   params.sphere_center = {0.2, 0.0, 0.1};
   params.sphere_radius = 0.06;
-  const AnalyticScene scene(params);
+  const testing::AnalyticScene scene(params);
   const SphereObject object({0.0, 0.0, 0.1}, 0.05);
   const Pose cam = LookAt({0.6, 0.0, 0.1}, object.center);  // scene sphere between camera and object
   const CameraIntrinsics camera = testing::TestCamera(128, 96);
@@ -140,7 +141,7 @@ struct KappaReference {
 };
 
 TEST(Shadow, KappaMatchesQuadratureUnderASphere) {
-  const AnalyticScene scene(PlainTable());
+  const testing::AnalyticScene scene(PlainTable());
   const SphereObject object({0.0, 0.0, 0.06}, 0.05);
   const CameraIntrinsics camera = testing::TestCamera(96, 72);
   const Pose cam = LookAt({0.25, -0.3, 0.35}, {0.02, 0.0, 0.0});
@@ -189,7 +190,7 @@ TEST(Shadow, KappaMatchesQuadratureUnderASphere) {
 }
 
 TEST(Shadow, FarFromTheObjectKappaIsOne) {
-  const AnalyticScene scene(PlainTable());
+  const testing::AnalyticScene scene(PlainTable());
   const SphereObject object({0.3, 0.2, 0.05}, 0.05);
   const CameraIntrinsics camera = testing::TestCamera(128, 96);
   const Pose cam = LookAt({0.8, 0.6, 0.5}, {0.3, 0.2, 0.0});
@@ -216,7 +217,7 @@ TEST(Shadow, FarFromTheObjectKappaIsOne) {
 }
 
 TEST(Shadow, KappaStepInterpolatesNearTheExactField) {
-  const AnalyticScene scene(PlainTable());
+  const testing::AnalyticScene scene(PlainTable());
   const SphereObject object({0.0, 0.0, 0.06}, 0.05);
   const CameraIntrinsics camera = testing::TestCamera(96, 72);
   const Pose cam = LookAt({0.25, -0.3, 0.35}, {0.02, 0.0, 0.0});
@@ -238,7 +239,7 @@ TEST(Shadow, KappaStepInterpolatesNearTheExactField) {
 }
 
 TEST(Shadow, CoarseToFineMatchesEveryNode) {
-  const AnalyticScene scene(PlainTable());
+  const testing::AnalyticScene scene(PlainTable());
   const SphereObject object({0.0, 0.0, 0.06}, 0.05);
   const CameraIntrinsics camera = testing::TestCamera(160, 120);
   const Pose cam = LookAt({0.25, -0.3, 0.35}, {0.02, 0.0, 0.0});
@@ -268,7 +269,7 @@ TEST(Shadow, CoarseToFineMatchesEveryNode) {
 // ----------------------------------------------------- shading, self-shadow
 
 TEST(Shading, ConvexObjectIsNotDarkenedByItsOwnField) {
-  const AnalyticScene scene(PlainTable());
+  const testing::AnalyticScene scene(PlainTable());
   const SphereObject object({0.0, 0.0, 0.2}, 0.05);
   const CameraIntrinsics camera = testing::TestCamera(128, 96);
   const Pose cam = LookAt({0.3, -0.2, 0.35}, object.center);
@@ -299,7 +300,7 @@ TEST(Shading, ConvexObjectIsNotDarkenedByItsOwnField) {
 }
 
 TEST(Shading, AnObjectShadowsAnotherThroughItsField) {
-  const AnalyticScene scene(PlainTable());
+  const testing::AnalyticScene scene(PlainTable());
   const SphereObject lower({0.0, 0.0, 0.05}, 0.05);
   const SphereObject upper({0.0, 0.0, 0.2}, 0.06);  // right above it
   const CameraIntrinsics camera = testing::TestCamera(128, 96);
@@ -334,7 +335,7 @@ TEST(Shading, AnObjectShadowsAnotherThroughItsField) {
 // ----------------------------------------------------------- incident light
 
 TEST(IncidentLight, SamplesFollowPaperEquationOne) {
-  const AnalyticScene scene(PlainTable());
+  const testing::AnalyticScene scene(PlainTable());
   const SgMixture env = OneLobe({0, 0, 1}, 1.0, 2.0);
   const Vec3 center{0.1, 0.05, 0.1};
   const std::vector<Vec3> dirs = {{0, 0, -1}, {0, 0, 1}, Normalized(Vec3{1, 0, 0.2})};
@@ -354,7 +355,7 @@ TEST(IncidentLight, SamplesFollowPaperEquationOne) {
 }
 
 TEST(IncidentLight, CachedWhileStillAndWarmStartedWhenMoved) {
-  const AnalyticScene scene;
+  const testing::AnalyticScene scene;
   const SgMixture env = OneLobe({0.5, 0.2, 1.0}, 5.0, 3.0);
   IncidentLightOptions options;
   options.directions = 512;
@@ -382,7 +383,7 @@ TEST(IncidentLight, CachedWhileStillAndWarmStartedWhenMoved) {
 }
 
 TEST(IncidentLight, EachObjectGetsTheLightAtItsOwnCentre) {
-  const AnalyticScene scene;  // the sphere and the medium make light depend on position
+  const testing::AnalyticScene scene;  // the sphere and the medium make light depend on position
   const SphereObject a({-0.2, 0.25, 0.05}, 0.04), b({0.35, -0.25, 0.05}, 0.04);
   const CameraIntrinsics camera = testing::TestCamera(64, 48);
   const Pose cam = LookAt({0.6, -0.6, 0.6}, {0, 0, 0});
@@ -400,7 +401,7 @@ TEST(IncidentLight, EachObjectGetsTheLightAtItsOwnCentre) {
 // ----------------------------------------------------------- backgrounds
 
 TEST(Background, NerfRenderingMatchesTheFieldAndBothBackgroundsAgreeOnTheObject) {
-  const AnalyticScene scene;
+  const testing::AnalyticScene scene;
   const SphereObject object({0.05, 0.0, 0.05}, 0.05);
   const CameraIntrinsics camera = testing::TestCamera(64, 48);
   const Pose cam = LookAt({0.5, -0.5, 0.4}, {0, 0, 0});
@@ -446,7 +447,7 @@ struct StabilityCase {
 };
 
 TEST(Stability, ExtremesGiveFiniteBoundedOutput) {
-  const AnalyticScene scene;
+  const testing::AnalyticScene scene;
   const SgMixture sky = OneLobe({0, 0, 1}, 1.0, 1.0);
   SgMixture sun = OneLobe({0.3, 0.2, 1.0}, 1e4, 1e5);  // a 1e5-bright, 0.6°-wide sun
   sun.push_back(sky[0]);
@@ -500,7 +501,7 @@ TEST(Stability, ExtremesGiveFiniteBoundedOutput) {
 }
 
 TEST(Stability, SunLitSphereIsBrighterThanSkyLitAndRoughnessChangesTheHighlight) {
-  const AnalyticScene scene(PlainTable());
+  const testing::AnalyticScene scene(PlainTable());
   const SphereObject object({0.0, 0.0, 0.1}, 0.05);
   const CameraIntrinsics camera = testing::TestCamera(64, 48);
   const Pose cam = LookAt({0.4, -0.3, 0.3}, object.center);
@@ -538,7 +539,7 @@ TEST(Stability, SunLitSphereIsBrighterThanSkyLitAndRoughnessChangesTheHighlight)
 }
 
 TEST(Stability, ResultsDoNotDependOnTheThreadCount) {
-  const AnalyticScene scene;
+  const testing::AnalyticScene scene;
   const SphereObject object({0.05, 0.0, 0.06}, 0.05);
   const CameraIntrinsics camera = testing::TestCamera(64, 48);
   const Pose cam = LookAt({0.4, -0.3, 0.3}, {0, 0, 0});
@@ -562,7 +563,7 @@ TEST(Options, PresetsValidateAndBadValuesAreListed) {
   bad.shadow_epsilon = 2;
   bad.light.directions = 3;
   EXPECT_EQ(bad.Validate().size(), 3u);
-  const AnalyticScene scene;
+  const testing::AnalyticScene scene;
   EXPECT_THROW(Inserter(scene, {}, bad), InputError);
   ImageF wrong(10, 10, 3);
   Inserter ok(scene, {}, InsertOptions{});

@@ -17,6 +17,7 @@
 #include "render/sg/sphere.h"
 #include "render/ssdf/ssdf.h"
 #include "tests/insert/test_camera.h"
+#include "tests/support/analytic_scene.h"
 
 namespace nerfar {
 namespace {
@@ -87,8 +88,8 @@ SgMixture TestLight() {
   return {sun, sky};
 }
 
-AnalyticSceneParams TableOnly() {
-  AnalyticSceneParams p;
+testing::AnalyticSceneParams TableOnly() {
+  testing::AnalyticSceneParams p;
   p.has_sphere = false;
   p.has_medium = false;
   p.checker_size_m = 0;
@@ -153,7 +154,7 @@ KappaComparison CompareKappaLayer(const InsertLayers& layers, const CameraIntrin
 }
 
 KappaComparison Compare(const std::vector<InsertObject>& objects, const std::vector<const WorldMesh*>& meshes) {
-  const AnalyticScene scene(TableOnly());
+  const testing::AnalyticScene scene(TableOnly());
   const CameraIntrinsics camera = testing::TestCamera(80, 60);
   const Pose cam = LookAt({0.2, -0.35, 0.4}, {0.0, 0.0, 0.0});
   InsertOptions options;
@@ -314,7 +315,7 @@ KappaComparison CompareNear(bool from_samples, bool panel = false, double distan
   o.light_distances = &distances;
   o.light_center = light.center;
 
-  const AnalyticScene scene(TableOnly());
+  const testing::AnalyticScene scene(TableOnly());
   const CameraIntrinsics camera = testing::TestCamera(80, 60);
   const Pose cam = LookAt({0.25, -0.3, 0.35}, {0.03, -0.02, 0.0});
   InsertOptions options;

@@ -17,6 +17,7 @@
 #include "render/insert/inserter.h"
 #include "tests/insert/insert_fixtures.h"
 #include "tests/insert/test_camera.h"
+#include "tests/support/analytic_scene.h"
 
 namespace nerfar {
 namespace {
@@ -72,7 +73,7 @@ SharpShadow CompareUnder(double sharpness) {
   const Sg lobe = testing::OneLobe({-std::cos(35 * kPi / 180), 0, std::sin(35 * kPi / 180)}, sharpness, 5.0)[0];
   const SgMixture light = {lobe};
   const testing::SphereObject sphere(kSphereCentre, kSphereRadius);
-  const AnalyticScene scene(testing::PlainTable());
+  const testing::AnalyticScene scene(testing::PlainTable());
   // Nearly straight down over the shadow (x from 0 to 14 cm): 0.9 mm pixels,
   // a few across the sharpest lobe's penumbra at the shadow's far end.
   const CameraIntrinsics camera = testing::TestCamera(240, 180);

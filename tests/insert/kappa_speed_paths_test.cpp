@@ -19,6 +19,7 @@
 #include "tests/insert/insert_fixtures.h"
 #include "tests/insert/kappa_compare.h"
 #include "tests/insert/test_camera.h"
+#include "tests/support/analytic_scene.h"
 
 namespace nerfar {
 namespace {
@@ -31,7 +32,7 @@ using testing::SphereObject;
 // slanted lobe and a broad sky: its shadow runs from under the ball (hidden
 // by it) out into the open.
 struct ShadowScene {
-  AnalyticScene scene{PlainTable()};
+  testing::AnalyticScene scene{PlainTable()};
   SphereObject object{{0.0, 0.0, 0.05}, 0.05};
   CameraIntrinsics camera = testing::TestCamera(150, 110);  // 150: no multiple of 4
   Pose cam = LookAt({0.22, -0.2, 0.3}, {0.0, 0.0, 0.02});
@@ -211,7 +212,7 @@ TEST(KappaSpeedPaths, RefineByHalvesStaysCloseToEveryNodeWithFewerKappa) {
 // are refined whatever their corners, and cells whose border its refined
 // neighbours found differing follow: the layer stays close to every node's.
 TEST(KappaSpeedPaths, ShadowSmallerThanACoarseCellIsFoundAtTheOutline) {
-  AnalyticScene scene{PlainTable()};
+  testing::AnalyticScene scene{PlainTable()};
   const SphereObject object({0.0, 0.0, 0.015}, 0.015);
   const CameraIntrinsics camera = testing::TestCamera(160, 120);
   const Pose cam = LookAt({0.25, -0.3, 0.35}, {0.0, 0.0, 0.01});
@@ -326,9 +327,9 @@ TEST(KappaSpeedPaths, LatticeTableHoldsExactlyWhatWasInserted) {
 // caches must follow both (a stale lattice would keep the old shadow, which
 // differs from the new one by far more than the tolerance).
 TEST(KappaSpeedPaths, BalancedCachesFollowExactKappaOverCameraMotionsObjectAndLight) {
-  AnalyticSceneParams params = PlainTable();
+  testing::AnalyticSceneParams params = PlainTable();
   params.has_sphere = true;  // a curved receiver too (its cells fail the plane reuse)
-  const AnalyticScene scene(params);
+  const testing::AnalyticScene scene(params);
   SphereObject object({-0.04, 0.1, 0.05}, 0.04);
   const CameraIntrinsics camera = testing::TestCamera(240, 180);
   SgMixture light = OneLobe({0.8, -0.1, 1.0}, 40.0, 5.0);

@@ -9,10 +9,11 @@
 #include <algorithm>
 #include <cmath>
 
-#include "render/insert/incident_light.h"
+#include "render/lighting/incident_light.h"
 #include "render/mesh/mesh.h"
 #include "render/sg/sphere.h"
 #include "render/sg/visibility.h"
+#include "tests/support/analytic_scene.h"
 
 namespace nerfar {
 namespace {
@@ -79,8 +80,8 @@ TEST(LightStart, ExitDistancesOfAFineSphereMatchTheAnalyticSphere) {
 
 // A table, an opaque sphere and a fog ball (absorbing and emitting) whose
 // centre the object's light is taken at.
-AnalyticSceneParams FogScene(bool with_fog) {
-  AnalyticSceneParams p;
+testing::AnalyticSceneParams FogScene(bool with_fog) {
+  testing::AnalyticSceneParams p;
   p.has_medium = with_fog;
   p.medium_center = {0.2, -0.1, 0.1};
   p.medium_radius = 0.03;
@@ -90,7 +91,7 @@ AnalyticSceneParams FogScene(bool with_fog) {
 }
 
 TEST(LightStart, FogInsideTheObjectNeitherLightsNorHidesIt) {
-  const AnalyticScene foggy(FogScene(true)), clear(FogScene(false));
+  const testing::AnalyticScene foggy(FogScene(true)), clear(FogScene(false));
   const Vec3 center = FogScene(true).medium_center;
   // A 4 cm cube around the fog ball (radius 3 cm) at the light's centre,
   // clear of the table (z from 6 to 14 cm) and of the opaque sphere.
@@ -153,7 +154,7 @@ TEST(LightStart, FogInsideTheObjectNeitherLightsNorHidesIt) {
 }
 
 TEST(LightStart, ATurnThatLeavesEveryStartInPlaceKeepsTheLight) {
-  const AnalyticScene scene(FogScene(true));
+  const testing::AnalyticScene scene(FogScene(true));
   const Vec3 center = FogScene(true).medium_center;
   // A 4 cm ball of 32 × 16 facets around the centre: turned about its
   // vertical axis, each ray's exit moves only by the facets' sagitta,

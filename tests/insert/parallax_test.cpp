@@ -11,7 +11,7 @@
 #include <cmath>
 #include <limits>
 
-#include "render/insert/incident_light.h"
+#include "render/lighting/incident_light.h"
 #include "render/sg/sphere.h"
 
 namespace nerfar {

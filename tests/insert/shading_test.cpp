@@ -16,6 +16,7 @@
 #include "render/sg/prefiltered.h"
 #include "tests/insert/insert_fixtures.h"
 #include "tests/insert/test_camera.h"
+#include "tests/support/analytic_scene.h"
 
 namespace nerfar {
 namespace {
@@ -300,7 +301,7 @@ TEST(PrefilteredSpecular, StableAtTheExtremes) {
 // mean) per channel; the mean relative error ≤ 0.01 (a tenth of δ: most
 // cells are nearly linear).
 TEST(GridShading, MatchesEveryPixelShadedExactly) {
-  const AnalyticScene scene(testing::PlainTable());
+  const testing::AnalyticScene scene(testing::PlainTable());
   const testing::SphereObject big({0.0, 0.0, 0.06}, 0.06), small({0.03, -0.075, 0.03}, 0.03);
   const CameraIntrinsics camera = testing::TestCamera(320, 240);
   const Pose cam = LookAt({0.25, -0.3, 0.22}, {0.0, -0.02, 0.05});
@@ -695,7 +696,7 @@ TEST(PrefilteredSpecular, VisibilityRatioMatchesPerLobeReference) {
 // lattice (balanced's default) pixels 0.03-0.05 rad from the silhouette
 // are off by up to 0.11: interpolation between lattice nodes, not tested here.
 TEST(PointLightShadow, MatchesTheAnalyticHardShadow) {
-  const AnalyticScene scene(testing::PlainTable());
+  const testing::AnalyticScene scene(testing::PlainTable());
   const testing::SphereObject object({0.0, 0.0, 0.06}, 0.05);
   const CameraIntrinsics camera = testing::TestCamera(96, 72);
   const Pose cam = LookAt({0.25, -0.3, 0.35}, {0.02, 0.0, 0.0});

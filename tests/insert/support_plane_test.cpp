@@ -17,6 +17,7 @@
 #include "tests/insert/insert_fixtures.h"
 #include "tests/insert/kappa_compare.h"
 #include "tests/insert/test_camera.h"
+#include "tests/support/analytic_scene.h"
 
 namespace nerfar {
 namespace {
@@ -42,7 +43,7 @@ TEST(TransmittanceDepths, HomogeneousNerfFieldMatchesTheClosedForm) {
 }
 
 TEST(TransmittanceDepths, AnalyticSceneMediumAndSurfaces) {
-  const AnalyticScene scene;  // medium ball at (0.2, −0.1, 0.1), r 0.07, σ 20; table z = 0; sphere elsewhere
+  const testing::AnalyticScene scene;  // medium ball at (0.2, −0.1, 0.1), r 0.07, σ 20; table z = 0; sphere elsewhere
   SceneRays rays;
   rays.Add({0.0f, -0.1f, 0.1f}, {1, 0, 0}, 0.0f, 0.5f);   // through the medium's centre, level 1/2
   rays.Add({0.0f, -0.1f, 0.1f}, {1, 0, 0}, 0.0f, 0.5f);   // level 0.01: not within the ball's 14 cm
@@ -177,7 +178,7 @@ TEST(SupportPlane, FoggyTableReceiversLandOnThePlaneFromEveryView) {
 TEST(SupportPlane, KappaOverAFoggyTableMatchesTheExactTable) {
   const NerfField field = FoggyTable(false);
   const NerfScene foggy(field);
-  const AnalyticScene exact(PlainTable());
+  const testing::AnalyticScene exact(PlainTable());
   const SphereObject object({0.0, 0.0, 0.05}, 0.05);
   const SgMixture light = OneLobe({-0.6, -0.3, 0.75}, 2000.0, 4000.0);
   const CameraIntrinsics camera = testing::TestCamera(160, 120);

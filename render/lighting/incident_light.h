@@ -14,7 +14,7 @@
 #include <vector>
 
 #include "calib/core/image.h"
-#include "render/insert/scene_field.h"
+#include "render/lighting/scene_field.h"
 #include "render/mesh/mesh.h"
 #include "render/sg/compact_sources.h"
 #include "render/sg/fit.h"

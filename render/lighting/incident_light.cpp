@@ -1,4 +1,4 @@
-#include "render/insert/incident_light.h"
+#include "render/lighting/incident_light.h"
 
 #include <algorithm>
 #include <chrono>

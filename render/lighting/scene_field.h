@@ -1,8 +1,8 @@
 // What per-frame insertion asks of the captured scene: volume rendering of
 // rays over a given [t_near, t_far] each (colour, opacity, depth), and the
-// surface normal at a point. The HDR NeRF implements it (nerf_scene.h); an
-// analytic stand-in (a plane, an opaque sphere and a ball of constant density)
-// gives exact answers for tests. World frame, metres; directions are unit;
+// surface normal at a point. The HDR NeRF implements it (render/insert's
+// nerf_scene.h); the tests' analytic stand-in (tests/support/analytic_scene.h)
+// gives exact answers. World frame, metres; directions are unit;
 // colour is linear HDR radiance already weighted by opacity (Ĉ = Σ T α c, so
 // a half-transparent ray returns half the colour it would behind glass).
 #pragma once
@@ -86,25 +86,6 @@ class SceneField {
                                    std::vector<float>& depth) const;
 };
 
-// An exact scene for tests and benchmarks: an opaque horizontal plane z = 0
-// (Lambertian-looking checker radiance, bounded by the box), an opaque sphere
-// and a ball of constant density σ (an absorbing and emitting medium, as a
-// NeRF models glass or smoke). Rendering integrates in closed form.
-struct AnalyticSceneParams {
-  Aabb box{{-0.6, -0.4, -0.05}, {0.6, 0.4, 0.6}};
-  Vec3f plane_radiance{0.5f, 0.45f, 0.4f};  // mean radiance of the table (checker ±20%)
-  float checker_size_m = 0.05f;             // 0: plain
-  bool has_sphere = true;
-  Vec3 sphere_center{-0.2, 0.1, 0.08};
-  double sphere_radius = 0.08;
-  Vec3f sphere_radiance{0.2f, 0.3f, 0.6f};
-  bool has_medium = true;
-  Vec3 medium_center{0.2, -0.1, 0.1};
-  double medium_radius = 0.07;
-  double medium_density = 20.0;  // σ, 1/m
-  Vec3f medium_radiance{0.9f, 0.9f, 0.9f};
-};
-
 // Nothing at all: every ray is empty (opacity 0). For inserting into images
 // whose geometry comes from elsewhere (ground-truth depth, tests).
 class EmptyScene final : public SceneField {
@@ -118,28 +99,6 @@ class EmptyScene final : public SceneField {
 
  private:
   Aabb box_;
-};
-
-class AnalyticScene final : public SceneField {
- public:
-  explicit AnalyticScene(AnalyticSceneParams params = {}) : params_(params) {}
-  Aabb Box() const override { return params_.box; }
-  void RenderRays(const SceneRays& rays, SceneSamples& out) const override;
-  void Normals(const std::vector<Vec3f>& points, std::vector<Vec3f>& normals) const override;
-  void TransmittanceDepths(const SceneRays& rays, const std::vector<float>& transmittance,
-                           std::vector<float>& depth) const override;
-  const AnalyticSceneParams& params() const { return params_; }
-
-  // One ray, double precision; depth here is the unnormalised D̂ = Σ T α t.
-  void RenderOne(const Vec3& origin, const Vec3& direction, double t0, double t1, Vec3& colour, double& opacity,
-                 double& depth) const;
-
- private:
-  Vec3f PlaneRadiance(const Vec3& point) const;
-  // The first opaque surface (plane or sphere) on o + t·d within [t0, t1]:
-  // its distance (infinity if none) and radiance.
-  double FirstHit(const Vec3& o, const Vec3& d, double t0, double t1, Vec3f* radiance) const;
-  AnalyticSceneParams params_;
 };
 
 }  // namespace nerfar
