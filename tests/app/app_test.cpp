@@ -6,6 +6,9 @@
 #include <filesystem>
 #include <map>
 #include <nlohmann/json.hpp>
+#include <set>
+#include <sstream>
+#include <stdexcept>
 #include <string>
 
 #include "app/cli.h"
@@ -295,6 +298,68 @@ TEST(ArgParser, ParsesOptionsPositionalsAndRejectsMisuse) {
   EXPECT_THROW(twice.Parse({"--count", "1", "--count", "2"}), InputError);
   EXPECT_THROW(twice.Parse({"--count", "1x"}), InputError);
   EXPECT_THROW(twice.Parse({"--quiet", "--verbose"}), InputError);
+}
+
+TEST(ArgParser, RequiredOptionsAreMarkedInHelpAndEnforced) {
+  std::string output, board;
+  ArgParser parser("test", "a test command");
+  parser.Option("-o", &output, "FILE", "output");
+  parser.Option("--board", &board, "B", "board");
+  parser.Required("-o");
+  const std::string help = parser.Help();
+  EXPECT_NE(help.find("output (required)\n"), std::string::npos) << help;
+  EXPECT_EQ(help.find("board (required)"), std::string::npos) << help;
+  const auto message = [](ArgParser& p, const std::vector<std::string>& args) {
+    try {
+      p.Parse(args);
+    } catch (const InputError& e) {
+      return std::string(e.what());
+    }
+    return std::string("(no error)");
+  };
+  EXPECT_NE(message(parser, {"--board", "b.json"}).find("missing -o FILE (required)"), std::string::npos);
+  EXPECT_NE(message(parser, {"-o", ""}).find("-o is empty"), std::string::npos);
+  EXPECT_THROW(parser.Required("--nothing"), std::logic_error);
+  ASSERT_TRUE(parser.Parse({"-o", "out.json"}));
+  EXPECT_EQ(output, "out.json");
+  // --help needs no required option.
+  ArgParser helped("test", "");
+  helped.Option("-o", &output, "FILE", "output");
+  helped.Required("-o");
+  EXPECT_FALSE(helped.Parse({"--help"}));
+}
+
+// The guide's option tables and every command's --help agree on which
+// options are required: a row of a command's section whose default is
+// "required" is marked "(required)" by the parser in that command's --help,
+// and no other option is.
+TEST(App, GuideTablesAndHelpAgreeOnRequiredOptions) {
+  std::istringstream guide(testing::ReadText(testing::SourcePath("docs/USER_GUIDE.md")));
+  std::map<std::string, std::set<std::string>> guide_required;
+  std::string command, line;
+  while (std::getline(guide, line)) {
+    if (line.rfind("## ", 0) == 0) {
+      const size_t at = line.find("(`nerfar ");
+      command = at == std::string::npos ? "" : line.substr(at + 9, line.find('`', at + 9) - at - 9);
+      if (!command.empty()) guide_required[command];
+    }
+    if (command.empty() || line.rfind("| `-", 0) != 0) continue;
+    const std::string flag = line.substr(3, line.find_first_of(" `", 3) - 3);
+    const size_t cell = line.find('|', 1) + 1;
+    const std::string default_cell = line.substr(cell, line.find('|', cell) - cell);
+    if (default_cell == " required ") guide_required[command].insert(flag);
+  }
+  ASSERT_GE(guide_required.size(), 12u) << "commands with a section in the guide";
+  for (const auto& [name, expected] : guide_required) {
+    const Result result = RunNerfar(name + " --help");
+    ASSERT_EQ(result.exit_code, 0) << name;
+    std::set<std::string> marked;
+    std::istringstream help(result.output);
+    while (std::getline(help, line))
+      if (line.rfind("  -", 0) == 0 && line.size() > 11 && line.substr(line.size() - 11) == " (required)")
+        marked.insert(line.substr(2, line.find(' ', 2) - 2));
+    EXPECT_EQ(marked, expected) << "nerfar " << name << " --help against docs/USER_GUIDE.md:\n" << result.output;
+  }
 }
 
 }  // namespace
