@@ -362,5 +362,25 @@ TEST(App, GuideTablesAndHelpAgreeOnRequiredOptions) {
   }
 }
 
+// train and env take --set through the one parser (calib/core/option_fields.h):
+// an unknown key or a bad value stops either with exit code 2 naming them, and
+// env's echo of its float options is the number as written (the balanced
+// preset's 1e-3 and 0.03 of the guide's table, not the floats' binary digits).
+TEST(App, TrainAndEnvSetKnobsThroughOneParser) {
+  testing::TempDir dir;
+  for (const std::string& command : {"train " + dir.path() + " -o " + dir.File("m.nerf"),
+                                     "env " + dir.File("m.nerf") + " -o " + dir.File("e.json")}) {
+    Result r = RunNerfar(command + " --set stpes=3");
+    EXPECT_EQ(r.exit_code, 2) << command << ": " << r.output;
+    EXPECT_NE(r.output.find("--set stpes=3: unknown option 'stpes' (expected one of: "), std::string::npos) << r.output;
+    r = RunNerfar(command + " --set seed=abc");
+    EXPECT_EQ(r.exit_code, 2) << command << ": " << r.output;
+    EXPECT_NE(r.output.find("'abc' is not a valid value of seed"), std::string::npos) << r.output;
+  }
+  const Result help = RunNerfar("env --help");
+  EXPECT_NE(help.output.find(R"("min_transmittance":0.001,)"), std::string::npos) << help.output;
+  EXPECT_NE(help.output.find(R"("shadow_min_transmittance":0.03,)"), std::string::npos) << help.output;
+}
+
 }  // namespace
 }  // namespace nerfar
