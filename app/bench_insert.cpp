@@ -86,7 +86,7 @@ SgMixture BenchEnvironment() {
   // NERFAR_BENCH_INSERT_SUN=λ: also a small, very bright sun of that
   // sharpness (the sunroom's energy), which the incident light passes on
   // analytically when it is sharper than its directions resolve.
-  if (const char* sun_env = std::getenv("NERFAR_BENCH_INSERT_SUN")) {
+  if (const char* sun_env = BenchVariable("NERFAR_BENCH_INSERT_SUN")) {
     Sg sun;
     sun.axis = Normalized(Vec3{-0.66, -0.36, 0.65});
     sun.sharpness = std::clamp(std::atof(sun_env), 1.0, 1e4);
@@ -203,7 +203,7 @@ void TimeHandHeld(const NerfScene& scene, const SgMixture& environment, const In
   std::vector<double> n_evaluated, part_raster, part_shade, n_hidden;
   // NERFAR_BENCH_INSERT_HANDHELD_ONLY=1 (for profiling): the preset's
   // hand-held frames alone, no reference renders (error rows stay 0).
-  const char* only_env = std::getenv("NERFAR_BENCH_INSERT_HANDHELD_ONLY");
+  const char* only_env = BenchVariable("NERFAR_BENCH_INSERT_HANDHELD_ONLY");
   const bool handheld_only = only_env != nullptr && std::string(only_env) == "1";
   for (int f = 0; f < frames; ++f) {
     Pose cam = T_world_camera;
@@ -300,7 +300,7 @@ StageMedians TimePreset(const NerfScene& scene, const SgMixture& environment, co
   }
   StageMedians m;
   m.coverage = double(layers.gbuffer.covered) / (double(camera.width) * camera.height);
-  const char* only_env = std::getenv("NERFAR_BENCH_INSERT_HANDHELD_ONLY");
+  const char* only_env = BenchVariable("NERFAR_BENCH_INSERT_HANDHELD_ONLY");
   if (only_env != nullptr && std::string(only_env) == "1") repeats = 0;  // profiling the hand-held frames
   for (int r = 0; r < repeats; ++r) {
     // The object still: the incident light is reused.
@@ -343,7 +343,7 @@ StageMedians TimePreset(const NerfScene& scene, const SgMixture& environment, co
   m.frame_camera_moved = MedianOf(still_cam);
   // NERFAR_BENCH_INSERT_HANDHELD_FRAMES=N: N hand-held frames (default 6,
   // the first builds the caches; more give a profiler more samples).
-  const char* frames_env = std::getenv("NERFAR_BENCH_INSERT_HANDHELD_FRAMES");
+  const char* frames_env = BenchVariable("NERFAR_BENCH_INSERT_HANDHELD_FRAMES");
   const int frames = frames_env != nullptr ? std::clamp(std::atoi(frames_env), 2, 1000) : 6;
   TimeHandHeld(scene, environment, object, camera, T_world_camera, options, frames, m);
   return m;
@@ -408,7 +408,7 @@ void GroundTruthQuality(const std::string& scenes_dir, const std::string& scene_
 // (for profiling under valgrind): read from PATH when it exists, else baked and written there.
 SsdfField BenchObjectSsdf(const TriangleMesh& mesh) {
   const double t_bake = NowSeconds();
-  const char* ssdf_cache = std::getenv("NERFAR_BENCH_INSERT_SSDF_CACHE");
+  const char* ssdf_cache = BenchVariable("NERFAR_BENCH_INSERT_SSDF_CACHE");
   std::error_code exists_error;
   const bool cached_ssdf = ssdf_cache != nullptr && fs::is_regular_file(ssdf_cache, exists_error);
   SsdfField field = cached_ssdf ? ReadSsdf(ssdf_cache) : BakeSsdf(mesh, SsdfBakeOptions::Preset("fast"), std::nullopt);
@@ -452,11 +452,11 @@ BenchView FrameTheObject(const TriangleMesh& mesh, const Pose& T_world_object, i
 InsertOptions PresetWithOverrides(const char* preset) {
   InsertOptions insert_options = InsertOptions::Preset(preset);
   // NERFAR_BENCH_INSERT_PARALLAX=0: near-light parallax off (to attribute its cost).
-  const char* parallax_env = std::getenv("NERFAR_BENCH_INSERT_PARALLAX");
+  const char* parallax_env = BenchVariable("NERFAR_BENCH_INSERT_PARALLAX");
   if (parallax_env != nullptr && std::string(parallax_env) == "0") insert_options.light.parallax = false;
   // NERFAR_BENCH_INSERT_OFF="snap,skip_covered" (either): κ's ε snap /
   // the skipped nodes under the object off (to attribute their savings).
-  const char* off_env = std::getenv("NERFAR_BENCH_INSERT_OFF");
+  const char* off_env = BenchVariable("NERFAR_BENCH_INSERT_OFF");
   const std::string off = off_env ? off_env : "";
   if (off.find("snap") != std::string::npos) insert_options.shadow_epsilon_snap = false;
   if (off.find("skip_covered") != std::string::npos) insert_options.kappa_skip_covered = false;
@@ -466,7 +466,7 @@ InsertOptions PresetWithOverrides(const char* preset) {
   // shadow_epsilon, kappa_cache_spacing_radii, occlusion_step, parallax,
   // kappa_refine_delta, shade_step, shade_refine_delta,
   // shade_refine_angle_deg, shade_specular_on_grid.
-  if (const char* knobs = std::getenv("NERFAR_BENCH_INSERT_KNOBS")) {
+  if (const char* knobs = BenchVariable("NERFAR_BENCH_INSERT_KNOBS")) {
     std::string list = knobs;
     for (size_t begin = 0; begin < list.size();) {
       const size_t end = std::min(list.find(',', begin), list.size());
@@ -563,9 +563,9 @@ std::vector<BenchFigure> BenchInsert(const BenchOptions& options) {
   BenchInsertRealNerfLight(options, figures);
   // NERFAR_BENCH_INSERT_GT=0 skips the ground-truth quality part;
   // NERFAR_BENCH_INSERT_PRESETS="fast,balanced" times only those presets.
-  const char* gt_env = std::getenv("NERFAR_BENCH_INSERT_GT");
+  const char* gt_env = BenchVariable("NERFAR_BENCH_INSERT_GT");
   const bool with_gt = gt_env == nullptr || std::string(gt_env) != "0";
-  const char* presets_env = std::getenv("NERFAR_BENCH_INSERT_PRESETS");
+  const char* presets_env = BenchVariable("NERFAR_BENCH_INSERT_PRESETS");
   const std::string presets = presets_env ? presets_env : "fast,balanced,accurate";
   if (with_gt && !options.quick && !options.scenes_dir.empty()) {
     for (const char* scene_name : {"lamps", "window"})

@@ -31,19 +31,19 @@ NerfSceneOptions SceneOptionsFor(const std::string& preset) {
   NerfSceneOptions o = NerfSceneOptions::Preset(preset);
   // NERFAR_BENCH_INSERT_LIGHT_RENDER=full|live|preview: the light rays' march
   // (NerfSceneOptions::light_render; default live).
-  if (const char* render_env = std::getenv("NERFAR_BENCH_INSERT_LIGHT_RENDER"))
+  if (const char* render_env = BenchVariable("NERFAR_BENCH_INSERT_LIGHT_RENDER"))
     o.light_render = NerfRenderOptions::Preset(render_env);
   // NERFAR_BENCH_INSERT_SEE_THROUGH=0: semi-transparent content kept whole
   // (no views aimed at it; seen radiance of surfaces only).
-  if (const char* see_env = std::getenv("NERFAR_BENCH_INSERT_SEE_THROUGH"))
+  if (const char* see_env = BenchVariable("NERFAR_BENCH_INSERT_SEE_THROUGH"))
     o.seen.see_through = std::string(see_env) != "0";
   // NERFAR_BENCH_INSERT_SEEN_VIEWS=V, NERFAR_BENCH_INSERT_SEEN_GROUP_CM=C:
   // views per point, cell of shared views (nerfar insert --seen-views, --seen-group-cm).
-  if (const char* views_env = std::getenv("NERFAR_BENCH_INSERT_SEEN_VIEWS")) o.seen.views = std::atoi(views_env);
-  if (const char* group_env = std::getenv("NERFAR_BENCH_INSERT_SEEN_GROUP_CM"))
+  if (const char* views_env = BenchVariable("NERFAR_BENCH_INSERT_SEEN_VIEWS")) o.seen.views = std::atoi(views_env);
+  if (const char* group_env = BenchVariable("NERFAR_BENCH_INSERT_SEEN_GROUP_CM"))
     o.seen.group_m = std::atof(group_env) / 100.0;
   // NERFAR_BENCH_INSERT_VIEWS_CACHE=0|1: the views' cache across frames (NerfSceneOptions::cache_views).
-  if (const char* c = std::getenv("NERFAR_BENCH_INSERT_VIEWS_CACHE")) o.cache_views = std::string(c) != "0";
+  if (const char* c = BenchVariable("NERFAR_BENCH_INSERT_VIEWS_CACHE")) o.cache_views = std::string(c) != "0";
   Problems problems("NERFAR_BENCH_INSERT_* light options");
   for (const std::string& p : o.Validate()) problems.Add("", p);
   problems.ThrowIfAny();
@@ -71,7 +71,7 @@ LitObject PlaceLitObject(const BenchOptions& options, const NerfField& nerf) {
     object.mesh = MakeTorus(0.04, 0.015, 48, 24);
     object.name = "torus";
   }
-  const char* pose_env = std::getenv("NERFAR_BENCH_INSERT_NERF_POSE");
+  const char* pose_env = BenchVariable("NERFAR_BENCH_INSERT_NERF_POSE");
   const std::string pose_path = pose_env ? pose_env : options.scenes_dir + "/lamps/insert/monkey_diffuse/pose.json";
   object.T_world_object = Pose{Mat3::Identity(), Vec3(nerf.aabb.min + nerf.aabb.max) * 0.5};
   if (std::filesystem::is_regular_file(pose_path, error)) {
@@ -134,8 +134,8 @@ void AddColdLight(const LightRun& run, const std::string& preset, std::vector<Be
 // IncidentLight for the whole drag; the first frame (cold) apart, the median
 // of the others.
 void AddDrag(const LightRun& run, const std::string& preset, std::vector<BenchFigure>& figures) {
-  const char* frames_env = std::getenv("NERFAR_BENCH_INSERT_DRAG_FRAMES");
-  const char* step_env = std::getenv("NERFAR_BENCH_INSERT_DRAG_MM");
+  const char* frames_env = BenchVariable("NERFAR_BENCH_INSERT_DRAG_FRAMES");
+  const char* step_env = BenchVariable("NERFAR_BENCH_INSERT_DRAG_MM");
   const int frames = frames_env ? std::max(2, std::atoi(frames_env)) : 20;
   const double step_m = (step_env ? std::atof(step_env) : 5.0) / 1000.0;
   const LitObject& object = run.object;
@@ -201,11 +201,11 @@ void AddDrag(const LightRun& run, const std::string& preset, std::vector<BenchFi
 // along +x from its pose, as in nerfar live (the seen-radiance views' cache and
 // the warm fit carry over).
 void BenchInsertRealNerfLight(const BenchOptions& options, std::vector<BenchFigure>& figures) {
-  const char* model = std::getenv("NERFAR_BENCH_INSERT_NERF");
+  const char* model = BenchVariable("NERFAR_BENCH_INSERT_NERF");
   if (model == nullptr || std::string(model).empty()) return;
   NerfField nerf = LoadNerf(model);
   // NERFAR_BENCH_INSERT_NERF_COPY=0: the exact float arrays (no render copy).
-  const char* copy_env = std::getenv("NERFAR_BENCH_INSERT_NERF_COPY");
+  const char* copy_env = BenchVariable("NERFAR_BENCH_INSERT_NERF_COPY");
   const bool copy = copy_env == nullptr || std::string(copy_env) != "0";
   if (copy) nerf.UpdateRenderCopy();  // what nerfar render reads (NerfRenderCopy)
   const LitObject object = PlaceLitObject(options, nerf);
@@ -217,7 +217,7 @@ void BenchInsertRealNerfLight(const BenchOptions& options, std::vector<BenchFigu
     sky.amplitude = {0.3, 0.35, 0.4};
     environment = {sky};
   }
-  const char* presets_env = std::getenv("NERFAR_BENCH_INSERT_LIGHT_PRESETS");
+  const char* presets_env = BenchVariable("NERFAR_BENCH_INSERT_LIGHT_PRESETS");
   const std::string presets = presets_env ? presets_env : "fast,balanced";
   const Vec3& center = object.center;
   const std::string where = std::filesystem::path(model).filename().string() + ", " + object.name + " at (" +
@@ -229,9 +229,9 @@ void BenchInsertRealNerfLight(const BenchOptions& options, std::vector<BenchFigu
     InsertOptions insert_options = InsertOptions::Preset(preset);
     // NERFAR_BENCH_INSERT_LIGHT_DIRECTIONS=N, NERFAR_BENCH_INSERT_LIGHT_REFINE=K:
     // the light's directions and sub-rays per refined direction (--light-directions, --light-refine-rays).
-    if (const char* d = std::getenv("NERFAR_BENCH_INSERT_LIGHT_DIRECTIONS"))
+    if (const char* d = BenchVariable("NERFAR_BENCH_INSERT_LIGHT_DIRECTIONS"))
       insert_options.light.directions = std::atoi(d);
-    if (const char* k = std::getenv("NERFAR_BENCH_INSERT_LIGHT_REFINE"))
+    if (const char* k = BenchVariable("NERFAR_BENCH_INSERT_LIGHT_REFINE"))
       insert_options.light.refine_rays = std::atoi(k);
     const NerfSceneOptions scene_options = SceneOptionsFor(preset);
     const std::string note = std::string(preset) + ", " + where +

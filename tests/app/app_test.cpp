@@ -2,6 +2,7 @@
 // messages that name what is wrong.
 #include <gtest/gtest.h>
 
+#include <cctype>
 #include <cmath>
 #include <filesystem>
 #include <map>
@@ -380,6 +381,44 @@ TEST(App, TrainAndEnvSetKnobsThroughOneParser) {
   const Result help = RunNerfar("env --help");
   EXPECT_NE(help.output.find(R"("min_transmittance":0.001,)"), std::string::npos) << help.output;
   EXPECT_NE(help.output.find(R"("shadow_min_transmittance":0.03,)"), std::string::npos) << help.output;
+}
+
+// The environment variables of `nerfar bench`: each one a stage reads
+// (BenchVariable("...") in app/bench_*.cpp, and no getenv of one besides) is
+// listed by `nerfar bench --help` and tabled in the guide's bench section,
+// and a NERFAR_BENCH_* name not listed stops the bench before any stage runs,
+// naming it.
+TEST(App, BenchVariablesAreReadListedDocumentedAndChecked) {
+  const auto names_after = [](const std::string& text, const std::string& marker, std::set<std::string>& into) {
+    for (size_t at = text.find(marker); at != std::string::npos; at = text.find(marker, at + 1)) {
+      const size_t begin = at + marker.size() - std::string("NERFAR_BENCH_").size();
+      size_t end = begin;
+      while (end < text.size() && (std::isupper(static_cast<unsigned char>(text[end])) || text[end] == '_')) ++end;
+      if (end > at + marker.size()) into.insert(text.substr(begin, end - begin));  // not the family NERFAR_BENCH_*
+    }
+  };
+  std::set<std::string> read, read_directly, listed, tabled;
+  for (const auto& entry : std::filesystem::directory_iterator(testing::SourcePath("app"))) {
+    const std::string name = entry.path().filename().string();
+    if (name.rfind("bench_", 0) != 0 || entry.path().extension() != ".cpp") continue;
+    const std::string source = testing::ReadText(entry.path().string());
+    names_after(source, "BenchVariable(\"NERFAR_BENCH_", read);
+    names_after(source, "getenv(\"NERFAR_BENCH_", read_directly);
+  }
+  const Result help = RunNerfar("bench --help");
+  ASSERT_EQ(help.exit_code, 0);
+  names_after(help.output, "\n  NERFAR_BENCH_", listed);
+  names_after(testing::ReadText(testing::SourcePath("docs/USER_GUIDE.md")), "| `NERFAR_BENCH_", tabled);
+  EXPECT_GE(read.size(), 30u);
+  EXPECT_TRUE(read_directly.empty()) << *read_directly.begin() << " read without BenchVariable";
+  EXPECT_EQ(listed, read) << help.output;
+  EXPECT_EQ(tabled, read) << "the guide's table of bench variables";
+
+  const Result r = testing::RunCommand("NERFAR_BENCH_INSERT_NREF=m.nerf NERFAR_BENCH_LIVE_FRAMES=30 " +
+                                       std::string(NERFAR_BINARY) + " bench insert --quick");
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("unknown environment variable NERFAR_BENCH_INSERT_NREF ("), std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("nerfar bench  "), std::string::npos) << "no stage ran: " << r.output;
 }
 
 }  // namespace
