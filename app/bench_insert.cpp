@@ -15,9 +15,11 @@
 #include <string>
 
 #include "app/bench.h"
+#include "calib/core/error.h"
 #include "calib/core/exr.h"
 #include "calib/core/image_io.h"
 #include "calib/core/log.h"
+#include "calib/core/option_fields.h"
 #include "calib/core/parallel.h"
 #include "calib/dataset.h"
 #include "calib/object.h"
@@ -447,6 +449,18 @@ BenchView FrameTheObject(const TriangleMesh& mesh, const Pose& T_world_object, i
   return view;
 }
 
+// The non-empty items of a comma-separated list (none for nullptr).
+std::vector<std::string> SplitList(const char* text) {
+  std::vector<std::string> items;
+  const std::string list = text ? text : "";
+  for (size_t begin = 0; begin <= list.size();) {
+    const size_t end = std::min(list.find(',', begin), list.size());
+    if (end > begin) items.push_back(list.substr(begin, end - begin));
+    begin = end + 1;
+  }
+  return items;
+}
+
 // The preset's options with the NERFAR_BENCH_INSERT_{PARALLAX,OFF,KNOBS}
 // overrides (to attribute a part's cost).
 InsertOptions PresetWithOverrides(const char* preset) {
@@ -456,40 +470,34 @@ InsertOptions PresetWithOverrides(const char* preset) {
   if (parallax_env != nullptr && std::string(parallax_env) == "0") insert_options.light.parallax = false;
   // NERFAR_BENCH_INSERT_OFF="snap,skip_covered" (either): κ's ε snap /
   // the skipped nodes under the object off (to attribute their savings).
-  const char* off_env = BenchVariable("NERFAR_BENCH_INSERT_OFF");
-  const std::string off = off_env ? off_env : "";
-  if (off.find("snap") != std::string::npos) insert_options.shadow_epsilon_snap = false;
-  if (off.find("skip_covered") != std::string::npos) insert_options.kappa_skip_covered = false;
-  // NERFAR_BENCH_INSERT_KNOBS="kappa_step=4,shadow_reach_radii=8,...": κ
-  // and shading knobs set over the preset (to attribute one preset's cost
-  // against another's): kappa_step, kappa_coarse_factor, shadow_reach_radii,
-  // shadow_epsilon, kappa_cache_spacing_radii, occlusion_step, parallax,
-  // kappa_refine_delta, shade_step, shade_refine_delta,
-  // shade_refine_angle_deg, shade_specular_on_grid.
-  if (const char* knobs = BenchVariable("NERFAR_BENCH_INSERT_KNOBS")) {
-    std::string list = knobs;
-    for (size_t begin = 0; begin < list.size();) {
-      const size_t end = std::min(list.find(',', begin), list.size());
-      const std::string item = list.substr(begin, end - begin);
-      begin = end + 1;
-      const size_t eq = item.find('=');
-      if (eq == std::string::npos) continue;
-      const std::string name = item.substr(0, eq);
-      const double v = std::atof(item.c_str() + eq + 1);
-      if (name == "kappa_step") insert_options.kappa_step = int(v);
-      if (name == "kappa_coarse_factor") insert_options.kappa_coarse_factor = int(v);
-      if (name == "kappa_refine_delta") insert_options.kappa_refine_delta = v;
-      if (name == "shadow_reach_radii") insert_options.shadow_reach_radii = v;
-      if (name == "shadow_epsilon") insert_options.shadow_epsilon = v;
-      if (name == "kappa_cache_spacing_radii") insert_options.kappa_cache_spacing_radii = v;
-      if (name == "occlusion_step") insert_options.occlusion_step = int(v);
-      if (name == "parallax") insert_options.light.parallax = v != 0;
-      if (name == "shade_step") insert_options.shade_step = int(v);
-      if (name == "shade_refine_delta") insert_options.shade_refine_delta = v;
-      if (name == "shade_refine_angle_deg") insert_options.shade_refine_angle_deg = v;
-      if (name == "shade_specular_on_grid") insert_options.shade_specular_on_grid = v != 0;
+  for (const std::string& item : SplitList(BenchVariable("NERFAR_BENCH_INSERT_OFF"))) {
+    if (item == "snap") {
+      insert_options.shadow_epsilon_snap = false;
+    } else if (item == "skip_covered") {
+      insert_options.kappa_skip_covered = false;
+    } else {
+      ThrowInputError("NERFAR_BENCH_INSERT_OFF", "'" + item + "' (expected snap, skip_covered or both)");
     }
   }
+  // NERFAR_BENCH_INSERT_KNOBS="kappa_step=4,shadow_reach_radii=8,...": κ
+  // and shading knobs set over the preset (to attribute one preset's cost
+  // against another's), through the --set parser: an unknown name or a bad
+  // value stops the bench.
+  InsertOptions& o = insert_options;
+  const std::vector<OptionField> knobs = {FieldOf("kappa_step", &o.kappa_step),
+                                          FieldOf("kappa_coarse_factor", &o.kappa_coarse_factor),
+                                          FieldOf("kappa_refine_delta", &o.kappa_refine_delta),
+                                          FieldOf("shadow_reach_radii", &o.shadow_reach_radii),
+                                          FieldOf("shadow_epsilon", &o.shadow_epsilon),
+                                          FieldOf("kappa_cache_spacing_radii", &o.kappa_cache_spacing_radii),
+                                          FieldOf("occlusion_step", &o.occlusion_step),
+                                          FieldOf("parallax", &o.light.parallax),
+                                          FieldOf("shade_step", &o.shade_step),
+                                          FieldOf("shade_refine_delta", &o.shade_refine_delta),
+                                          FieldOf("shade_refine_angle_deg", &o.shade_refine_angle_deg),
+                                          FieldOf("shade_specular_on_grid", &o.shade_specular_on_grid)};
+  for (const std::string& item : SplitList(BenchVariable("NERFAR_BENCH_INSERT_KNOBS")))
+    SetOptionField(knobs, item, "NERFAR_BENCH_INSERT_KNOBS");
   return insert_options;
 }
 
@@ -559,6 +567,7 @@ void AddPresetFigures(const char* preset, const StageMedians& m, const InsertOpt
 void BenchInsertRealNerfLight(const BenchOptions& options, std::vector<BenchFigure>& figures);
 
 std::vector<BenchFigure> BenchInsert(const BenchOptions& options) {
+  PresetWithOverrides("fast");  // a bad NERFAR_BENCH_INSERT_OFF or _KNOBS stops the bench before any work
   std::vector<BenchFigure> figures;
   BenchInsertRealNerfLight(options, figures);
   // NERFAR_BENCH_INSERT_GT=0 skips the ground-truth quality part;

@@ -87,20 +87,20 @@ double ShortestDecimal(float value) {
 
 }  // namespace
 
-void SetOptionField(const std::vector<OptionField>& fields, const std::string& key_value) {
+void SetOptionField(const std::vector<OptionField>& fields, const std::string& key_value, const std::string& source) {
   const size_t eq = key_value.find('=');
-  if (eq == std::string::npos) ThrowInputError("--set " + key_value, "has no '=' (expected key=value)");
+  if (eq == std::string::npos) ThrowInputError(source + " " + key_value, "has no '=' (expected key=value)");
   const std::string key = key_value.substr(0, eq), value = key_value.substr(eq + 1);
   for (const OptionField& f : fields) {
     if (key != f.name) continue;
     if (!SetField(f, value))
-      ThrowInputError("--set " + key_value,
+      ThrowInputError(source + " " + key_value,
                       "'" + value + "' is not a valid value of " + key + " (expected " + KindName(f.kind) + ")");
     return;
   }
   std::string known;
   for (const OptionField& f : fields) known += (known.empty() ? "" : ", ") + std::string(f.name);
-  ThrowInputError("--set " + key_value, "unknown option '" + key + "' (expected one of: " + known + ")");
+  ThrowInputError(source + " " + key_value, "unknown option '" + key + "' (expected one of: " + known + ")");
 }
 
 std::string OptionFieldsJson(const std::vector<OptionField>& fields) {

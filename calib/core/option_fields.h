@@ -30,11 +30,13 @@ inline OptionField FieldOf(const char* name, bool* value) { return {name, Option
 inline OptionField FieldOf(const char* name, float* value) { return {name, OptionField::kFloat, value}; }
 inline OptionField FieldOf(const char* name, uint64_t* value) { return {name, OptionField::kU64, value}; }
 
-// Sets the field "key=value" names. Throws InputError "--set key=value: ..."
-// when there is no '=', when no field has that key (the known keys listed),
-// or when the value is not of the field's kind (naming key, value and kind);
-// the field is left as it was then.
-void SetOptionField(const std::vector<OptionField>& fields, const std::string& key_value);
+// Sets the field "key=value" names. Throws InputError "SOURCE key=value: ..."
+// (SOURCE: the flag or variable the text came from) when there is no '=',
+// when no field has that key (the known keys listed), or when the value is
+// not of the field's kind (naming key, value and kind); the field is left as
+// it was then.
+void SetOptionField(const std::vector<OptionField>& fields, const std::string& key_value,
+                    const std::string& source = "--set");
 
 // The fields as one compact JSON object, e.g. {"steps":3000,"lr":0.1,"smooth":true}.
 std::string OptionFieldsJson(const std::vector<OptionField>& fields);

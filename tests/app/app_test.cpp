@@ -419,6 +419,14 @@ TEST(App, BenchVariablesAreReadListedDocumentedAndChecked) {
   EXPECT_EQ(r.exit_code, 2) << r.output;
   EXPECT_NE(r.output.find("unknown environment variable NERFAR_BENCH_INSERT_NREF ("), std::string::npos) << r.output;
   EXPECT_EQ(r.output.find("nerfar bench  "), std::string::npos) << "no stage ran: " << r.output;
+  // The insert stage's knobs go through the --set parser: a misspelt knob
+  // stops the stage before it measures anything, naming the knob.
+  const Result knob = testing::RunCommand("NERFAR_BENCH_INSERT_KNOBS=kappa_step=4,shade_stp=2 " +
+                                          std::string(NERFAR_BINARY) + " bench insert --quick");
+  EXPECT_EQ(knob.exit_code, 2) << knob.output;
+  EXPECT_NE(knob.output.find("NERFAR_BENCH_INSERT_KNOBS shade_stp=2: unknown option 'shade_stp'"), std::string::npos)
+      << knob.output;
+  EXPECT_EQ(knob.output.find("insert     "), std::string::npos) << "no figure: " << knob.output;
 }
 
 }  // namespace
