@@ -34,6 +34,20 @@ struct BenchStage {
 
 const std::vector<BenchStage>& AllBenchStages();
 
+// The environment variables that steer the stages (bench_variables.cpp): a
+// stage reads one through BenchVariable (nullptr when unset; a name not in
+// the list is a programming error, std::logic_error). CheckBenchEnvironment
+// throws InputError naming every NERFAR_BENCH_* variable of `environment`
+// (NAME=VALUE entries, null-terminated, as environ) that is not listed.
+struct BenchVariableInfo {
+  const char* name;
+  const char* stages;  // the stages that read it
+  const char* what;    // its value and effect, one line
+};
+const std::vector<BenchVariableInfo>& BenchVariables();
+const char* BenchVariable(const char* name);
+void CheckBenchEnvironment(const char* const* environment);
+
 // Runs `body` repeatedly for at least min_seconds (and at least min_repeats
 // times) and returns the median time of one call in milliseconds.
 template <typename Body>

@@ -116,7 +116,7 @@ Vec3 PanoramaLookup(const ImageF& pano, const Vec3& d) {
 
 std::map<std::string, std::string> ModelsFromEnvironment() {
   std::map<std::string, std::string> models;
-  const char* list = std::getenv("NERFAR_BENCH_ENV_MODELS");
+  const char* list = BenchVariable("NERFAR_BENCH_ENV_MODELS");
   if (list == nullptr) return models;
   std::stringstream in(list);
   std::string item;
@@ -231,7 +231,7 @@ void SharedScene(const std::string& scenes_dir, const std::string& scene, const 
   const NerfField field = LoadNerf(model);
   EnvEstimateOptions o = EnvEstimateOptions::Preset(preset);
   // $NERFAR_BENCH_ENV_SET: "key=value;key=value" overrides (as `nerfar env --set`).
-  const char* sets = std::getenv("NERFAR_BENCH_ENV_SET");
+  const char* sets = BenchVariable("NERFAR_BENCH_ENV_SET");
   if (sets != nullptr) {
     std::stringstream in(sets);
     std::string kv;
@@ -248,10 +248,10 @@ void SharedScene(const std::string& scenes_dir, const std::string& scene, const 
   for (const Vec3& n : upper) e_true.push_back(PanoramaIrradiance(truth_env, n));
   double true_energy = 0;
   for (const Vec3& e : e_true) true_energy += LuminanceOf(e);
-  const char* trade_only = std::getenv("NERFAR_BENCH_ENV_TRADE_ONLY");
+  const char* trade_only = BenchVariable("NERFAR_BENCH_ENV_TRADE_ONLY");
   if (trade_only == nullptr || std::string(trade_only) != "1")
     MainFigures(dir, scene, field, o, note, truth_env, upper, e_true, true_energy, figures);
-  const char* trade = std::getenv("NERFAR_BENCH_ENV_TRADE");
+  const char* trade = BenchVariable("NERFAR_BENCH_ENV_TRADE");
   if (trade != nullptr) {
     // "1": the cells 16/64 px x 64/256 rays other than the run above (64 x
     // 256 with the balanced preset); else a list "PxR,PxR,...".
@@ -298,7 +298,7 @@ std::vector<BenchFigure> BenchEnv(const BenchOptions& options) {
   std::vector<BenchFigure> figures;
   const std::map<std::string, std::string> models = ModelsFromEnvironment();
   if (!models.empty() && !options.scenes_dir.empty()) {
-    const char* preset = std::getenv("NERFAR_BENCH_ENV_PRESET");
+    const char* preset = BenchVariable("NERFAR_BENCH_ENV_PRESET");
     for (const auto& [scene, model] : models)
       SharedScene(options.scenes_dir, scene, model, preset != nullptr ? preset : "balanced", figures);
     return figures;

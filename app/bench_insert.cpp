@@ -15,9 +15,11 @@
 #include <string>
 
 #include "app/bench.h"
+#include "calib/core/error.h"
 #include "calib/core/exr.h"
 #include "calib/core/image_io.h"
 #include "calib/core/log.h"
+#include "calib/core/option_fields.h"
 #include "calib/core/parallel.h"
 #include "calib/dataset.h"
 #include "calib/object.h"
@@ -86,7 +88,7 @@ SgMixture BenchEnvironment() {
   // NERFAR_BENCH_INSERT_SUN=λ: also a small, very bright sun of that
   // sharpness (the sunroom's energy), which the incident light passes on
   // analytically when it is sharper than its directions resolve.
-  if (const char* sun_env = std::getenv("NERFAR_BENCH_INSERT_SUN")) {
+  if (const char* sun_env = BenchVariable("NERFAR_BENCH_INSERT_SUN")) {
     Sg sun;
     sun.axis = Normalized(Vec3{-0.66, -0.36, 0.65});
     sun.sharpness = std::clamp(std::atof(sun_env), 1.0, 1e4);
@@ -203,7 +205,7 @@ void TimeHandHeld(const NerfScene& scene, const SgMixture& environment, const In
   std::vector<double> n_evaluated, part_raster, part_shade, n_hidden;
   // NERFAR_BENCH_INSERT_HANDHELD_ONLY=1 (for profiling): the preset's
   // hand-held frames alone, no reference renders (error rows stay 0).
-  const char* only_env = std::getenv("NERFAR_BENCH_INSERT_HANDHELD_ONLY");
+  const char* only_env = BenchVariable("NERFAR_BENCH_INSERT_HANDHELD_ONLY");
   const bool handheld_only = only_env != nullptr && std::string(only_env) == "1";
   for (int f = 0; f < frames; ++f) {
     Pose cam = T_world_camera;
@@ -300,7 +302,7 @@ StageMedians TimePreset(const NerfScene& scene, const SgMixture& environment, co
   }
   StageMedians m;
   m.coverage = double(layers.gbuffer.covered) / (double(camera.width) * camera.height);
-  const char* only_env = std::getenv("NERFAR_BENCH_INSERT_HANDHELD_ONLY");
+  const char* only_env = BenchVariable("NERFAR_BENCH_INSERT_HANDHELD_ONLY");
   if (only_env != nullptr && std::string(only_env) == "1") repeats = 0;  // profiling the hand-held frames
   for (int r = 0; r < repeats; ++r) {
     // The object still: the incident light is reused.
@@ -343,7 +345,7 @@ StageMedians TimePreset(const NerfScene& scene, const SgMixture& environment, co
   m.frame_camera_moved = MedianOf(still_cam);
   // NERFAR_BENCH_INSERT_HANDHELD_FRAMES=N: N hand-held frames (default 6,
   // the first builds the caches; more give a profiler more samples).
-  const char* frames_env = std::getenv("NERFAR_BENCH_INSERT_HANDHELD_FRAMES");
+  const char* frames_env = BenchVariable("NERFAR_BENCH_INSERT_HANDHELD_FRAMES");
   const int frames = frames_env != nullptr ? std::clamp(std::atoi(frames_env), 2, 1000) : 6;
   TimeHandHeld(scene, environment, object, camera, T_world_camera, options, frames, m);
   return m;
@@ -404,19 +406,175 @@ void GroundTruthQuality(const std::string& scenes_dir, const std::string& scene_
   figures.push_back({"light_err_fit_" + key, LightingError(light, probe), "", "32-SG fit of the true probe"});
 }
 
+// The object's SSDF, baked with the fast preset. NERFAR_BENCH_INSERT_SSDF_CACHE=PATH
+// (for profiling under valgrind): read from PATH when it exists, else baked and written there.
+SsdfField BenchObjectSsdf(const TriangleMesh& mesh) {
+  const double t_bake = NowSeconds();
+  const char* ssdf_cache = BenchVariable("NERFAR_BENCH_INSERT_SSDF_CACHE");
+  std::error_code exists_error;
+  const bool cached_ssdf = ssdf_cache != nullptr && fs::is_regular_file(ssdf_cache, exists_error);
+  SsdfField field = cached_ssdf ? ReadSsdf(ssdf_cache) : BakeSsdf(mesh, SsdfBakeOptions::Preset("fast"), std::nullopt);
+  if (ssdf_cache != nullptr && !cached_ssdf) WriteSsdf(ssdf_cache, field);
+  LogInfo("bench insert: " + std::string(cached_ssdf ? "read" : "baked") + " the object's SSDF (fast) in " +
+          FormatDuration(NowSeconds() - t_bake));
+  return field;
+}
+
+// The camera of the timed frames: 60° horizontal view, its distance set so
+// the object covers about 10% of the frame.
+struct BenchView {
+  CameraIntrinsics camera;
+  Pose T_world_camera;
+};
+
+BenchView FrameTheObject(const TriangleMesh& mesh, const Pose& T_world_object, int width, int height) {
+  BenchView view;
+  CameraIntrinsics& camera = view.camera;
+  camera.width = width;
+  camera.height = height;
+  camera.fx = camera.fy = 0.5 * width / std::tan(kPi / 6);
+  camera.cx = width / 2.0;
+  camera.cy = height / 2.0;
+  const Vec3 target = T_world_object.translation;
+  const Vec3 direction = Normalized(Vec3{0.7, -0.6, 0.5});
+  double distance = 0.4;
+  view.T_world_camera = LookAt(target + direction * distance, target);
+  for (int iteration = 0; iteration < 4; ++iteration) {
+    const ObjectGBuffer g = Rasterize(camera, view.T_world_camera, {{&mesh, T_world_object, 1.0}});
+    const double coverage = double(g.covered) / (double(width) * height);
+    if (coverage <= 0) break;
+    distance *= std::sqrt(coverage / 0.10);
+    view.T_world_camera = LookAt(target + direction * distance, target);
+  }
+  return view;
+}
+
+// The non-empty items of a comma-separated list (none for nullptr).
+std::vector<std::string> SplitList(const char* text) {
+  std::vector<std::string> items;
+  const std::string list = text ? text : "";
+  for (size_t begin = 0; begin <= list.size();) {
+    const size_t end = std::min(list.find(',', begin), list.size());
+    if (end > begin) items.push_back(list.substr(begin, end - begin));
+    begin = end + 1;
+  }
+  return items;
+}
+
+// The preset's options with the NERFAR_BENCH_INSERT_{PARALLAX,OFF,KNOBS}
+// overrides (to attribute a part's cost).
+InsertOptions PresetWithOverrides(const char* preset) {
+  InsertOptions insert_options = InsertOptions::Preset(preset);
+  // NERFAR_BENCH_INSERT_PARALLAX=0: near-light parallax off (to attribute its cost).
+  const char* parallax_env = BenchVariable("NERFAR_BENCH_INSERT_PARALLAX");
+  if (parallax_env != nullptr && std::string(parallax_env) == "0") insert_options.light.parallax = false;
+  // NERFAR_BENCH_INSERT_OFF="snap,skip_covered" (either): κ's ε snap /
+  // the skipped nodes under the object off (to attribute their savings).
+  for (const std::string& item : SplitList(BenchVariable("NERFAR_BENCH_INSERT_OFF"))) {
+    if (item == "snap") {
+      insert_options.shadow_epsilon_snap = false;
+    } else if (item == "skip_covered") {
+      insert_options.kappa_skip_covered = false;
+    } else {
+      ThrowInputError("NERFAR_BENCH_INSERT_OFF", "'" + item + "' (expected snap, skip_covered or both)");
+    }
+  }
+  // NERFAR_BENCH_INSERT_KNOBS="kappa_step=4,shadow_reach_radii=8,...": κ
+  // and shading knobs set over the preset (to attribute one preset's cost
+  // against another's), through the --set parser: an unknown name or a bad
+  // value stops the bench.
+  InsertOptions& o = insert_options;
+  const std::vector<OptionField> knobs = {FieldOf("kappa_step", &o.kappa_step),
+                                          FieldOf("kappa_coarse_factor", &o.kappa_coarse_factor),
+                                          FieldOf("kappa_refine_delta", &o.kappa_refine_delta),
+                                          FieldOf("shadow_reach_radii", &o.shadow_reach_radii),
+                                          FieldOf("shadow_epsilon", &o.shadow_epsilon),
+                                          FieldOf("kappa_cache_spacing_radii", &o.kappa_cache_spacing_radii),
+                                          FieldOf("occlusion_step", &o.occlusion_step),
+                                          FieldOf("parallax", &o.light.parallax),
+                                          FieldOf("shade_step", &o.shade_step),
+                                          FieldOf("shade_refine_delta", &o.shade_refine_delta),
+                                          FieldOf("shade_refine_angle_deg", &o.shade_refine_angle_deg),
+                                          FieldOf("shade_specular_on_grid", &o.shade_specular_on_grid)};
+  for (const std::string& item : SplitList(BenchVariable("NERFAR_BENCH_INSERT_KNOBS")))
+    SetOptionField(knobs, item, "NERFAR_BENCH_INSERT_KNOBS");
+  return insert_options;
+}
+
+// One preset's figures: the still and moving frames' stages, then the
+// hand-held sequence's.
+void AddPresetFigures(const char* preset, const StageMedians& m, const InsertOptions& insert_options,
+                      const std::string& size, std::vector<BenchFigure>& figures) {
+  const std::string note = std::string(preset) + ", " + size + ", object " +
+                           std::to_string(int(std::round(m.coverage * 100))) + "% of the frame";
+  const std::string p = std::string(preset) + "_";
+  figures.push_back({p + "light_ms", m.light, "ms", note + "; N=" + std::to_string(insert_options.light.directions)});
+  figures.push_back(
+      {p + "fit_warm_ms", m.fit_warm, "ms", note + "; M=" + std::to_string(insert_options.light.fit.lobes)});
+  figures.push_back({p + "raster_ms", m.raster, "ms", note});
+  figures.push_back({p + "shade_ms", m.shade, "ms", note + " (with self-shadow)"});
+  figures.push_back({p + "occlusion_ms", m.occlusion, "ms", note + " (incl. composite)"});
+  figures.push_back({p + "kappa_ms", m.kappa, "ms", note + "; step " + std::to_string(insert_options.kappa_step)});
+  figures.push_back({p + "kappa_rect_still_px", m.kappa_rect_px, "px", note + "; where κ was passed, still frame"});
+  figures.push_back({p + "kappa_marched_still", m.kappa_marched, "rays", note + "; κ receivers marched, still frame"});
+  figures.push_back({p + "frame_still_ms", m.frame_still, "ms", note + "; light cached"});
+  figures.push_back({p + "frame_moving_ms", m.frame_moving, "ms", note + "; light + warm fit"});
+  figures.push_back({p + "kappa_camera_moved_ms", m.kappa_camera_moved, "ms", note + "; object still, camera 1 mm"});
+  figures.push_back({p + "frame_camera_moved_ms", m.frame_camera_moved, "ms", note + "; object still, camera 1 mm"});
+  const std::string hh = note + "; hand-held: object still, camera 3 mm per frame, median of 5 frames";
+  figures.push_back({p + "handheld_kappa_ms", m.handheld_kappa, "ms", hh + ", options of the preset"});
+  figures.push_back({p + "handheld_frame_ms", m.handheld_frame, "ms", hh + ", options of the preset"});
+  figures.push_back({p + "handheld_marched", m.handheld_marched, "rays", hh + ", options of the preset"});
+  figures.push_back({p + "handheld_occlusion_ms", m.handheld_occlusion, "ms", hh + ", occlusion + composite"});
+  figures.push_back({p + "handheld_kappa_receivers_ms", m.handheld_receivers_ms, "ms",
+                     hh + ", κ part: receivers (reuse, marches, cell normals)"});
+  figures.push_back({p + "handheld_kappa_lookup_ms", m.handheld_lookup_ms, "ms",
+                     hh + ", κ part: κ at the receivers (lattice look-ups, new nodes)"});
+  figures.push_back(
+      {p + "handheld_kappa_multiply_ms", m.handheld_multiply_ms, "ms", hh + ", κ part: layer + background multiply"});
+  figures.push_back({p + "handheld_receivers", m.handheld_receivers, "", hh + ", receivers whose κ was taken"});
+  figures.push_back({p + "handheld_lookups", m.handheld_lookups, "", hh + ", shared-lattice look-ups"});
+  figures.push_back({p + "handheld_multiplied_px", m.handheld_multiplied, "px", hh + ", pixels the multiply passed"});
+  figures.push_back({p + "handheld_evaluated", m.handheld_evaluated, "", hh + ", lattice nodes evaluated (new)"});
+  figures.push_back(
+      {p + "handheld_hidden", m.handheld_hidden, "", hh + ", κ grid nodes under the object not needed (skipped)"});
+  figures.push_back({p + "handheld_raster_ms", m.handheld_raster, "ms", hh + ", raster"});
+  figures.push_back({p + "handheld_shade_ms", m.handheld_shade, "ms", hh + ", shade + self-shadow"});
+  figures.push_back({p + "handheld_reused", m.handheld_reused, "rays", hh + ", options of the preset"});
+  figures.push_back(
+      {p + "handheld_kappa_all_marched_ms", m.handheld_kappa_marched_all, "ms", hh + ", exact receivers"});
+  figures.push_back(
+      {p + "handheld_frame_all_marched_ms", m.handheld_frame_marched_all, "ms", hh + ", exact receivers"});
+  figures.push_back({p + "handheld_marched_all", m.handheld_marched_all, "rays", hh + ", exact receivers"});
+  figures.push_back({p + "handheld_kappa_error_mean", m.handheld_error_mean, "",
+                     hh + ", preset vs exact receivers: worst frame's sum |dκ| / sum (1 - κ)"});
+  figures.push_back(
+      {p + "handheld_kappa_error_max", m.handheld_error_max, "", hh + ", preset vs exact receivers: worst pixel |dκ|"});
+  figures.push_back(
+      {p + "handheld_kappa_noise_mean", m.handheld_noise_mean, "",
+       hh + ", exact receivers vs exact receivers from 0.1 mm away: worst frame's sum |dκ| / sum (1 - κ)"});
+  figures.push_back({p + "handheld_kappa_vs_truth_mean", m.handheld_truth_preset_mean, "",
+                     hh + ", preset vs κ with the true geometry as receivers: worst frame's sum |dκ| / sum (1 - κ)"});
+  figures.push_back({p + "handheld_kappa_exact_vs_truth_mean", m.handheld_truth_exact_mean, "",
+                     hh + ", exact receivers vs κ with the true geometry: worst frame's sum |dκ| / sum (1 - κ)"});
+  figures.push_back({p + "handheld_kappa_noise_max", m.handheld_noise_max, "",
+                     hh + ", exact receivers vs exact receivers from 0.1 mm away: worst pixel |dκ|"});
+}
+
 }  // namespace
 
 // The incident light on a real NeRF (bench_insert_light.cpp; NERFAR_BENCH_INSERT_NERF).
 void BenchInsertRealNerfLight(const BenchOptions& options, std::vector<BenchFigure>& figures);
 
 std::vector<BenchFigure> BenchInsert(const BenchOptions& options) {
+  PresetWithOverrides("fast");  // a bad NERFAR_BENCH_INSERT_OFF or _KNOBS stops the bench before any work
   std::vector<BenchFigure> figures;
   BenchInsertRealNerfLight(options, figures);
   // NERFAR_BENCH_INSERT_GT=0 skips the ground-truth quality part;
   // NERFAR_BENCH_INSERT_PRESETS="fast,balanced" times only those presets.
-  const char* gt_env = std::getenv("NERFAR_BENCH_INSERT_GT");
+  const char* gt_env = BenchVariable("NERFAR_BENCH_INSERT_GT");
   const bool with_gt = gt_env == nullptr || std::string(gt_env) != "0";
-  const char* presets_env = std::getenv("NERFAR_BENCH_INSERT_PRESETS");
+  const char* presets_env = BenchVariable("NERFAR_BENCH_INSERT_PRESETS");
   const std::string presets = presets_env ? presets_env : "fast,balanced,accurate";
   if (with_gt && !options.quick && !options.scenes_dir.empty()) {
     for (const char* scene_name : {"lamps", "window"})
@@ -430,17 +588,7 @@ std::vector<BenchFigure> BenchInsert(const BenchOptions& options) {
   const SgMixture environment = BenchEnvironment();
   std::string mesh_name;
   const TriangleMesh mesh = BenchObjectMesh(options.scenes_dir, &mesh_name);
-  const double t_bake = NowSeconds();
-  // NERFAR_BENCH_INSERT_SSDF_CACHE=PATH (for profiling under valgrind): the
-  // object's SSDF read from PATH when it exists, else baked and written there.
-  const char* ssdf_cache = std::getenv("NERFAR_BENCH_INSERT_SSDF_CACHE");
-  std::error_code exists_error;
-  const bool cached_ssdf = ssdf_cache != nullptr && fs::is_regular_file(ssdf_cache, exists_error);
-  const SsdfField field =
-      cached_ssdf ? ReadSsdf(ssdf_cache) : BakeSsdf(mesh, SsdfBakeOptions::Preset("fast"), std::nullopt);
-  if (ssdf_cache != nullptr && !cached_ssdf) WriteSsdf(ssdf_cache, field);
-  LogInfo("bench insert: " + std::string(cached_ssdf ? "read" : "baked") + " the object's SSDF (fast) in " +
-          FormatDuration(NowSeconds() - t_bake));
+  const SsdfField field = BenchObjectSsdf(mesh);
   const BoundingSphere bs = ComputeBoundingSphere(mesh);
   const Pose T_world_object{Mat3::Identity(), {0.1, -0.05, -bs.center.z + (ComputeBounds(mesh).max.z - bs.center.z)}};
   const SsdfVisibility visibility(field, T_world_object, 1.0);
@@ -450,124 +598,14 @@ std::vector<BenchFigure> BenchInsert(const BenchOptions& options) {
   object.material.base_color = {0.8, 0.35, 0.2};
   object.material.roughness = 0.7;
   object.visibility = &visibility;
-
-  // Camera: 60° horizontal view, distance set so the object covers ~10%.
-  CameraIntrinsics camera;
-  camera.width = width;
-  camera.height = height;
-  camera.fx = camera.fy = 0.5 * width / std::tan(kPi / 6);
-  camera.cx = width / 2.0;
-  camera.cy = height / 2.0;
-  const Vec3 target = T_world_object.translation;
-  const Vec3 direction = Normalized(Vec3{0.7, -0.6, 0.5});
-  double distance = 0.4;
-  Pose T_world_camera = LookAt(target + direction * distance, target);
-  for (int iteration = 0; iteration < 4; ++iteration) {
-    const ObjectGBuffer g = Rasterize(camera, T_world_camera, {{&mesh, T_world_object, 1.0}});
-    const double coverage = double(g.covered) / (double(width) * height);
-    if (coverage <= 0) break;
-    distance *= std::sqrt(coverage / 0.10);
-    T_world_camera = LookAt(target + direction * distance, target);
-  }
+  const BenchView view = FrameTheObject(mesh, T_world_object, width, height);
   const std::string size = std::to_string(width) + "x" + std::to_string(height) + ", " + mesh_name;
   for (const char* preset : {"fast", "balanced", "accurate"}) {
     if (presets.find(preset) == std::string::npos) continue;
-    InsertOptions insert_options = InsertOptions::Preset(preset);
-    // NERFAR_BENCH_INSERT_PARALLAX=0: near-light parallax off (to attribute its cost).
-    const char* parallax_env = std::getenv("NERFAR_BENCH_INSERT_PARALLAX");
-    if (parallax_env != nullptr && std::string(parallax_env) == "0") insert_options.light.parallax = false;
-    // NERFAR_BENCH_INSERT_OFF="snap,skip_covered" (either): κ's ε snap /
-    // the skipped nodes under the object off (to attribute their savings).
-    const char* off_env = std::getenv("NERFAR_BENCH_INSERT_OFF");
-    const std::string off = off_env ? off_env : "";
-    if (off.find("snap") != std::string::npos) insert_options.shadow_epsilon_snap = false;
-    if (off.find("skip_covered") != std::string::npos) insert_options.kappa_skip_covered = false;
-    // NERFAR_BENCH_INSERT_KNOBS="kappa_step=4,shadow_reach_radii=8,...": κ
-    // and shading knobs set over the preset (to attribute one preset's cost
-    // against another's): kappa_step, kappa_coarse_factor, shadow_reach_radii,
-    // shadow_epsilon, kappa_cache_spacing_radii, occlusion_step, parallax,
-    // kappa_refine_delta, shade_step, shade_refine_delta,
-    // shade_refine_angle_deg, shade_specular_on_grid.
-    if (const char* knobs = std::getenv("NERFAR_BENCH_INSERT_KNOBS")) {
-      std::string list = knobs;
-      for (size_t begin = 0; begin < list.size();) {
-        const size_t end = std::min(list.find(',', begin), list.size());
-        const std::string item = list.substr(begin, end - begin);
-        begin = end + 1;
-        const size_t eq = item.find('=');
-        if (eq == std::string::npos) continue;
-        const std::string name = item.substr(0, eq);
-        const double v = std::atof(item.c_str() + eq + 1);
-        if (name == "kappa_step") insert_options.kappa_step = int(v);
-        if (name == "kappa_coarse_factor") insert_options.kappa_coarse_factor = int(v);
-        if (name == "kappa_refine_delta") insert_options.kappa_refine_delta = v;
-        if (name == "shadow_reach_radii") insert_options.shadow_reach_radii = v;
-        if (name == "shadow_epsilon") insert_options.shadow_epsilon = v;
-        if (name == "kappa_cache_spacing_radii") insert_options.kappa_cache_spacing_radii = v;
-        if (name == "occlusion_step") insert_options.occlusion_step = int(v);
-        if (name == "parallax") insert_options.light.parallax = v != 0;
-        if (name == "shade_step") insert_options.shade_step = int(v);
-        if (name == "shade_refine_delta") insert_options.shade_refine_delta = v;
-        if (name == "shade_refine_angle_deg") insert_options.shade_refine_angle_deg = v;
-        if (name == "shade_specular_on_grid") insert_options.shade_specular_on_grid = v != 0;
-      }
-    }
-    const StageMedians m = TimePreset(scene, environment, object, camera, T_world_camera, insert_options, repeats);
-    const std::string note = std::string(preset) + ", " + size + ", object " +
-                             std::to_string(int(std::round(m.coverage * 100))) + "% of the frame";
-    const std::string p = std::string(preset) + "_";
-    figures.push_back({p + "light_ms", m.light, "ms", note + "; N=" + std::to_string(insert_options.light.directions)});
-    figures.push_back(
-        {p + "fit_warm_ms", m.fit_warm, "ms", note + "; M=" + std::to_string(insert_options.light.fit.lobes)});
-    figures.push_back({p + "raster_ms", m.raster, "ms", note});
-    figures.push_back({p + "shade_ms", m.shade, "ms", note + " (with self-shadow)"});
-    figures.push_back({p + "occlusion_ms", m.occlusion, "ms", note + " (incl. composite)"});
-    figures.push_back({p + "kappa_ms", m.kappa, "ms", note + "; step " + std::to_string(insert_options.kappa_step)});
-    figures.push_back({p + "kappa_rect_still_px", m.kappa_rect_px, "px", note + "; where κ was passed, still frame"});
-    figures.push_back(
-        {p + "kappa_marched_still", m.kappa_marched, "rays", note + "; κ receivers marched, still frame"});
-    figures.push_back({p + "frame_still_ms", m.frame_still, "ms", note + "; light cached"});
-    figures.push_back({p + "frame_moving_ms", m.frame_moving, "ms", note + "; light + warm fit"});
-    figures.push_back({p + "kappa_camera_moved_ms", m.kappa_camera_moved, "ms", note + "; object still, camera 1 mm"});
-    figures.push_back({p + "frame_camera_moved_ms", m.frame_camera_moved, "ms", note + "; object still, camera 1 mm"});
-    const std::string hh = note + "; hand-held: object still, camera 3 mm per frame, median of 5 frames";
-    figures.push_back({p + "handheld_kappa_ms", m.handheld_kappa, "ms", hh + ", options of the preset"});
-    figures.push_back({p + "handheld_frame_ms", m.handheld_frame, "ms", hh + ", options of the preset"});
-    figures.push_back({p + "handheld_marched", m.handheld_marched, "rays", hh + ", options of the preset"});
-    figures.push_back({p + "handheld_occlusion_ms", m.handheld_occlusion, "ms", hh + ", occlusion + composite"});
-    figures.push_back({p + "handheld_kappa_receivers_ms", m.handheld_receivers_ms, "ms",
-                       hh + ", κ part: receivers (reuse, marches, cell normals)"});
-    figures.push_back({p + "handheld_kappa_lookup_ms", m.handheld_lookup_ms, "ms",
-                       hh + ", κ part: κ at the receivers (lattice look-ups, new nodes)"});
-    figures.push_back(
-        {p + "handheld_kappa_multiply_ms", m.handheld_multiply_ms, "ms", hh + ", κ part: layer + background multiply"});
-    figures.push_back({p + "handheld_receivers", m.handheld_receivers, "", hh + ", receivers whose κ was taken"});
-    figures.push_back({p + "handheld_lookups", m.handheld_lookups, "", hh + ", shared-lattice look-ups"});
-    figures.push_back({p + "handheld_multiplied_px", m.handheld_multiplied, "px", hh + ", pixels the multiply passed"});
-    figures.push_back({p + "handheld_evaluated", m.handheld_evaluated, "", hh + ", lattice nodes evaluated (new)"});
-    figures.push_back(
-        {p + "handheld_hidden", m.handheld_hidden, "", hh + ", κ grid nodes under the object not needed (skipped)"});
-    figures.push_back({p + "handheld_raster_ms", m.handheld_raster, "ms", hh + ", raster"});
-    figures.push_back({p + "handheld_shade_ms", m.handheld_shade, "ms", hh + ", shade + self-shadow"});
-    figures.push_back({p + "handheld_reused", m.handheld_reused, "rays", hh + ", options of the preset"});
-    figures.push_back(
-        {p + "handheld_kappa_all_marched_ms", m.handheld_kappa_marched_all, "ms", hh + ", exact receivers"});
-    figures.push_back(
-        {p + "handheld_frame_all_marched_ms", m.handheld_frame_marched_all, "ms", hh + ", exact receivers"});
-    figures.push_back({p + "handheld_marched_all", m.handheld_marched_all, "rays", hh + ", exact receivers"});
-    figures.push_back({p + "handheld_kappa_error_mean", m.handheld_error_mean, "",
-                       hh + ", preset vs exact receivers: worst frame's sum |dκ| / sum (1 - κ)"});
-    figures.push_back({p + "handheld_kappa_error_max", m.handheld_error_max, "",
-                       hh + ", preset vs exact receivers: worst pixel |dκ|"});
-    figures.push_back(
-        {p + "handheld_kappa_noise_mean", m.handheld_noise_mean, "",
-         hh + ", exact receivers vs exact receivers from 0.1 mm away: worst frame's sum |dκ| / sum (1 - κ)"});
-    figures.push_back({p + "handheld_kappa_vs_truth_mean", m.handheld_truth_preset_mean, "",
-                       hh + ", preset vs κ with the true geometry as receivers: worst frame's sum |dκ| / sum (1 - κ)"});
-    figures.push_back({p + "handheld_kappa_exact_vs_truth_mean", m.handheld_truth_exact_mean, "",
-                       hh + ", exact receivers vs κ with the true geometry: worst frame's sum |dκ| / sum (1 - κ)"});
-    figures.push_back({p + "handheld_kappa_noise_max", m.handheld_noise_max, "",
-                       hh + ", exact receivers vs exact receivers from 0.1 mm away: worst pixel |dκ|"});
+    const InsertOptions insert_options = PresetWithOverrides(preset);
+    const StageMedians m =
+        TimePreset(scene, environment, object, view.camera, view.T_world_camera, insert_options, repeats);
+    AddPresetFigures(preset, m, insert_options, size, figures);
   }
   return figures;
 }

@@ -208,7 +208,7 @@ void AddFloorAndHud(int width, int height, std::vector<BenchFigure>& figures) {
 std::vector<BenchFigure> BenchLive(const BenchOptions& options) {
   std::vector<BenchFigure> figures;
   // NERFAR_BENCH_LIVE_FRAMES=N: frames per run (default 90, 3 s at 30/s).
-  const char* frames_env = std::getenv("NERFAR_BENCH_LIVE_FRAMES");
+  const char* frames_env = BenchVariable("NERFAR_BENCH_LIVE_FRAMES");
   const int frames = options.quick ? 8 : std::clamp(frames_env ? std::atoi(frames_env) : 90, 20, 3000);
   const int width = options.quick ? 640 : 1280, height = options.quick ? 360 : 720;
   const int warmup = options.quick ? 2 : 15;

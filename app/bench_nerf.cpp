@@ -105,13 +105,13 @@ std::vector<BenchFigure> BenchNerf(const BenchOptions& options) {
     LogWarning("bench nerf: ../shared/scenes not found; nothing measured");
     return figures;
   }
-  const char* env = std::getenv("NERFAR_BENCH_NERF_PRESETS");
+  const char* env = BenchVariable("NERFAR_BENCH_NERF_PRESETS");
   const std::vector<std::string> presets = options.quick ? std::vector<std::string>{"fast"} : Split(env ? env : "fast");
   std::vector<std::string> scenes = {"lamps", "window"};
   if (options.quick) scenes.resize(1);
   const std::string tmp = std::filesystem::temp_directory_path() / "nerfar_bench_nerf";
   std::filesystem::create_directories(tmp);
-  if (const char* models = std::getenv("NERFAR_BENCH_NERF_MODELS")) {
+  if (const char* models = BenchVariable("NERFAR_BENCH_NERF_MODELS")) {
     for (const std::string& item : Split(models)) {
       const size_t eq = item.find('=');
       if (eq == std::string::npos) throw InputError("NERFAR_BENCH_NERF_MODELS: '" + item + "' (expected SCENE=FILE)");

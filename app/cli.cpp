@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <stdexcept>
 
 #include "calib/core/error.h"
 #include "calib/core/log.h"
@@ -62,6 +63,15 @@ void ArgParser::Option(const std::string& name, std::vector<std::string>* out, c
   AddOption(std::move(entry));
 }
 
+void ArgParser::Required(const std::string& name) {
+  for (Entry& e : options_)
+    if (e.name == name && e.flag == nullptr) {
+      e.required = true;
+      return;
+    }
+  throw std::logic_error("ArgParser::Required: no option " + name + " declared for nerfar " + command_);
+}
+
 void ArgParser::Positional(const std::string& name, std::string* out, const std::string& help, bool required) {
   positionals_.push_back({name, help, out, nullptr, required});
 }
@@ -103,6 +113,7 @@ bool ArgParser::Parse(const std::vector<std::string>& args) {
         if (i + 1 >= args.size()) Fail(name + " needs a value (" + entry->metavar + ")");
         value = args[++i];
       }
+      if (entry->required && value.empty()) Fail(name + " is empty (required: " + entry->metavar + ")");
       entry->set(value);
       continue;
     }
@@ -117,6 +128,11 @@ bool ArgParser::Parse(const std::vector<std::string>& args) {
   }
   for (size_t k = next_positional; k < positionals_.size(); ++k)
     if (positionals_[k].required && positionals_[k].one != nullptr) Fail("missing " + positionals_[k].name);
+  std::string missing;
+  for (const Entry& e : options_)
+    if (e.required && std::find(seen.begin(), seen.end(), e.name) == seen.end())
+      missing += (missing.empty() ? "" : ", ") + e.name + " " + e.metavar;
+  if (!missing.empty()) Fail("missing " + missing + " (required)");
   if (quiet_ && verbose_) Fail("--quiet and --verbose exclude each other");
   if (threads_ < 0 || threads_ > 1024) Fail("--threads must be 0 (all cores) to 1024");
   SetLogLevel(quiet_ ? LogLevel::kQuiet : (verbose_ ? LogLevel::kVerbose : LogLevel::kNormal));
@@ -139,7 +155,7 @@ std::string ArgParser::Help() const {
   for (const Entry& e : options_) {
     std::string left = "  " + e.name + (e.metavar.empty() ? "" : " " + e.metavar);
     left.resize(std::max<size_t>(left.size() + 2, 26), ' ');
-    usage += left + e.help + "\n";
+    usage += left + e.help + (e.required ? " (required)" : "") + "\n";
   }
   std::string help_line = "  --help";
   help_line.resize(26, ' ');

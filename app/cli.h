@@ -1,6 +1,8 @@
 // Command-line parsing shared by every subcommand: declared flags, options and
 // positionals with help text; strict (unknown flags and bad values are usage
-// errors, exit 2); `--help` prints the generated help. The common options
+// errors, exit 2); `--help` prints the generated help. An option declared
+// Required is marked "(required)" in the help and its absence is a usage
+// error naming it. The common options
 // --threads, --quiet and --verbose are added to every command.
 #pragma once
 
@@ -21,6 +23,8 @@ class ArgParser {
   // Repeatable option collecting every value (e.g. --set key=value).
   void Option(const std::string& name, std::vector<std::string>* out, const std::string& metavar,
               const std::string& help);
+  // Marks a declared option as one the command cannot run without.
+  void Required(const std::string& name);
   void Positional(const std::string& name, std::string* out, const std::string& help, bool required = true);
   // Any number of trailing positionals.
   void Positionals(const std::string& name, std::vector<std::string>* out, const std::string& help);
@@ -39,6 +43,7 @@ class ArgParser {
     std::function<void(const std::string&)> set;  // options
     bool* flag = nullptr;
     bool repeatable = false;
+    bool required = false;
   };
   struct PositionalEntry {
     std::string name, help;

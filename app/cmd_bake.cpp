@@ -23,7 +23,8 @@ int RunBake(const CommandArgs& args) {
   int grid = -1, dirs = -1, components = -1, bisection = -1;
   ArgParser parser("bake", "Bake the SSDF visibility field of a virtual object (its shadows and self-shadows).");
   parser.Positional("OBJECT", &object, "mesh (.obj .ply .gltf .glb) or object JSON naming its mesh");
-  parser.Option("-o", &output, "FILE", "the field to write (.ssdf); required");
+  parser.Option("-o", &output, "FILE", "the field to write (.ssdf)");
+  parser.Required("-o");
   parser.Option("--material", &material_path, "M.json", "material to store with the field (default: OBJECT's own)");
   parser.Option("--preset", &preset, "P", "fast, balanced (default) or accurate; single knobs below override it");
   parser.Option("--grid", &grid, "N", "grid points per axis (balanced: 16)");
@@ -38,7 +39,6 @@ int RunBake(const CommandArgs& args) {
       "example:\n"
       "  nerfar bake ../shared/scenes/objects/monkey_diffuse.json -o monkey.ssdf --preset fast\n");
   if (!parser.Parse(args)) return 0;
-  if (output.empty()) throw InputError("nerfar bake: -o FILE is required (where to write the field)");
 
   SsdfBakeOptions options = SsdfBakeOptions::Preset(preset);
   if (grid != -1) options.grid = grid;

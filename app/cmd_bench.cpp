@@ -67,8 +67,15 @@ int RunBench(const CommandArgs& args) {
   std::string stage_list;
   for (const BenchStage& stage : AllBenchStages())
     stage_list += std::string("  ") + stage.name + ": " + stage.summary + "\n";
-  parser.Epilog("stages:\n" + stage_list);
+  std::string variable_list;
+  for (const BenchVariableInfo& v : BenchVariables())
+    variable_list += std::string("  ") + v.name + " (" + v.stages + "): " + v.what + "\n";
+  parser.Epilog("stages:\n" + stage_list +
+                "\nenvironment variables (any other NERFAR_BENCH_* is an error; docs/USER_GUIDE.md tables their "
+                "defaults):\n" +
+                variable_list);
   if (!parser.Parse(args)) return 0;
+  CheckBenchEnvironment(environ);
   options.scenes_dir = FindSharedScenes();
 
   std::vector<const BenchStage*> selected;

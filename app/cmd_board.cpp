@@ -77,8 +77,8 @@ std::string CommandLine(const CommandArgs& args) {
 int RunBoard(const CommandArgs& args) {
   BoardJob job;
   ArgParser parser("board", "A tag board to print: a vector PDF at exact scale, PNGs, and its board.json.");
-  parser.Option("-o", &job.output, "DIR",
-                "folder to write board.pdf, board_sheet<N>_<D>dpi.png, board.json (required)");
+  parser.Option("-o", &job.output, "DIR", "folder to write board.pdf, board_sheet<N>_<D>dpi.png, board.json");
+  parser.Required("-o");
   parser.Option("--paper", &job.paper, "P", "A4 (default), letter, A3, or WxH in millimetres");
   parser.Option("--tag-size", &job.tag_size_mm, "MM", "edge of each tag's black square (default 30)");
   parser.Option("--family", &job.family, "F", "tag36h11 (default), tag25h9 or tag16h5");
@@ -97,7 +97,6 @@ int RunBoard(const CommandArgs& args) {
       "         nerfar board -o calib --layout grid --tag-size 20 --ids 100");
   if (!parser.Parse(args)) return 0;
   Problems usage("nerfar board");
-  if (job.output.empty()) usage.Add("-o", "missing (expected the folder to write)");
   if (!(job.dpi >= 72 && job.dpi <= 1200)) usage.Add("--dpi", Number(job.dpi) + " (expected 72 to 1200)");
   if (job.printed_ruler_mm < 0) usage.Add("--printed-ruler", "must be > 0 (millimetres)");
   usage.ThrowIfAny();

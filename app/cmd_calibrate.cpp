@@ -93,10 +93,12 @@ void PrintCalibration(const IntrinsicsResult& result, const CalibrationRecord& r
 int RunCalibrate(const CommandArgs& args) {
   CalibrateJob job;
   ArgParser parser("calibrate", "Camera intrinsics and distortion from views of an AprilTag board.");
-  parser.Option("--board", &job.board_path, "B", "board.json of the tag board (required)");
+  parser.Option("--board", &job.board_path, "B", "board.json of the tag board");
   parser.Option("--images", &job.images_dir, "DIR", "a folder of board images (name order)");
   parser.Option("--source", &job.source, "S", "a live or video source instead of --images");
-  parser.Option("-o", &job.output, "FILE", "camera.json to write (required)");
+  parser.Option("-o", &job.output, "FILE", "camera.json to write");
+  parser.Required("--board");
+  parser.Required("-o");
   parser.Option("--max-frames", &job.max_frames, "N", "frames read from --source at most (default 600)");
   parser.Option("--every", &job.every, "K", "use every K-th frame of --source (default 1)");
   parser.Option("--max-views", &job.max_views, "N", "views kept for the fit (default 60)");
@@ -112,8 +114,6 @@ int RunCalibrate(const CommandArgs& args) {
                 "still written, with the verdict), 2 for bad input.");
   if (!parser.Parse(args)) return 0;
   Problems usage("nerfar calibrate");
-  if (job.board_path.empty()) usage.Add("--board", "missing (a board.json)");
-  if (job.output.empty()) usage.Add("-o", "missing (the camera.json to write)");
   if (job.images_dir.empty() == job.source.empty()) usage.Add("", "give exactly one of --images DIR or --source S");
   if (job.every < 1 || job.max_views < 3 || job.min_tags < 1 || job.max_frames < 1)
     usage.Add("", "--every >= 1, --max-views >= 3, --min-tags >= 1 and --max-frames >= 1 are required");

@@ -271,10 +271,11 @@ ImageF LinearView(const Frame& frame, const std::string& image_folder, const Cam
 int RunCapture(const CommandArgs& args) {
   CaptureOptions options;
   ArgParser parser("capture", "A capture session: tracked, sharp, well-spread HDR views written as a dataset.");
-  parser.Option("--source", &options.source, "S", "camera, video or image folder (required)");
-  parser.Option("--board", &options.board_path, "B", "board.json of the tags on the table (required)");
+  parser.Option("--source", &options.source, "S", "camera, video or image folder");
+  parser.Option("--board", &options.board_path, "B", "board.json of the tags on the table");
   parser.Option("--camera", &options.camera_path, "C", "camera.json from 'nerfar calibrate' or a transforms.json");
-  parser.Option("-o", &options.output, "DATASET", "dataset folder to write (resumed if it exists) (required)");
+  parser.Option("-o", &options.output, "DATASET", "dataset folder to write (resumed if it exists)");
+  for (const char* name : {"--source", "--board", "--camera", "-o"}) parser.Required(name);
   parser.Option("--views", &options.views, "N", "views to collect, train + test (default 100)");
   parser.Option("--test-every", &options.test_every, "K", "every K-th view goes to the test split (default 10)");
   parser.Option("--brackets", &options.brackets, "N", "exposures per view where the camera allows (default 1)");
@@ -287,10 +288,6 @@ int RunCapture(const CommandArgs& args) {
   parser.Epilog(SourceHelp());
   if (!parser.Parse(args)) return 0;
   Problems usage("nerfar capture");
-  if (options.source.empty()) usage.Add("--source", "missing");
-  if (options.board_path.empty()) usage.Add("--board", "missing");
-  if (options.camera_path.empty()) usage.Add("--camera", "missing");
-  if (options.output.empty()) usage.Add("-o", "missing");
   if (options.views < 1 || options.brackets < 1 || options.brackets > 9 || options.ev_step <= 0 ||
       options.test_every < 0 || options.max_frames < 1)
     usage.Add("", "--views >= 1, --brackets 1..9, --ev-step > 0, --test-every >= 0, --max-frames >= 1");

@@ -121,6 +121,7 @@ int RunEnv(const CommandArgs& args) {
   ArgParser parser("env", "Estimate the distant environment light (32 SGs) of a NeRF by inverse rendering.");
   parser.Positional("NERF", &nerf_path, "trained model (.nerf)");
   parser.Option("-o", &output, "FILE", "output env.json");
+  parser.Required("-o");
   parser.Option("--preview", &preview, "FILE", "also write a 256x128 equirect EXR of the estimate");
   parser.Option(
       "--dump-samples", &dump, "FILE",
@@ -140,7 +141,6 @@ int RunEnv(const CommandArgs& args) {
                 "\nBaseline that ignores the NeRF's light and visibility: --set ignore_near_field=true\n"
                 "Example: nerfar env window.nerf -o env.json --preview env.exr --truth scenes/window/env.exr");
   if (!parser.Parse(args)) return 0;
-  if (output.empty()) throw InputError("nerfar env: -o FILE is required (see 'nerfar env --help')");
   EnvEstimateOptions options = EnvEstimateOptions::Preset(preset);
   for (const std::string& s : sets) options.Set(s);
   {

@@ -197,7 +197,8 @@ int RunImport(const CommandArgs& args) {
   ImportJob job;
   ArgParser parser("import", "Bring a capture made with other tools into nerfar's frame (metres, z up, a NeRF box).");
   parser.Positional("SRC", &job.source, "folder with transforms.json (instant-ngp, nerfstudio, COLMAP conversions)");
-  parser.Option("-o", &job.output, "DST", "dataset folder to write (required; the images stay in SRC)");
+  parser.Option("-o", &job.output, "DST", "dataset folder to write (the images stay in SRC)");
+  parser.Required("-o");
   parser.Option("--board", &job.board_path, "B", "board.json of tags seen in the images: frame, scale and box from it");
   parser.Option("--up", &job.up, "U", "without a board: auto (default: from the cameras) or file (keep the file's +z)");
   parser.Option("--distance", &job.distance_m, "M", "without a board: the median camera-to-subject distance, metres");
@@ -209,7 +210,6 @@ int RunImport(const CommandArgs& args) {
       "Then: nerfar train DST -o scene.nerf\nExample: nerfar import ~/captures/mug -o mug --up auto --distance 0.6");
   if (!parser.Parse(args)) return 0;
   Problems usage("nerfar import");
-  if (job.output.empty()) usage.Add("-o", "missing (expected the dataset folder to write)");
   if (job.up != "auto" && job.up != "file") usage.Add("--up", "'" + job.up + "' (expected auto or file)");
   if (job.distance_m < 0 || job.scale < 0) usage.Add("--distance, --scale", "must be > 0");
   if (job.distance_m > 0 && job.scale > 0) usage.Add("--distance, --scale", "give one of them");

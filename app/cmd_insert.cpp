@@ -149,13 +149,16 @@ void AddInputFlags(ArgParser& parser, InsertArgs& a) {
       "the scene's HDR NeRF (.nerf; required unless --truth-geometry with --light-probe: then nothing occludes)");
   parser.Option("--env", &a.env_path, "FILE", "environment SGs (env.json from `nerfar env`; default: none)");
   parser.Option("--object", &a.object_paths, "FILE", "an object's SSDF field (.ssdf from `nerfar bake`); repeatable");
+  parser.Required("--object");
   parser.Option("--pose", &a.pose_paths, "FILE", "the object's pose.json (object_to_world); one per --object");
   parser.Option("--mesh", &a.mesh_paths, "FILE", "the object's mesh (default: the one the .ssdf names); per --object");
   parser.Option("--material", &a.material_paths, "FILE",
                 "the object's material JSON (default: the .ssdf's); per --object");
-  parser.Option("--dataset", &a.dataset_dir, "DIR", "dataset folder with the cameras (required)");
+  parser.Option("--dataset", &a.dataset_dir, "DIR", "dataset folder with the cameras");
+  parser.Required("--dataset");
   parser.Option("--split", &a.split, "NAME", "test (default) or train");
-  parser.Option("-o", &a.output, "OUT", "output folder (required)");
+  parser.Option("-o", &a.output, "OUT", "output folder");
+  parser.Required("-o");
   parser.Option("--frames", &a.frames_dir, "DIR",
                 "camera frames named like the dataset's images (default: those images)");
   parser.Option("--background", &a.background, "B", "images (AR over the camera frames, default) or nerf");
@@ -300,11 +303,8 @@ void CheckUsage(const InsertArgs& a) {
   Problems usage("nerfar insert");
   if (a.nerf_path.empty() && !a.without_nerf) usage.Add("--nerf", "missing (expected the scene's .nerf file)");
   if (a.without_nerf && a.background == "nerf") usage.Add("--background", "nerf needs --nerf");
-  if (a.dataset_dir.empty()) usage.Add("--dataset", "missing (expected the dataset folder)");
-  if (a.output.empty()) usage.Add("-o", "missing (expected an output folder)");
   if (a.truth_geometry && a.truth_dir.empty()) usage.Add("--truth-geometry", "needs --truth DIR");
   if (!a.probe_distances.empty() && a.light_probe.empty()) usage.Add("--probe-distances", "needs --light-probe FILE");
-  if (a.object_paths.empty()) usage.Add("--object", "missing (expected at least one .ssdf)");
   if (a.pose_paths.size() != a.object_paths.size())
     usage.Add("--pose", std::to_string(a.pose_paths.size()) + " given for " + std::to_string(a.object_paths.size()) +
                             " objects (expected one per --object)");

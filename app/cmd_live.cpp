@@ -98,10 +98,11 @@ int ParseViews(const std::string& text, Problems& usage) {
 std::optional<LiveArgs> ParseLiveArgs(const CommandArgs& args) {
   LiveArgs a;
   ArgParser parser("live", "The live AR view: tracked camera frames with the object inserted.");
-  parser.Option("--source", &a.source_name, "S",
-                "frames: synthetic:SCENE,..., v4l2:/dev/videoN, video:FILE, ... (required)");
+  parser.Option("--source", &a.source_name, "S", "frames: synthetic:SCENE,..., v4l2:/dev/videoN, video:FILE, ...");
+  parser.Required("--source");
   parser.Option("--scene", &a.scene_dir, "SCENE",
-                "folder with scene.nerf, env.json, board.json, camera and *.ssdf (a `nerfar demo` output; required)");
+                "folder with scene.nerf, env.json, board.json, camera and *.ssdf (a `nerfar demo` output)");
+  parser.Required("--scene");
   parser.Option("--object", &a.object_paths, "OBJ",
                 "object .ssdf (or a mesh: no shadows); repeatable (default: SCENE/*.ssdf)");
   parser.Option("--camera", &a.camera_path, "C",
@@ -146,8 +147,6 @@ std::optional<LiveArgs> ParseLiveArgs(const CommandArgs& args) {
   if (!parser.Parse(args)) return std::nullopt;
 
   Problems usage("nerfar live");
-  if (a.source_name.empty()) usage.Add("--source", "missing (expected a frame source, e.g. synthetic:window)");
-  if (a.scene_dir.empty()) usage.Add("--scene", "missing (expected a SCENE folder, e.g. a `nerfar demo` output)");
   if (a.render_divisor < 0 || a.render_divisor > 4)
     usage.Add("--render-divisor", std::to_string(a.render_divisor) + " (expected 1..4)");
   if (a.frames < 0) usage.Add("--frames", std::to_string(a.frames) + " (expected >= 0)");

@@ -63,9 +63,11 @@ int RunRender(const CommandArgs& args) {
   bool no_render_copy = false;
   ArgParser parser("render", "Render a NeRF at a dataset's cameras and score it (psnr_tm, depth).");
   parser.Positional("MODEL", &model, "trained model (.nerf)");
-  parser.Option("--dataset", &dataset, "DIR", "dataset folder whose cameras to render (required)");
+  parser.Option("--dataset", &dataset, "DIR", "dataset folder whose cameras to render");
+  parser.Required("--dataset");
   parser.Option("--split", &options.split, "NAME", "split: test (default) or train");
-  parser.Option("-o", &output, "OUT", "output folder (required)");
+  parser.Option("-o", &output, "OUT", "output folder");
+  parser.Required("-o");
   parser.Flag("--png", &options.write_png, "also write OUT/<name>.png: render beside reference, tone-mapped");
   parser.Option("--quality", &quality, "Q",
                 "render setting: full (default; 0.5-voxel steps, rays stop at transmittance 1e-3) or live "
@@ -94,8 +96,6 @@ int RunRender(const CommandArgs& args) {
       "Writes OUT/<name>.exr, OUT/<name>_depth.exr, OUT/<name>_surface_depth.exr, OUT/<name>_opacity.exr and "
       "OUT/report.json.");
   if (!parser.Parse(args)) return 0;
-  if (dataset.empty() || output.empty())
-    throw InputError("nerfar render: --dataset DIR and -o OUT are required (see 'nerfar render --help')");
   try {
     options.render = NerfRenderOptions::Preset(quality);
   } catch (const InputError& e) {

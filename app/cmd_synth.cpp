@@ -35,6 +35,7 @@ int RunSynth(const CommandArgs& args) {
   ArgParser parser("synth", "Render a procedural tabletop scene with exact ground truth (HDR dataset layout).");
   parser.Option("--scene", &options.scene, "NAME", names + " (default lamps)");
   parser.Option("-o", &options.output_dir, "DIR", "output folder (created; files in it are replaced)");
+  parser.Required("-o");
   parser.Option("--res", &res, "WxH", "image size (default 400x300; 60 deg horizontal field of view)");
   parser.Option("--views", &options.views, "N", "training views (default 100)");
   parser.Option("--test-views", &options.test_views, "M", "test views, also the insert/ views (default 8)");
@@ -61,7 +62,6 @@ int RunSynth(const CommandArgs& args) {
     options = preset_options;
     parser.Parse(args);  // explicit sample counts override the preset
   }
-  if (options.output_dir.empty()) throw InputError("nerfar synth: -o DIR is required (see 'nerfar synth --help')");
   if (!res.empty()) ParseResolution(res, options.width, options.height);
   if (seed < 0) throw InputError("nerfar synth: --seed " + std::to_string(seed) + " (expected >= 0)");
   options.seed = static_cast<uint64_t>(seed);

@@ -30,6 +30,7 @@ int RunTrack(const CommandArgs& args) {
   parser.Option("--source", &source_name, "S", "frames: images:DIR, video:FILE, v4l2:/dev/videoN, synthetic, ...");
   parser.Option("--board", &board_path, "B", "board.json");
   parser.Option("--camera", &camera_path, "C", "camera.json or a transforms.json (its intrinsics)");
+  for (const char* name : {"--source", "--board", "--camera"}) parser.Required(name);
   parser.Option("-o", &output, "FILE", "write poses.json");
   parser.Option("--overlay", &overlay, "FILE", "write a video with the detections and the state drawn");
   parser.Option("--filter", &filter, "KIND",
@@ -46,8 +47,6 @@ int RunTrack(const CommandArgs& args) {
   parser.Option("--detector-threads", &threads, "N", "threads of the tag detector (default 1)");
   parser.Epilog(SourceHelp());
   if (!parser.Parse(args)) return 0;
-  if (source_name.empty() || board_path.empty() || camera_path.empty())
-    throw InputError("nerfar track: --source, --board and --camera are required (see 'nerfar track --help')");
 
   CheckOutputsSpareInputs({output, overlay}, Paths(board_path, camera_path, SourceInputs(source_name)));
   const Board board = ReadBoard(board_path);

@@ -40,6 +40,7 @@ int RunTrain(const CommandArgs& args) {
   ArgParser parser("train", "Train the HDR NeRF of a dataset (transforms.json + linear EXR images).");
   parser.Positional("DATASET", &dataset, "dataset folder (transforms_train.json or transforms.json, images)");
   parser.Option("-o", &output, "FILE", "output model (.nerf); its checkpoint is FILE.ckpt");
+  parser.Required("-o");
   parser.Option("--preset", &preset, "P", "fast | balanced (default) | accurate");
   parser.Option("--minutes", &minutes, "M", "wall-clock budget: the schedule is compressed to end in M minutes");
   parser.Option("--set", &sets, "KEY=VALUE", "override one training option (repeatable; see below)");
@@ -54,7 +55,6 @@ int RunTrain(const CommandArgs& args) {
                 "\nCtrl-C or SIGTERM stops after the current step and keeps a checkpoint; the same command resumes.\n"
                 "Example: nerfar train ../shared/scenes/lamps -o lamps.nerf --preset fast");
   if (!parser.Parse(args)) return 0;
-  if (output.empty()) throw InputError("nerfar train: -o FILE is required (see 'nerfar train --help')");
   if (minutes < 0) throw InputError("nerfar train: --minutes must be >= 0");
   if (checkpoint_seconds <= 0) throw InputError("nerfar train: --checkpoint-seconds must be > 0");
   if (stop_at_step < 0) throw InputError("nerfar train: --stop-at-step must be >= 0 (0: none)");

@@ -1,5 +1,5 @@
 // calib/core: EXR and PNG round trips, strict JSON, atomic files, the binary
-// container, math, threads, tone mapping and metrics.
+// container, the --set option parser, math, threads, tone mapping and metrics.
 #include <fcntl.h>
 #include <gtest/gtest.h>
 #include <sys/syscall.h>
@@ -26,6 +26,7 @@
 #include "calib/core/math.h"
 #include "calib/core/media.h"
 #include "calib/core/metrics.h"
+#include "calib/core/option_fields.h"
 #include "calib/core/output_guard.h"
 #include "calib/core/parallel.h"
 #include "tests/support/support.h"
@@ -604,6 +605,74 @@ TEST(BinaryFile, WriteBinaryFileIsAtomicAndReadsBack) {
   BinaryFile file = OpenBinaryFile(bytes, dir.File("x.bin"), kTestFormat);
   EXPECT_EQ(file.fields.Get<double>("value"), 2.5);
   EXPECT_EQ(std::distance(std::filesystem::directory_iterator(dir.path()), {}), 1) << "no temporary file left";
+}
+
+// The --set parser of every command (train, env): one options struct of
+// each kind, set from text and echoed.
+struct SetTarget {
+  int steps = 3;
+  double rate = 0.5;
+  float step = 0.5f;
+  bool smooth = false;
+  uint64_t seed = 1;
+  std::vector<OptionField> Fields() {
+    return {FieldOf("steps", &steps), FieldOf("rate", &rate), FieldOf("step", &step), FieldOf("smooth", &smooth),
+            FieldOf("seed", &seed)};
+  }
+};
+
+std::string SetError(SetTarget& t, const std::string& key_value) {
+  try {
+    SetOptionField(t.Fields(), key_value);
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  return "(no error)";
+}
+
+TEST(OptionFields, SetsEveryKindFromText) {
+  SetTarget t;
+  SetOptionField(t.Fields(), "steps=1e3");
+  SetOptionField(t.Fields(), "rate=-0.25");
+  SetOptionField(t.Fields(), "step=0.001");
+  SetOptionField(t.Fields(), "smooth=true");
+  SetOptionField(t.Fields(), "seed=18446744073709551615");  // digits are read exactly, past 2^53
+  EXPECT_EQ(t.steps, 1000);
+  EXPECT_EQ(t.rate, -0.25);
+  EXPECT_EQ(t.step, 0.001f);
+  EXPECT_TRUE(t.smooth);
+  EXPECT_EQ(t.seed, 18446744073709551615ull);
+}
+
+TEST(OptionFields, UnknownKeysAndBadValuesAreRefusedNamingThem) {
+  SetTarget t;
+  std::string m = SetError(t, "stpes=3");
+  EXPECT_NE(m.find("unknown option 'stpes'"), std::string::npos) << m;
+  EXPECT_NE(m.find("steps, rate, step, smooth, seed"), std::string::npos) << m;  // the keys there are
+  m = SetError(t, "steps=abc");
+  EXPECT_NE(m.find("--set steps=abc"), std::string::npos) << m;
+  EXPECT_NE(m.find("'abc' is not a valid value of steps (expected a whole number)"), std::string::npos) << m;
+  for (const char* bad : {"steps=1.5", "steps=", "steps=3x", "steps=3000000000", "rate=nan", "rate=1e999", "step=1e39",
+                          "smooth=1", "smooth=yes", "seed=-1", "seed=1.5"})
+    EXPECT_NE(SetError(t, bad), "(no error)") << bad;
+  EXPECT_NE(SetError(t, "steps").find("has no '='"), std::string::npos);
+  // A refused value leaves the field as it was.
+  EXPECT_EQ(t.steps, 3);
+  EXPECT_EQ(t.rate, 0.5);
+  EXPECT_EQ(t.step, 0.5f);
+  EXPECT_FALSE(t.smooth);
+  EXPECT_EQ(t.seed, 1u);
+}
+
+// Floats are echoed as they were written (0.001, not the float's exact
+// double 0.0010000000474974513); doubles, integers and bools as they are.
+TEST(OptionFields, EchoWritesValuesAsWritten) {
+  SetTarget t;
+  for (const char* kv : {"steps=-7", "rate=0.1", "step=0.001", "smooth=true", "seed=42"})
+    SetOptionField(t.Fields(), kv);
+  EXPECT_EQ(OptionFieldsJson(t.Fields()), R"({"rate":0.1,"seed":42,"smooth":true,"step":0.001,"steps":-7})");
+  SetOptionField(t.Fields(), "step=0.3");
+  EXPECT_NE(OptionFieldsJson(t.Fields()).find(R"("step":0.3,)"), std::string::npos) << OptionFieldsJson(t.Fields());
 }
 
 }  // namespace

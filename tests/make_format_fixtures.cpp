@@ -32,8 +32,8 @@ int main(int argc, char** argv) {
   raw.color_slope_bits = 6;
   SaveNerf(dir + "/field_raw.nerf", ParseNerf(SerializeNerf(field, raw), "memory"), raw);
 
-  const NerfTrainData data = testing::FormatFixtureTrainData();
-  NerfTrainer trainer(data, testing::FormatFixtureTrainOptions());
+  const NerfTrainData data = testing::TinyTrainData();
+  NerfTrainer trainer(data, testing::TinyTrainOptions());
   for (int n = 0; n < testing::kFormatFixtureTrainSteps; ++n) trainer.Step();
   trainer.SaveCheckpoint(dir + "/train.ckpt");
 

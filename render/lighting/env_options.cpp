@@ -7,17 +7,13 @@
 
 #include "calib/core/error.h"
 #include "calib/core/json.h"
+#include "calib/core/option_fields.h"
 #include "render/sg/sg.h"
 
 namespace nerfar {
 namespace {
 
 // ------------------------------------------------------------------- options
-struct OptionField {
-  const char* name;
-  enum Kind { kInt, kDouble, kBool, kFloat, kU64 } kind;
-  void* ptr;
-};
 std::vector<OptionField> Fields(EnvEstimateOptions& o) {
   using F = OptionField;
   return {{"views", F::kInt, &o.views},
@@ -175,66 +171,10 @@ std::vector<std::string> EnvEstimateOptions::Validate() const {
 }
 
 std::string EnvEstimateOptions::ToJson() const {
-  Json doc = Json::object();
   EnvEstimateOptions copy = *this;
-  for (const OptionField& f : Fields(copy)) {
-    switch (f.kind) {
-      case OptionField::kInt:
-        doc[f.name] = *static_cast<int*>(f.ptr);
-        break;
-      case OptionField::kDouble:
-        doc[f.name] = *static_cast<double*>(f.ptr);
-        break;
-      case OptionField::kFloat:
-        doc[f.name] = *static_cast<float*>(f.ptr);
-        break;
-      case OptionField::kBool:
-        doc[f.name] = *static_cast<bool*>(f.ptr);
-        break;
-      case OptionField::kU64:
-        doc[f.name] = *static_cast<uint64_t*>(f.ptr);
-        break;
-    }
-  }
-  return DumpJson(doc, -1);
+  return OptionFieldsJson(Fields(copy));
 }
 
-void EnvEstimateOptions::Set(const std::string& key_value) {
-  const size_t eq = key_value.find('=');
-  if (eq == std::string::npos) ThrowInputError("--set " + key_value, "has no '=' (expected key=value)");
-  const std::string key = key_value.substr(0, eq), value = key_value.substr(eq + 1);
-  for (const OptionField& f : Fields(*this)) {
-    if (key != f.name) continue;
-    try {
-      size_t used = 0;
-      switch (f.kind) {
-        case OptionField::kInt:
-          *static_cast<int*>(f.ptr) = std::stoi(value, &used);
-          break;
-        case OptionField::kDouble:
-          *static_cast<double*>(f.ptr) = std::stod(value, &used);
-          break;
-        case OptionField::kFloat:
-          *static_cast<float*>(f.ptr) = std::stof(value, &used);
-          break;
-        case OptionField::kU64:
-          *static_cast<uint64_t*>(f.ptr) = std::stoull(value, &used);
-          break;
-        case OptionField::kBool:
-          if (value != "true" && value != "false") throw std::invalid_argument("bool");
-          *static_cast<bool*>(f.ptr) = value == "true";
-          used = value.size();
-          break;
-      }
-      if (used != value.size()) throw std::invalid_argument("trailing");
-    } catch (const std::exception&) {
-      ThrowInputError(
-          "--set " + key_value,
-          "has a bad value (expected a " + std::string(f.kind == OptionField::kBool ? "true/false" : "number") + ")");
-    }
-    return;
-  }
-  ThrowInputError("--set " + key_value, "names no option (expected one of the keys of the logged options)");
-}
+void EnvEstimateOptions::Set(const std::string& key_value) { SetOptionField(Fields(*this), key_value); }
 
 }  // namespace nerfar

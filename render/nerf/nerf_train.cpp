@@ -19,6 +19,7 @@
 #include "calib/core/json.h"
 #include "calib/core/log.h"
 #include "calib/core/metrics.h"
+#include "calib/core/option_fields.h"
 #include "calib/core/parallel.h"
 #include "calib/core/random.h"
 #include "calib/linear_image.h"
@@ -200,70 +201,46 @@ std::vector<std::string> NerfTrainOptions::Validate() const {
 }
 
 namespace {
-// One table of the options' fields so ToJson and Set never drift apart.
-template <typename Visit>
-void VisitFields(NerfTrainOptions& o, Visit&& visit) {
-  visit("steps", o.steps);
-  visit("rays_per_step", o.rays_per_step);
-  visit("coarse_voxel_m", o.coarse_voxel_m);
-  visit("levels", o.levels);
-  visit("last_level_start", o.last_level_start);
-  visit("step_voxels", o.step_voxels);
-  visit("lr_density", o.lr_density);
-  visit("lr_color", o.lr_color);
-  visit("lr_final_factor", o.lr_final_factor);
-  visit("color_slope_decay", o.color_slope_decay);
-  visit("tv_density", o.tv_density);
-  visit("tv_color", o.tv_color);
-  visit("background_weight", o.background_weight);
-  visit("foreground_weight", o.foreground_weight);
-  visit("distortion_weight", o.distortion_weight);
-  visit("sparsity_weight", o.sparsity_weight);
-  visit("loss_epsilon", o.loss_epsilon);
-  visit("occupancy_every", o.occupancy_every);
-  visit("occupancy_sigma", o.occupancy_sigma);
-  visit("occupancy_sigma_finest", o.occupancy_sigma_finest);
-  visit("save_occupancy_sigma", o.save_occupancy_sigma);
-  visit("prune_delay", o.prune_delay);
-  visit("prune_weight", o.prune_weight);
-  visit("prune_every", o.prune_every);
-  visit("prune_relative", o.prune_relative);
-  visit("initial_sigma", o.initial_sigma);
-  visit("seed", o.seed);
-  visit("max_seconds", o.max_seconds);
-  visit("eval_views", o.eval_views);
+// One table of the options' fields, so ToJson and Set never drift apart.
+std::vector<OptionField> Fields(NerfTrainOptions& o) {
+  return {FieldOf("steps", &o.steps),
+          FieldOf("rays_per_step", &o.rays_per_step),
+          FieldOf("coarse_voxel_m", &o.coarse_voxel_m),
+          FieldOf("levels", &o.levels),
+          FieldOf("last_level_start", &o.last_level_start),
+          FieldOf("step_voxels", &o.step_voxels),
+          FieldOf("lr_density", &o.lr_density),
+          FieldOf("lr_color", &o.lr_color),
+          FieldOf("lr_final_factor", &o.lr_final_factor),
+          FieldOf("color_slope_decay", &o.color_slope_decay),
+          FieldOf("tv_density", &o.tv_density),
+          FieldOf("tv_color", &o.tv_color),
+          FieldOf("background_weight", &o.background_weight),
+          FieldOf("foreground_weight", &o.foreground_weight),
+          FieldOf("distortion_weight", &o.distortion_weight),
+          FieldOf("sparsity_weight", &o.sparsity_weight),
+          FieldOf("loss_epsilon", &o.loss_epsilon),
+          FieldOf("occupancy_every", &o.occupancy_every),
+          FieldOf("occupancy_sigma", &o.occupancy_sigma),
+          FieldOf("occupancy_sigma_finest", &o.occupancy_sigma_finest),
+          FieldOf("save_occupancy_sigma", &o.save_occupancy_sigma),
+          FieldOf("prune_delay", &o.prune_delay),
+          FieldOf("prune_weight", &o.prune_weight),
+          FieldOf("prune_every", &o.prune_every),
+          FieldOf("prune_relative", &o.prune_relative),
+          FieldOf("initial_sigma", &o.initial_sigma),
+          FieldOf("seed", &o.seed),
+          FieldOf("max_seconds", &o.max_seconds),
+          FieldOf("eval_views", &o.eval_views)};
 }
 }  // namespace
 
 std::string NerfTrainOptions::ToJson() const {
-  Json j = Json::object();
   NerfTrainOptions copy = *this;
-  VisitFields(copy, [&](const char* key, auto& value) { j[key] = value; });
-  return j.dump();
+  return OptionFieldsJson(Fields(copy));
 }
 
-void NerfTrainOptions::Set(const std::string& key_value) {
-  const size_t eq = key_value.find('=');
-  if (eq == std::string::npos) throw InputError("--set '" + key_value + "' (expected key=value)");
-  const std::string key = key_value.substr(0, eq), text = key_value.substr(eq + 1);
-  bool found = false;
-  VisitFields(*this, [&](const char* name, auto& value) {
-    if (key != name) return;
-    found = true;
-    char* end = nullptr;
-    errno = 0;
-    const double v = std::strtod(text.c_str(), &end);
-    if (text.empty() || *end != '\0' || errno != 0 || !std::isfinite(v))
-      throw InputError("--set " + key + ": '" + text + "' is not a number");
-    using T = std::decay_t<decltype(value)>;
-    if constexpr (std::is_integral_v<T>) {
-      if (v != std::floor(v) || v < 0 || v > 9.0e15)
-        throw InputError("--set " + key + ": '" + text + "' (expected a whole number)");
-    }
-    value = static_cast<T>(v);
-  });
-  if (!found) throw InputError("--set: unknown option '" + key + "' (see the option list in 'nerfar train --help')");
-}
+void NerfTrainOptions::Set(const std::string& key_value) { SetOptionField(Fields(*this), key_value); }
 
 // --------------------------------------------------------------- trainer
 

@@ -2,10 +2,14 @@
 // messages that name what is wrong.
 #include <gtest/gtest.h>
 
+#include <cctype>
 #include <cmath>
 #include <filesystem>
 #include <map>
 #include <nlohmann/json.hpp>
+#include <set>
+#include <sstream>
+#include <stdexcept>
 #include <string>
 
 #include "app/cli.h"
@@ -295,6 +299,134 @@ TEST(ArgParser, ParsesOptionsPositionalsAndRejectsMisuse) {
   EXPECT_THROW(twice.Parse({"--count", "1", "--count", "2"}), InputError);
   EXPECT_THROW(twice.Parse({"--count", "1x"}), InputError);
   EXPECT_THROW(twice.Parse({"--quiet", "--verbose"}), InputError);
+}
+
+TEST(ArgParser, RequiredOptionsAreMarkedInHelpAndEnforced) {
+  std::string output, board;
+  ArgParser parser("test", "a test command");
+  parser.Option("-o", &output, "FILE", "output");
+  parser.Option("--board", &board, "B", "board");
+  parser.Required("-o");
+  const std::string help = parser.Help();
+  EXPECT_NE(help.find("output (required)\n"), std::string::npos) << help;
+  EXPECT_EQ(help.find("board (required)"), std::string::npos) << help;
+  const auto message = [](ArgParser& p, const std::vector<std::string>& args) {
+    try {
+      p.Parse(args);
+    } catch (const InputError& e) {
+      return std::string(e.what());
+    }
+    return std::string("(no error)");
+  };
+  EXPECT_NE(message(parser, {"--board", "b.json"}).find("missing -o FILE (required)"), std::string::npos);
+  EXPECT_NE(message(parser, {"-o", ""}).find("-o is empty"), std::string::npos);
+  EXPECT_THROW(parser.Required("--nothing"), std::logic_error);
+  ASSERT_TRUE(parser.Parse({"-o", "out.json"}));
+  EXPECT_EQ(output, "out.json");
+  // --help needs no required option.
+  ArgParser helped("test", "");
+  helped.Option("-o", &output, "FILE", "output");
+  helped.Required("-o");
+  EXPECT_FALSE(helped.Parse({"--help"}));
+}
+
+// The guide's option tables and every command's --help agree on which
+// options are required: a row of a command's section whose default is
+// "required" is marked "(required)" by the parser in that command's --help,
+// and no other option is.
+TEST(App, GuideTablesAndHelpAgreeOnRequiredOptions) {
+  std::istringstream guide(testing::ReadText(testing::SourcePath("docs/USER_GUIDE.md")));
+  std::map<std::string, std::set<std::string>> guide_required;
+  std::string command, line;
+  while (std::getline(guide, line)) {
+    if (line.rfind("## ", 0) == 0) {
+      const size_t at = line.find("(`nerfar ");
+      command = at == std::string::npos ? "" : line.substr(at + 9, line.find('`', at + 9) - at - 9);
+      if (!command.empty()) guide_required[command];
+    }
+    if (command.empty() || line.rfind("| `-", 0) != 0) continue;
+    const std::string flag = line.substr(3, line.find_first_of(" `", 3) - 3);
+    const size_t cell = line.find('|', 1) + 1;
+    const std::string default_cell = line.substr(cell, line.find('|', cell) - cell);
+    if (default_cell == " required ") guide_required[command].insert(flag);
+  }
+  ASSERT_GE(guide_required.size(), 12u) << "commands with a section in the guide";
+  for (const auto& [name, expected] : guide_required) {
+    const Result result = RunNerfar(name + " --help");
+    ASSERT_EQ(result.exit_code, 0) << name;
+    std::set<std::string> marked;
+    std::istringstream help(result.output);
+    while (std::getline(help, line))
+      if (line.rfind("  -", 0) == 0 && line.size() > 11 && line.substr(line.size() - 11) == " (required)")
+        marked.insert(line.substr(2, line.find(' ', 2) - 2));
+    EXPECT_EQ(marked, expected) << "nerfar " << name << " --help against docs/USER_GUIDE.md:\n" << result.output;
+  }
+}
+
+// train and env take --set through the one parser (calib/core/option_fields.h):
+// an unknown key or a bad value stops either with exit code 2 naming them, and
+// env's echo of its float options is the number as written (the balanced
+// preset's 1e-3 and 0.03 of the guide's table, not the floats' binary digits).
+TEST(App, TrainAndEnvSetKnobsThroughOneParser) {
+  testing::TempDir dir;
+  for (const std::string& command : {"train " + dir.path() + " -o " + dir.File("m.nerf"),
+                                     "env " + dir.File("m.nerf") + " -o " + dir.File("e.json")}) {
+    Result r = RunNerfar(command + " --set stpes=3");
+    EXPECT_EQ(r.exit_code, 2) << command << ": " << r.output;
+    EXPECT_NE(r.output.find("--set stpes=3: unknown option 'stpes' (expected one of: "), std::string::npos) << r.output;
+    r = RunNerfar(command + " --set seed=abc");
+    EXPECT_EQ(r.exit_code, 2) << command << ": " << r.output;
+    EXPECT_NE(r.output.find("'abc' is not a valid value of seed"), std::string::npos) << r.output;
+  }
+  const Result help = RunNerfar("env --help");
+  EXPECT_NE(help.output.find(R"("min_transmittance":0.001,)"), std::string::npos) << help.output;
+  EXPECT_NE(help.output.find(R"("shadow_min_transmittance":0.03,)"), std::string::npos) << help.output;
+}
+
+// The environment variables of `nerfar bench`: each one a stage reads
+// (BenchVariable("...") in app/bench_*.cpp, and no getenv of one besides) is
+// listed by `nerfar bench --help` and tabled in the guide's bench section,
+// and a NERFAR_BENCH_* name not listed stops the bench before any stage runs,
+// naming it.
+TEST(App, BenchVariablesAreReadListedDocumentedAndChecked) {
+  const auto names_after = [](const std::string& text, const std::string& marker, std::set<std::string>& into) {
+    for (size_t at = text.find(marker); at != std::string::npos; at = text.find(marker, at + 1)) {
+      const size_t begin = at + marker.size() - std::string("NERFAR_BENCH_").size();
+      size_t end = begin;
+      while (end < text.size() && (std::isupper(static_cast<unsigned char>(text[end])) || text[end] == '_')) ++end;
+      if (end > at + marker.size()) into.insert(text.substr(begin, end - begin));  // not the family NERFAR_BENCH_*
+    }
+  };
+  std::set<std::string> read, read_directly, listed, tabled;
+  for (const auto& entry : std::filesystem::directory_iterator(testing::SourcePath("app"))) {
+    const std::string name = entry.path().filename().string();
+    if (name.rfind("bench_", 0) != 0 || entry.path().extension() != ".cpp") continue;
+    const std::string source = testing::ReadText(entry.path().string());
+    names_after(source, "BenchVariable(\"NERFAR_BENCH_", read);
+    names_after(source, "getenv(\"NERFAR_BENCH_", read_directly);
+  }
+  const Result help = RunNerfar("bench --help");
+  ASSERT_EQ(help.exit_code, 0);
+  names_after(help.output, "\n  NERFAR_BENCH_", listed);
+  names_after(testing::ReadText(testing::SourcePath("docs/USER_GUIDE.md")), "| `NERFAR_BENCH_", tabled);
+  EXPECT_GE(read.size(), 30u);
+  EXPECT_TRUE(read_directly.empty()) << *read_directly.begin() << " read without BenchVariable";
+  EXPECT_EQ(listed, read) << help.output;
+  EXPECT_EQ(tabled, read) << "the guide's table of bench variables";
+
+  const Result r = testing::RunCommand("NERFAR_BENCH_INSERT_NREF=m.nerf NERFAR_BENCH_LIVE_FRAMES=30 " +
+                                       std::string(NERFAR_BINARY) + " bench insert --quick");
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("unknown environment variable NERFAR_BENCH_INSERT_NREF ("), std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("nerfar bench  "), std::string::npos) << "no stage ran: " << r.output;
+  // The insert stage's knobs go through the --set parser: a misspelt knob
+  // stops the stage before it measures anything, naming the knob.
+  const Result knob = testing::RunCommand("NERFAR_BENCH_INSERT_KNOBS=kappa_step=4,shade_stp=2 " +
+                                          std::string(NERFAR_BINARY) + " bench insert --quick");
+  EXPECT_EQ(knob.exit_code, 2) << knob.output;
+  EXPECT_NE(knob.output.find("NERFAR_BENCH_INSERT_KNOBS shade_stp=2: unknown option 'shade_stp'"), std::string::npos)
+      << knob.output;
+  EXPECT_EQ(knob.output.find("insert     "), std::string::npos) << "no figure: " << knob.output;
 }
 
 }  // namespace

@@ -210,10 +210,10 @@ TEST(BoardCommandInput, BadInputExitsTwoNamingIt) {
   testing::TempDir tmp;
   const std::string o = " -o " + tmp.File("x");
   for (const Case& c :
-       {Case{"board", "-o: missing"}, Case{"board --paper A7", "--paper"}, Case{"board --family tag99h9", "tag family"},
-        Case{"board --family tagStandard41h12", "classic family"}, Case{"board --tag-size 400", "no tag of 400 mm"},
-        Case{"board --ids 585", "not in tag36h11"}, Case{"board --layout spiral", "layout"},
-        Case{"board --table 100x100 --tag-size 40", "table"}}) {
+       {Case{"board", "missing -o DIR (required)"}, Case{"board --paper A7", "--paper"},
+        Case{"board --family tag99h9", "tag family"}, Case{"board --family tagStandard41h12", "classic family"},
+        Case{"board --tag-size 400", "no tag of 400 mm"}, Case{"board --ids 585", "not in tag36h11"},
+        Case{"board --layout spiral", "layout"}, Case{"board --table 100x100 --tag-size 40", "table"}}) {
     const Result r =
         RunNerfar(std::string(c.args) +
                   (std::string(c.args).find("-o") == std::string::npos && std::string(c.args) != "board" ? o : ""));

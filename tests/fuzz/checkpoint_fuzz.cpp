@@ -1,5 +1,5 @@
 // Fuzzes the training checkpoint reader (NerfTrainer::LoadCheckpoint) of the
-// tiny trainer of checkpoint_fixture.h. An input is the part of a checkpoint
+// tiny trainer of tests/support/tiny_trainer.h. An input is the part of a checkpoint
 // after its magic and identity strings, without the checksum: the target
 // puts its own trainer's identity in front and the checksum after, so that
 // mutations reach the grid, brick list and arrays; the bytes as a whole file
@@ -10,14 +10,14 @@
 
 #include "calib/core/atomic_file.h"
 #include "calib/core/error.h"
-#include "tests/fuzz/checkpoint_fixture.h"
 #include "tests/fuzz/fuzz_support.h"
+#include "tests/support/tiny_trainer.h"
 
 namespace {
 
 struct Fixture {
-  nerfar::NerfTrainData data = nerfar::fuzz::TinyTrainData();  // the trainer keeps a reference
-  nerfar::NerfTrainer trainer{data, nerfar::fuzz::TinyTrainOptions()};
+  nerfar::NerfTrainData data = nerfar::testing::TinyTrainData();  // the trainer keeps a reference
+  nerfar::NerfTrainer trainer{data, nerfar::testing::TinyTrainOptions()};
   std::string path = nerfar::fuzz::ScratchFile("fuzz.ckpt");
   std::string identity;  // magic and identity strings of this trainer's checkpoints
   Fixture() {

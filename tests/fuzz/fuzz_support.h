@@ -1,7 +1,8 @@
 // Shared by the fuzz targets: a per-process scratch file for readers that
 // take a path, and the checksum (calib/core/binary_file.h) that the .nerf, .ssdf and checkpoint
 // files end with (appended by the targets so that mutated bodies get past
-// the checksum and reach the parser; the raw bytes are tried as well).
+// the checksum and reach the parser; the raw bytes are tried as well), and
+// where a checkpoint's identity ends.
 #pragma once
 
 #include <unistd.h>
@@ -52,6 +53,18 @@ void Expect(Read read) {
     read();
   } catch (const InputError&) {
   }
+}
+
+// The number of bytes of a checkpoint before its grid: the magic and the
+// two identity strings (options, dataset), each a u64 length and its bytes.
+inline size_t CheckpointIdentityBytes(const std::string& checkpoint) {
+  size_t at = 8;
+  for (int i = 0; i < 2 && at + 8 <= checkpoint.size(); ++i) {
+    std::uint64_t length = 0;
+    std::memcpy(&length, checkpoint.data() + at, 8);
+    at += 8 + length;
+  }
+  return at;
 }
 
 }  // namespace nerfar::fuzz

@@ -18,7 +18,8 @@
 #include "render/mesh/mesh.h"
 #include "render/nerf/nerf_file.h"
 #include "render/ssdf/ssdf.h"
-#include "tests/fuzz/checkpoint_fixture.h"
+#include "tests/fuzz/fuzz_support.h"
+#include "tests/support/tiny_trainer.h"
 
 namespace {
 
@@ -101,8 +102,8 @@ void SsdfSeeds() {
 }
 
 void CheckpointSeeds() {
-  const NerfTrainData data = fuzz::TinyTrainData();  // the trainer keeps a reference
-  NerfTrainer trainer(data, fuzz::TinyTrainOptions());
+  const NerfTrainData data = testing::TinyTrainData();  // the trainer keeps a reference
+  NerfTrainer trainer(data, testing::TinyTrainOptions());
   const std::string path = (fs::temp_directory_path() / "nerfar_make_seeds.ckpt").string();
   for (int steps : {0, 2}) {
     while (trainer.step() < steps) trainer.Step();

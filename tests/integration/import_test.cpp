@@ -166,7 +166,7 @@ TEST(Import, BadInputExitsTwo) {
   EXPECT_EQ(RunNerfar("import " + dir.path() + " -o " + dir.File("o") + " --board b.json --distance 1", &output), 2);
   EXPECT_NE(output.find("--board"), std::string::npos) << output;
   EXPECT_EQ(RunNerfar("import " + dir.path(), &output), 2);
-  EXPECT_NE(output.find("-o: missing"), std::string::npos) << output;
+  EXPECT_NE(output.find("missing -o DST (required)"), std::string::npos) << output;
   EXPECT_EQ(RunNerfar("import " + dir.File("none") + " -o " + dir.File("o"), &output), 2);
   EXPECT_NE(output.find(dir.File("none")), std::string::npos) << output;
 }

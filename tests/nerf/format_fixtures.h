@@ -2,7 +2,7 @@
 // (written by tests/make_format_fixtures.cpp; the tests read those files to
 // show that files written by earlier builds still read): a small field with
 // values from a hash (no library RNG, whose sequences may differ between
-// standard libraries) and a one-view training set.
+// standard libraries) and the tiny trainer of tests/support/tiny_trainer.h.
 #pragma once
 
 #include <cmath>
@@ -10,6 +10,7 @@
 #include "calib/core/random.h"
 #include "render/nerf/nerf_field.h"
 #include "render/nerf/nerf_train.h"
+#include "tests/support/tiny_trainer.h"
 
 namespace nerfar::testing {
 
@@ -32,37 +33,6 @@ inline NerfField FormatFixtureField() {
       }
   f.UpdateOccupancy(1e-3f);
   return f;
-}
-
-// One 8x6 view of a 20 cm box, its pixels a gradient.
-inline NerfTrainData FormatFixtureTrainData() {
-  NerfTrainData data;
-  data.aabb = Aabb{{-0.1, -0.1, -0.1}, {0.1, 0.1, 0.1}};
-  data.source = "fixture/transforms.json";
-  NerfView view;
-  view.name = "r_000";
-  view.camera.width = 8;
-  view.camera.height = 6;
-  view.camera.fx = view.camera.fy = 8;
-  view.camera.cx = 4;
-  view.camera.cy = 3;
-  view.T_world_camera = LookAt({0.0, -1.0, 0.3}, {0, 0, 0});
-  view.rgb = ImageF(8, 6, 3, 0.0f);
-  for (int y = 0; y < 6; ++y)
-    for (int x = 0; x < 8; ++x)
-      for (int c = 0; c < 3; ++c) view.rgb.Pixel(x, y)[c] = 0.1f + 0.05f * float(x + y + c);
-  data.train.push_back(view);
-  return data;
-}
-
-// The fast preset on a 10 cm grid (one brick), one level, 64 rays a step.
-inline NerfTrainOptions FormatFixtureTrainOptions() {
-  NerfTrainOptions options = NerfTrainOptions::Preset("fast");
-  options.coarse_voxel_m = 0.1;
-  options.levels = 1;
-  options.rays_per_step = 64;
-  options.eval_views = 0;
-  return options;
 }
 
 // Steps trained before tests/data/formats/train.ckpt was written.

@@ -593,8 +593,8 @@ TEST(OldFiles, NerfFilesReadAndSaveToTheSameBytes) {
 }
 
 TEST(OldFiles, CheckpointLoadsAndSavesEveryValue) {
-  const NerfTrainData data = testing::FormatFixtureTrainData();
-  NerfTrainer trainer(data, testing::FormatFixtureTrainOptions());
+  const NerfTrainData data = testing::TinyTrainData();
+  NerfTrainer trainer(data, testing::TinyTrainOptions());
   const std::string old_path = testing::TestDataPath("formats/train.ckpt");
   // Refused as "made with other training options" when NerfTrainOptions gained a field since the
   // fixture was written (its JSON is the checkpoint's identity): then write the fixtures again.

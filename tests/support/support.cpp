@@ -47,6 +47,8 @@ std::string SharedScenesDir() {
 
 std::string TestDataPath(const std::string& name) { return SourceDir() + "/tests/data/" + name; }
 
+std::string SourcePath(const std::string& relative) { return SourceDir() + "/" + relative; }
+
 void WriteText(const std::string& path, const std::string& text) {
   std::ofstream out(path, std::ios::binary);
   out << text;

@@ -35,6 +35,9 @@ std::string ReadText(const std::string& path);
 // Copies the first `bytes` bytes of `from` to `to` (a truncated file).
 void WriteTruncatedCopy(const std::string& from, const std::string& to, size_t bytes);
 
+// SOURCE/relative: a file of the source tree (NERFAR_SOURCE_DIR overrides its root).
+std::string SourcePath(const std::string& relative);
+
 // A finished shell command: its exit code (-1 when it did not exit normally)
 // and its stdout and stderr together.
 struct CommandResult {
