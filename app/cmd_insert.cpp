@@ -18,6 +18,7 @@
 #include "app/cli.h"
 #include "app/command_files.h"
 #include "app/commands.h"
+#include "app/object_assets.h"
 #include "calib/core/atomic_file.h"
 #include "calib/core/error.h"
 #include "calib/core/exr.h"
@@ -51,6 +52,7 @@ struct LoadedObject {
   TriangleMesh mesh;
   ObjectPlacement placement;
   SgMaterial material;
+  MaterialMaps maps;
   std::unique_ptr<SsdfVisibility> visibility;
 };
 
@@ -148,9 +150,12 @@ void AddInputFlags(ArgParser& parser, InsertArgs& a) {
       "--nerf", &a.nerf_path, "FILE",
       "the scene's HDR NeRF (.nerf; required unless --truth-geometry with --light-probe: then nothing occludes)");
   parser.Option("--env", &a.env_path, "FILE", "environment SGs (env.json from `nerfar env`; default: none)");
-  parser.Option("--object", &a.object_paths, "FILE", "an object's SSDF field (.ssdf from `nerfar bake`); repeatable");
+  parser.Option("--object", &a.object_paths, "FILE",
+                "an object: its SSDF field (.ssdf from `nerfar bake`), or a mesh (.obj .ply .gltf .glb) or object "
+                "JSON whose field is baked here; repeatable");
   parser.Option("--pose", &a.pose_paths, "FILE", "the object's pose.json (object_to_world); one per --object");
-  parser.Option("--mesh", &a.mesh_paths, "FILE", "the object's mesh (default: the one the .ssdf names); per --object");
+  parser.Option("--mesh", &a.mesh_paths, "FILE",
+                "the object's mesh (default: the one the .ssdf or JSON names); per --object");
   parser.Option("--material", &a.material_paths, "FILE",
                 "the object's material JSON (default: the .ssdf's); per --object");
   parser.Option("--dataset", &a.dataset_dir, "DIR", "dataset folder with the cameras (required)");
@@ -304,7 +309,7 @@ void CheckUsage(const InsertArgs& a) {
   if (a.output.empty()) usage.Add("-o", "missing (expected an output folder)");
   if (a.truth_geometry && a.truth_dir.empty()) usage.Add("--truth-geometry", "needs --truth DIR");
   if (!a.probe_distances.empty() && a.light_probe.empty()) usage.Add("--probe-distances", "needs --light-probe FILE");
-  if (a.object_paths.empty()) usage.Add("--object", "missing (expected at least one .ssdf)");
+  if (a.object_paths.empty()) usage.Add("--object", "missing (expected at least one .ssdf, mesh or object JSON)");
   if (a.pose_paths.size() != a.object_paths.size())
     usage.Add("--pose", std::to_string(a.pose_paths.size()) + " given for " + std::to_string(a.object_paths.size()) +
                             " objects (expected one per --object)");
@@ -426,14 +431,34 @@ ProbeLight FitProbe(const std::string& path, const InsertOptions& options) {
   return probe;
 }
 
+// An .ssdf and the mesh it names (or --mesh), as `nerfar bake` wrote them.
+void LoadBakedObject(const InsertArgs& a, size_t i, LoadedObject& o) {
+  o.field = ReadSsdf(a.object_paths[i]);
+  const std::string mesh_path =
+      a.mesh_paths.empty() ? ResolveMesh(o.field.mesh_reference, a.object_paths[i]) : a.mesh_paths[i];
+  o.mesh = ReadMesh(mesh_path);
+}
+
+// A mesh or an object JSON: its field baked here with the preset's bake
+// options (a second or so for a few thousand triangles, a few seconds for a
+// million: less than inserting it into one view).
+void BakeObject(const InsertArgs& a, size_t i, LoadedObject& o) {
+  const ObjectSource source = ResolveObjectSource(a.object_paths[i]);
+  o.mesh = ReadMesh(a.mesh_paths.empty() ? source.mesh_path : a.mesh_paths[i]);
+  LogInfo("insert: baking the field of " + a.object_paths[i] + " (" + std::to_string(o.mesh.TriangleCount()) +
+          " triangles) in memory; `nerfar bake` keeps it for the next run");
+  o.field =
+      BakeObjectField(o.mesh, SsdfBakeOptions::Preset(a.preset), source.material ? source.material : o.mesh.material);
+}
+
 std::vector<LoadedObject> LoadObjects(const InsertArgs& a) {
   std::vector<LoadedObject> loaded(a.object_paths.size());
   for (size_t i = 0; i < a.object_paths.size(); ++i) {
     LoadedObject& o = loaded[i];
-    o.field = ReadSsdf(a.object_paths[i]);
-    const std::string mesh_path =
-        a.mesh_paths.empty() ? ResolveMesh(o.field.mesh_reference, a.object_paths[i]) : a.mesh_paths[i];
-    o.mesh = ReadMesh(mesh_path);
+    if (fs::path(a.object_paths[i]).extension() == ".ssdf")
+      LoadBakedObject(a, i, o);
+    else
+      BakeObject(a, i, o);
     o.placement = ReadObjectPlacement(a.pose_paths[i]);
     std::optional<Material> material = o.field.material;
     if (!a.material_paths.empty()) material = ReadMaterial(a.material_paths[i]);
@@ -442,6 +467,7 @@ std::vector<LoadedObject> LoadObjects(const InsertArgs& a) {
       o.material.base_color = material->albedo;
       o.material.roughness = material->roughness;
       o.material.metallic = material->metallic;
+      o.maps = LoadMaterialMaps(*material);
     } else {
       LogWarning("insert: " + a.object_paths[i] + " carries no material; using the default grey");
     }
@@ -507,6 +533,10 @@ std::vector<InsertObject> InsertObjects(const std::vector<LoadedObject>& loaded,
     o.scale = loaded[i].placement.scale;
     o.material = loaded[i].material;
     o.visibility = loaded[i].visibility.get();
+    const MaterialMaps& maps = loaded[i].maps;
+    if (maps.albedo) o.albedo_map = &*maps.albedo;
+    if (maps.roughness) o.roughness_map = &*maps.roughness;
+    if (maps.metallic) o.metallic_map = &*maps.metallic;
     o.light_center = loaded[i].placement.center_world;
     if (probe != nullptr)
       o.light_override = &probe->light, o.light_samples = &probe->samples, o.light_compact = &probe->compact;

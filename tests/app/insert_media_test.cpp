@@ -1,0 +1,220 @@
+// `nerfar insert` with what users bring: an object as a mesh or an object
+// JSON (its field baked in memory), a GLB whose base colour is an embedded
+// texture (the rendered object shows the texture's colours where its UVs
+// put them), on a tiny scene: an opaque slab NeRF whose top is the plane
+// z = 0, a grey light from above, a 64 × 48 dataset looking down at it.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "calib/camera.h"
+#include "calib/core/atomic_file.h"
+#include "calib/core/exr.h"
+#include "calib/core/image_io.h"
+#include "calib/core/json.h"
+#include "calib/dataset.h"
+#include "render/lighting/env_light.h"
+#include "render/mesh/mesh.h"
+#include "render/nerf/nerf_field.h"
+#include "render/nerf/nerf_file.h"
+#include "tests/support/support.h"
+
+namespace nerfar {
+namespace {
+
+namespace fs = std::filesystem;
+using Result = testing::CommandResult;
+
+Result RunNerfar(const std::string& arguments) {
+  return testing::RunCommand(std::string(NERFAR_BINARY) + " " + arguments);
+}
+
+constexpr int kWidth = 64, kHeight = 48;
+constexpr double kHalfSide = 0.05;  // the textured quad's half side, metres
+
+// The camera of the one test view: above the slab, looking down at the origin.
+Pose ViewPose() { return LookAt({0.0, -0.12, 0.35}, {0, 0, 0}); }
+
+CameraIntrinsics ViewCamera() {
+  CameraIntrinsics camera;
+  camera.width = kWidth;
+  camera.height = kHeight;
+  camera.fx = camera.fy = 70;
+  camera.cx = kWidth / 2.0;
+  camera.cy = kHeight / 2.0;
+  return camera;
+}
+
+// DIR/transforms_test.json with one grey EXR frame, the slab NeRF, a light
+// from above (grey: the object's colour is its albedo's) and an identity pose.
+void WriteScene(const testing::TempDir& dir) {
+  Dataset dataset;
+  dataset.dir = dir.File("ds");
+  dataset.camera = ViewCamera();
+  dataset.aabb = Aabb{{-0.3, -0.3, -0.05}, {0.3, 0.3, 0.2}};
+  MakeDirectories(dir.File("ds/test"));
+  DatasetFrame frame;
+  frame.file_path = "test/r_000.exr";
+  frame.image_path = dir.File("ds/") + frame.file_path;
+  frame.T_world_camera = ViewPose();
+  WriteExrRgb(frame.image_path, ImageF(kWidth, kHeight, 3, 0.3f));
+  dataset.frames.push_back(frame);
+  WriteDataset(dir.File("ds/transforms_test.json"), dataset);
+  NerfField slab =
+      NerfField::Dense({{-0.3, -0.3, -0.04}, {0.3, 0.3, 0.0}}, 0.02, std::log(5000.0f), {-1.0f, -1.0f, -1.0f});
+  slab.UpdateOccupancy(1.0f);
+  SaveNerf(dir.File("slab.nerf"), slab);
+  EnvLight env;
+  env.lobes.push_back(Sg{Normalized(Vec3(0.2, 0.1, 1.0)), 8.0, {6.0, 6.0, 6.0}});
+  WriteEnvLight(dir.File("env.json"), env);
+  testing::WriteText(dir.File("pose.json"), R"({"object_to_world": [[1,0,0,0],[0,1,0,0],[0,0,1,0.01],[0,0,0,1]]})");
+}
+
+void Append(std::string& bytes, const void* data, size_t size) {
+  bytes.append(static_cast<const char*>(data), size);
+  while (bytes.size() % 4 != 0) bytes.push_back('\0');
+}
+
+void AppendU32(std::string& out, uint32_t value) { out.append(reinterpret_cast<const char*>(&value), 4); }
+
+// A GLB (glTF 2.0 binary) of one quad in the plane z = 0, facing +z, its
+// base colour the embedded PNG `png`: glTF's UV (0, 0) is the image's top
+// left, so the image's top rows land on the quad's +y side.
+void WriteTexturedQuadGlb(const std::string& path, const std::string& png) {
+  const float a = static_cast<float>(kHalfSide);
+  const float positions[12] = {-a, -a, 0, a, -a, 0, a, a, 0, -a, a, 0};
+  const float normals[12] = {0, 0, 1, 0, 0, 1, 0, 0, 1, 0, 0, 1};
+  const float uvs[8] = {0, 1, 1, 1, 1, 0, 0, 0};  // y = −a at the image's bottom (v = 1), +a at its top
+  const uint16_t indices[6] = {0, 1, 2, 0, 2, 3};
+  std::string bin;
+  size_t offsets[6];
+  offsets[0] = bin.size(), Append(bin, positions, sizeof positions);
+  offsets[1] = bin.size(), Append(bin, normals, sizeof normals);
+  offsets[2] = bin.size(), Append(bin, uvs, sizeof uvs);
+  offsets[3] = bin.size(), Append(bin, indices, sizeof indices);
+  offsets[4] = bin.size(), Append(bin, png.data(), png.size());
+  offsets[5] = bin.size();
+  const size_t lengths[5] = {sizeof positions, sizeof normals, sizeof uvs, sizeof indices, png.size()};
+  nlohmann::json views = nlohmann::json::array();
+  for (int v = 0; v < 5; ++v) views.push_back({{"buffer", 0}, {"byteOffset", offsets[v]}, {"byteLength", lengths[v]}});
+  const nlohmann::json gltf = {
+      {"asset", {{"version", "2.0"}}},
+      {"scene", 0},
+      {"scenes", {{{"nodes", {0}}}}},
+      {"nodes", {{{"mesh", 0}}}},
+      {"meshes",
+       {{{"primitives",
+          {{{"attributes", {{"POSITION", 0}, {"NORMAL", 1}, {"TEXCOORD_0", 2}}}, {"indices", 3}, {"material", 0}}}}}}},
+      {"materials",
+       {{{"name", "textured"},
+         {"pbrMetallicRoughness",
+          {{"baseColorTexture", {{"index", 0}}},
+           {"baseColorFactor", {1, 1, 1, 1}},
+           {"metallicFactor", 0},
+           {"roughnessFactor", 1}}}}}},
+      {"textures", {{{"source", 0}}}},
+      {"images", {{{"bufferView", 4}, {"mimeType", "image/png"}}}},
+      {"accessors",
+       {{{"bufferView", 0},
+         {"componentType", 5126},
+         {"count", 4},
+         {"type", "VEC3"},
+         {"min", {-a, -a, 0}},
+         {"max", {a, a, 0}}},
+        {{"bufferView", 1}, {"componentType", 5126}, {"count", 4}, {"type", "VEC3"}},
+        {{"bufferView", 2}, {"componentType", 5126}, {"count", 4}, {"type", "VEC2"}},
+        {{"bufferView", 3}, {"componentType", 5123}, {"count", 6}, {"type", "SCALAR"}}}},
+      {"bufferViews", views},
+      {"buffers", {{{"byteLength", bin.size()}}}}};
+  std::string json = gltf.dump();
+  while (json.size() % 4 != 0) json.push_back(' ');
+  std::string glb = "glTF";
+  AppendU32(glb, 2);
+  AppendU32(glb, static_cast<uint32_t>(12 + 8 + json.size() + 8 + bin.size()));
+  AppendU32(glb, static_cast<uint32_t>(json.size()));
+  glb += "JSON" + json;
+  AppendU32(glb, static_cast<uint32_t>(bin.size()));
+  glb += std::string("BIN\0", 4) + bin;
+  WriteFileAtomic(path, glb);
+}
+
+// The rendered object's chromaticity (each channel's share of the sum) at a
+// world point of the quad, from the object layer (I_v) of the view.
+Vec3 ChromaticityAt(const ImageF& object, const Vec3& world) {
+  Vec2 pixel;
+  EXPECT_TRUE(Project(ViewCamera(), ViewPose().Inverse() * world, pixel));
+  const int x = static_cast<int>(pixel.x), y = static_cast<int>(pixel.y);
+  const Vec3 rgb(object.at(x, y, 0), object.at(x, y, 1), object.at(x, y, 2));
+  const double sum = rgb.x + rgb.y + rgb.z;
+  EXPECT_GT(sum, 0.0) << "no object at pixel " << x << "," << y;
+  return rgb / sum;
+}
+
+TEST(InsertMedia, AGlbsEmbeddedTextureColoursTheObjectWhereItsUvsPutIt) {
+  testing::TempDir dir;
+  WriteScene(dir);
+  // 8 × 8: the top four rows red, the bottom four green (sRGB 230 / 30).
+  Image8 texture(8, 8, 3);
+  for (int y = 0; y < 8; ++y)
+    for (int x = 0; x < 8; ++x) {
+      uint8_t* p = texture.Pixel(x, y);
+      p[0] = y < 4 ? 230 : 30, p[1] = y < 4 ? 30 : 230, p[2] = 30;
+    }
+  WriteImage8(dir.File("texture.png"), texture);
+  WriteTexturedQuadGlb(dir.File("quad.glb"), ReadFileBytes(dir.File("texture.png")));
+  const Result r = RunNerfar("insert --nerf " + dir.File("slab.nerf") + " --env " + dir.File("env.json") +
+                             " --object " + dir.File("quad.glb") + " --pose " + dir.File("pose.json") + " --dataset " +
+                             dir.File("ds") + " -o " + dir.File("out") + " --preset fast --threads 2");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("baking the field of " + dir.File("quad.glb")), std::string::npos) << r.output;
+  const ImageF object = ReadExrRgb(dir.File("out/r_000_object.exr"));
+  // The texture's colours, linear: 230 -> 0.79, 30 -> 0.013; chromaticity 0.96 / 0.016.
+  const double strong = SrgbToLinear(230 / 255.0f), weak = SrgbToLinear(30 / 255.0f);
+  const Vec3 red(strong, weak, weak), green(weak, strong, weak);
+  // The light is grey (a grey lobe and a grey slab), so the diffuse colour
+  // is the albedo's; the dielectric specular (F0 = 0.02, roughness 1) adds
+  // grey of a few per cent of it: 0.05 of chromaticity holds it, while a
+  // flipped or missing texture is off by 0.3 or more.
+  const Vec3 top = ChromaticityAt(object, {0, kHalfSide / 2, 0.01});
+  const Vec3 bottom = ChromaticityAt(object, {0, -kHalfSide / 2, 0.01});
+  for (int c = 0; c < 3; ++c) {
+    EXPECT_NEAR(top[c], red[c] / (red.x + red.y + red.z), 0.05) << "channel " << c << " of the +y half";
+    EXPECT_NEAR(bottom[c], green[c] / (green.x + green.y + green.z), 0.05) << "channel " << c << " of the -y half";
+  }
+}
+
+TEST(InsertMedia, AnObjectJsonIsBakedInMemoryAsBakeWritesIt) {
+  testing::TempDir dir;
+  WriteScene(dir);
+  WriteMeshObj(dir.File("box.obj"), MakeBox({0.03, 0.03, 0.03}));
+  testing::WriteText(dir.File("box.json"),
+                     R"({"mesh": "box.obj", "albedo": [0.7, 0.5, 0.3], "roughness": 0.6, "metallic": 0.0})");
+  const std::string common = " --pose " + dir.File("pose.json") + " --nerf " + dir.File("slab.nerf") + " --env " +
+                             dir.File("env.json") + " --dataset " + dir.File("ds") + " --preset fast --threads 2";
+  Result r = RunNerfar("insert --object " + dir.File("box.json") + common + " -o " + dir.File("memory"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  r = RunNerfar("bake " + dir.File("box.json") + " -o " + dir.File("box.ssdf") + " --preset fast");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  r = RunNerfar("insert --object " + dir.File("box.ssdf") + common + " -o " + dir.File("file"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  // The same field and material either way: the composites agree bit for bit.
+  const ImageF memory = ReadExrRgb(dir.File("memory/r_000.exr")), file = ReadExrRgb(dir.File("file/r_000.exr"));
+  EXPECT_EQ(memory.pixels, file.pixels);
+  // The box casts a shadow on the slab (its field is used, not skipped).
+  const ImageF kappa = ReadExrChannel(dir.File("memory/r_000_kappa.exr"));
+  size_t shadowed = 0;
+  for (float k : kappa.pixels) shadowed += k < 0.9f;
+  EXPECT_GT(shadowed, 20u);
+  // A JSON naming no mesh is named in the error.
+  testing::WriteText(dir.File("nomesh.json"), R"({"albedo": [0.7, 0.5, 0.3], "roughness": 0.6, "metallic": 0.0})");
+  r = RunNerfar("insert --object " + dir.File("nomesh.json") + common + " -o " + dir.File("bad"));
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find(dir.File("nomesh.json")), std::string::npos) << r.output;
+}
+
+}  // namespace
+}  // namespace nerfar
