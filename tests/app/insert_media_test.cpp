@@ -3,6 +3,9 @@
 // texture (the rendered object shows the texture's colours where its UVs
 // put them), on a tiny scene: an opaque slab NeRF whose top is the plane
 // z = 0, a grey light from above, a 64 × 48 dataset looking down at it.
+// Camera paths: the orbit's geometry, the camera_path.json reader (its
+// cameras, and each kind of bad input named), and a short orbit to PNG
+// frames and an MP4 (ffmpeg; skipped, saying so, where it is absent).
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -11,6 +14,8 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "app/camera_path.h"
+#include "app/video.h"
 #include "calib/camera.h"
 #include "calib/core/atomic_file.h"
 #include "calib/core/exr.h"
@@ -214,6 +219,179 @@ TEST(InsertMedia, AnObjectJsonIsBakedInMemoryAsBakeWritesIt) {
   r = RunNerfar("insert --object " + dir.File("nomesh.json") + common + " -o " + dir.File("bad"));
   EXPECT_EQ(r.exit_code, 2) << r.output;
   EXPECT_NE(r.output.find(dir.File("nomesh.json")), std::string::npos) << r.output;
+}
+
+TEST(CameraPath, AnOrbitCirclesItsCentreAtItsRadiusAndElevationLookingAtIt) {
+  const Orbit orbit{{0.1, -0.2, 0.05}, 0.6, 30.0 * kPi / 180.0, 0.25, 8};
+  const std::vector<Pose> poses = OrbitPoses(orbit);
+  ASSERT_EQ(poses.size(), 8u);
+  for (size_t i = 0; i < poses.size(); ++i) {
+    SCOPED_TRACE(i);
+    const Vec3 offset = poses[i].translation - orbit.centre;
+    // Closed forms; 1e-9 is rounding in doubles.
+    EXPECT_NEAR(Length(offset), 0.6, 1e-9);
+    EXPECT_NEAR(std::asin(offset.z / Length(offset)), 30.0 * kPi / 180.0, 1e-9);
+    const double azimuth = std::atan2(offset.y, offset.x);
+    EXPECT_NEAR(std::remainder(azimuth - (0.25 + 2 * kPi * i / 8), 2 * kPi), 0.0, 1e-9);
+    // OpenCV axes: the camera's +z looks at the centre, its +y (image down) points down in the world.
+    const Vec3 forward = poses[i].Rotate({0, 0, 1}), down = poses[i].Rotate({0, 1, 0});
+    EXPECT_NEAR(Dot(forward, Normalized(-offset)), 1.0, 1e-9);
+    EXPECT_LT(down.z, 0.0);
+  }
+  // The capture's orbit: cameras at 0.5, 0.6 and 0.9 m, 10, 20 and 60 degrees up: the medians.
+  std::vector<Pose> capture;
+  const double distances[3] = {0.5, 0.9, 0.6}, elevations[3] = {20, 60, 10};
+  for (int k = 0; k < 3; ++k) {
+    const double e = elevations[k] * kPi / 180.0, az = 1.0 + k;
+    capture.push_back(
+        LookAt(Vec3(std::cos(e) * std::cos(az), std::cos(e) * std::sin(az), std::sin(e)) * distances[k], {0, 0, 0}));
+  }
+  const Orbit suggested = OrbitOfCapture(capture, {0, 0, 0}, 12);
+  EXPECT_NEAR(suggested.radius_m, 0.6, 1e-9);
+  EXPECT_NEAR(suggested.elevation_rad, 20.0 * kPi / 180.0, 1e-9);
+  EXPECT_NEAR(suggested.start_azimuth_rad, 1.0, 1e-9);
+  EXPECT_EQ(suggested.frames, 12);
+}
+
+// nerfstudio's camera_path.json as its viewer writes it (keys nerfar does not read included).
+std::string CameraPathJson(const std::string& first_matrix, const std::string& fov = "60") {
+  return R"({"default_fov": 75, "default_transition_sec": 2, "keyframes": [], "camera_type": "perspective",
+    "render_height": 240, "render_width": 320, "fps": 30, "seconds": 1, "is_cycle": false, "smoothness_value": 0.5,
+    "camera_path": [
+      {"camera_to_world": )" +
+         first_matrix + R"(, "fov": )" + fov + R"(, "aspect": 1.333},
+      {"camera_to_world": [1,0,0,0, 0,1,0,0, 0,0,1,2, 0,0,0,1], "fov": 30, "aspect": 1.333}]})";
+}
+
+TEST(CameraPath, ReadsNerfstudiosCameraPathJson) {
+  testing::TempDir dir;
+  testing::WriteText(dir.File("path.json"), CameraPathJson("[1,0,0,0.5, 0,1,0,0, 0,0,1,1, 0,0,0,1]"));
+  const CameraPath path = ReadCameraPath(dir.File("path.json"));
+  ASSERT_EQ(path.views.size(), 2u);
+  EXPECT_EQ(path.fps, 30);
+  const CameraIntrinsics& camera = path.views[0].camera;
+  EXPECT_EQ(camera.width, 320);
+  EXPECT_EQ(camera.height, 240);
+  // Vertical field of view 60°: f = (240 / 2) / tan(30°) = 207.85 px.
+  EXPECT_NEAR(camera.fy, 120.0 / std::tan(kPi / 6), 1e-9);
+  EXPECT_NEAR(path.views[1].camera.fy, 120.0 / std::tan(kPi / 12), 1e-9);
+  EXPECT_NEAR(camera.cx, 160.0, 1e-12);
+  // An OpenGL camera at (0.5, 0, 1) with identity rotation looks along −z:
+  // as OpenCV axes its +z is world −z and its +y (image down) world −y.
+  const Pose& pose = path.views[0].T_world_camera;
+  EXPECT_NEAR(Length(pose.translation - Vec3(0.5, 0, 1)), 0.0, 1e-12);
+  EXPECT_NEAR(pose.Rotate({0, 0, 1}).z, -1.0, 1e-12);
+  EXPECT_NEAR(pose.Rotate({0, 1, 0}).y, -1.0, 1e-12);
+}
+
+TEST(CameraPath, BadInputIsNamedWithWhatIsWrong) {
+  testing::TempDir dir;
+  struct Case {
+    std::string text, expected;
+  };
+  const std::string rigid = "[1,0,0,0, 0,1,0,0, 0,0,1,1, 0,0,0,1]";
+  const Case cases[] = {
+      {"{not json", "line 1"},
+      {CameraPathJson("[1,0,0,0, 0,2,0,0, 0,0,1,1, 0,0,0,1]"), "not a rotation"},
+      {CameraPathJson("[1,0,0,0, 0,1,0,0]"), "camera_to_world"},
+      {CameraPathJson(rigid, "0"), "/camera_path/0/fov"},
+      {CameraPathJson(rigid, "\"wide\""), "/camera_path/0/fov"},
+      {R"({"render_width": 320, "render_height": 240, "camera_path": []})", "is empty"},
+      {R"({"render_width": 320, "camera_path": [{"camera_to_world": )" + rigid + R"(, "fov": 50}]})", "render_height"},
+      {R"({"camera_type": "fisheye", "render_width": 320, "render_height": 240, "camera_path": [{"camera_to_world": )" +
+           rigid + R"(, "fov": 50}]})",
+       "fisheye"},
+  };
+  for (const Case& c : cases) {
+    testing::WriteText(dir.File("bad.json"), c.text);
+    try {
+      ReadCameraPath(dir.File("bad.json"));
+      ADD_FAILURE() << "accepted: " << c.text;
+    } catch (const InputError& e) {
+      const std::string what = e.what();
+      EXPECT_NE(what.find(dir.File("bad.json")), std::string::npos) << what;
+      EXPECT_NE(what.find(c.expected), std::string::npos) << "expected '" << c.expected << "' in: " << what;
+    }
+  }
+}
+
+// The video runs: the textured quad's scene, an orbit of `frames` views at
+// 48 pixels across (36 high: the dataset's 4:3).
+std::string OrbitCommand(const testing::TempDir& dir, int frames) {
+  return "insert --nerf " + dir.File("slab.nerf") + " --env " + dir.File("env.json") + " --object " +
+         dir.File("box.obj") + " --pose " + dir.File("pose.json") + " --dataset " + dir.File("ds") + " -o " +
+         dir.File("video") + " --orbit --orbit-frames " + std::to_string(frames) +
+         " --video-width 48 --preset fast --threads 2";
+}
+
+TEST(InsertVideo, AnOrbitWritesItsFramesAndADecodableMp4OfTheStatedSize) {
+  if (!FindOnPath("ffmpeg") || !FindOnPath("ffprobe"))
+    GTEST_SKIP() << "ffmpeg / ffprobe not on PATH (setup.sh installs them)";
+  testing::TempDir dir;
+  WriteScene(dir);
+  WriteMeshObj(dir.File("box.obj"), MakeBox({0.03, 0.03, 0.03}));
+  const Result r = RunNerfar(OrbitCommand(dir, 6) + " --fps 12");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  for (int i = 0; i < 6; ++i) {
+    const Image8 frame = ReadImage8(dir.File("video/frame_000" + std::to_string(i) + ".png"));
+    EXPECT_EQ(frame.width, 48);
+    EXPECT_EQ(frame.height, 36);
+  }
+  EXPECT_FALSE(fs::exists(dir.File("video/frame_0006.png")));
+  // ffprobe decodes every frame (-count_frames) and states the stream's size.
+  const Result probe = testing::RunCommand(
+      "ffprobe -v error -count_frames -select_streams v:0 -show_entries stream=width,height,nb_read_frames,codec_name "
+      "-of default=noprint_wrappers=1 " +
+      dir.File("video/video.mp4"));
+  ASSERT_EQ(probe.exit_code, 0) << probe.output;
+  EXPECT_NE(probe.output.find("codec_name=h264"), std::string::npos) << probe.output;
+  EXPECT_NE(probe.output.find("width=48"), std::string::npos) << probe.output;
+  EXPECT_NE(probe.output.find("height=36"), std::string::npos) << probe.output;
+  EXPECT_NE(probe.output.find("nb_read_frames=6"), std::string::npos) << probe.output;
+  // Progress: the last frame's count.
+  EXPECT_NE(r.output.find("(6/6)"), std::string::npos) << r.output;
+}
+
+TEST(InsertVideo, WithoutFfmpegTheFramesAreKeptAndTheErrorSaysHowToEncodeThem) {
+  testing::TempDir dir;
+  WriteScene(dir);
+  WriteMeshObj(dir.File("box.obj"), MakeBox({0.03, 0.03, 0.03}));
+  const Result r = testing::RunCommand("/usr/bin/env PATH=" + dir.File("empty") + " " + std::string(NERFAR_BINARY) +
+                                       " " + OrbitCommand(dir, 2));
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find("ffmpeg not found"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("ffmpeg -hide_banner"), std::string::npos) << "no command to run by hand:\n" << r.output;
+  EXPECT_TRUE(fs::is_regular_file(dir.File("video/frame_0000.png")));
+  EXPECT_TRUE(fs::is_regular_file(dir.File("video/frame_0001.png")));
+  EXPECT_FALSE(fs::exists(dir.File("video/video.mp4")));
+}
+
+TEST(InsertVideo, ACameraPathsViewsAreRenderedAtItsSizeScaledToTheVideoWidth) {
+  testing::TempDir dir;
+  WriteScene(dir);
+  WriteMeshObj(dir.File("box.obj"), MakeBox({0.03, 0.03, 0.03}));
+  // Two views from 0.4 m above, looking straight down (OpenGL: −z forward), the second 5 cm along +x.
+  testing::WriteText(dir.File("path.json"), R"({"camera_type": "perspective", "render_width": 320,
+    "render_height": 240, "fps": 10, "camera_path": [
+      {"camera_to_world": [1,0,0,0, 0,1,0,0, 0,0,1,0.4, 0,0,0,1], "fov": 40},
+      {"camera_to_world": [1,0,0,0.05, 0,1,0,0, 0,0,1,0.4, 0,0,0,1], "fov": 40}]})");
+  // Without ffmpeg on PATH (the frames are what is checked here).
+  const Result r = testing::RunCommand("/usr/bin/env PATH=" + dir.File("empty") + " " + std::string(NERFAR_BINARY) +
+                                       " insert --nerf " + dir.File("slab.nerf") + " --env " + dir.File("env.json") +
+                                       " --object " + dir.File("box.obj") + " --pose " + dir.File("pose.json") +
+                                       " --dataset " + dir.File("ds") + " -o " + dir.File("video") + " --camera-path " +
+                                       dir.File("path.json") + " --video-width 32 --preset fast --threads 2");
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  const Image8 first = ReadImage8(dir.File("video/frame_0000.png")),
+               second = ReadImage8(dir.File("video/frame_0001.png"));
+  EXPECT_EQ(first.width, 32);
+  EXPECT_EQ(first.height, 24);
+  EXPECT_FALSE(fs::exists(dir.File("video/frame_0002.png")));
+  // The box seen from straight above sits in the middle of the first view;
+  // the second, 5 cm to the side, sees it off centre: the views differ.
+  EXPECT_NE(first.pixels, second.pixels);
+  // The frame rate the file states is the one the command to encode them by hand uses.
+  EXPECT_NE(r.output.find("-framerate 10"), std::string::npos) << r.output;
 }
 
 }  // namespace
