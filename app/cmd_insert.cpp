@@ -63,12 +63,9 @@ struct LoadedObject {
 // The mesh an .ssdf was baked from: as stored, or relative to the field's folder.
 std::string ResolveMesh(const std::string& reference, const std::string& ssdf_path) {
   if (reference.empty()) ThrowInputError(ssdf_path, "names no mesh (give --mesh FILE)");
-  const fs::path p(reference);
-  std::error_code error;
-  if (p.is_absolute() || fs::is_regular_file(p, error)) return reference;
-  const fs::path beside = fs::path(ssdf_path).parent_path() / p;
-  if (fs::is_regular_file(beside, error)) return beside.string();
-  ThrowInputError(ssdf_path, "its mesh '" + reference + "' was not found (give --mesh FILE)");
+  const std::string found = FindBeside(reference, ssdf_path);
+  if (found.empty()) ThrowInputError(ssdf_path, "its mesh '" + reference + "' was not found (give --mesh FILE)");
+  return found;
 }
 
 ImageF ReadFrame(const std::string& path) {
@@ -508,7 +505,7 @@ std::vector<LoadedObject> LoadObjects(const InsertArgs& a) {
       o.material.base_color = material->albedo;
       o.material.roughness = material->roughness;
       o.material.metallic = material->metallic;
-      o.maps = LoadMaterialMaps(*material);
+      o.maps = LoadMaterialMaps(*material, a.object_paths[i]);
     } else {
       LogWarning("insert: " + a.object_paths[i] + " carries no material; using the default grey");
     }

@@ -26,7 +26,29 @@ ImageF MapOf(const Image8& texture, int channel, const Vec3& factor, bool srgb) 
   return map;
 }
 
+// A texture reference found beside `owner` when it is not where it says
+// (left as it is then, for the error to name).
+std::string TextureBeside(const std::string& reference, const std::string& owner) {
+  const std::string found = FindBeside(reference, owner);
+  return found.empty() ? reference : found;
+}
+
 }  // namespace
+
+std::string FindBeside(const std::string& reference, const std::string& owner) {
+  std::error_code error;
+  if (std::filesystem::is_regular_file(reference, error)) return reference;
+  // An embedded texture's file is the part before '#'.
+  const size_t hash = reference.rfind('#');
+  const std::string file = hash == std::string::npos ? reference : reference.substr(0, hash);
+  const std::string tail = hash == std::string::npos ? "" : reference.substr(hash);
+  if (file.empty()) return "";
+  if (std::filesystem::is_regular_file(file, error)) return reference;
+  const std::filesystem::path p(file);
+  if (p.is_absolute()) return "";
+  const std::filesystem::path beside = std::filesystem::path(owner).parent_path() / p;
+  return std::filesystem::is_regular_file(beside, error) ? beside.string() + tail : "";
+}
 
 ObjectSource ResolveObjectSource(const std::string& object) {
   ObjectSource source{object, std::nullopt, {object}};
@@ -48,23 +70,23 @@ SsdfField BakeObjectField(const TriangleMesh& mesh, const SsdfBakeOptions& optio
   return field;
 }
 
-MaterialMaps LoadMaterialMaps(const Material& material) {
+MaterialMaps LoadMaterialMaps(const Material& material, const std::string& owner) {
   MaterialMaps maps;
   if (!material.albedo_texture.empty())
-    maps.albedo = MapOf(ReadMeshTexture(material.albedo_texture), -1, material.albedo, true);
+    maps.albedo = MapOf(ReadMeshTexture(TextureBeside(material.albedo_texture, owner)), -1, material.albedo, true);
   const bool packed = !material.roughness_texture.empty() && material.roughness_texture == material.metallic_texture;
   const Vec3 roughness(material.roughness, material.roughness, material.roughness);
   const Vec3 metallic(material.metallic, material.metallic, material.metallic);
   if (packed) {
-    const Image8 texture = ReadMeshTexture(material.roughness_texture);
+    const Image8 texture = ReadMeshTexture(TextureBeside(material.roughness_texture, owner));
     maps.roughness = MapOf(texture, 1, roughness, false);
     maps.metallic = MapOf(texture, 2, metallic, false);
     return maps;
   }
   if (!material.roughness_texture.empty())
-    maps.roughness = MapOf(ReadMeshTexture(material.roughness_texture), 0, roughness, false);
+    maps.roughness = MapOf(ReadMeshTexture(TextureBeside(material.roughness_texture, owner)), 0, roughness, false);
   if (!material.metallic_texture.empty())
-    maps.metallic = MapOf(ReadMeshTexture(material.metallic_texture), 0, metallic, false);
+    maps.metallic = MapOf(ReadMeshTexture(TextureBeside(material.metallic_texture, owner)), 0, metallic, false);
   return maps;
 }
 

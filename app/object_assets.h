@@ -24,6 +24,11 @@ struct ObjectSource {
   std::vector<std::string> inputs;   // the files it reads (for CheckOutputsSpareInputs)
 };
 
+// A file that an object's file names (its mesh; a texture, "<mesh>#<index>"
+// for one embedded in a GLB): as given where it exists, else beside `owner`
+// (the file that names it, moved since with what it names); "" when neither.
+std::string FindBeside(const std::string& reference, const std::string& owner);
+
 // A mesh file as it is, or an object JSON's material and the mesh it names
 // (InputError naming the JSON when it names none).
 ObjectSource ResolveObjectSource(const std::string& object);
@@ -40,7 +45,8 @@ struct MaterialMaps {
 // The material's textures, read (InputError naming an unreadable one) and
 // converted for the inserter. A roughness and metallic texture that are one
 // file are glTF's packed image (roughness G, metallic B); a texture of its
-// own is read from its first channel.
-MaterialMaps LoadMaterialMaps(const Material& material);
+// own is read from its first channel. Texture files are found as FindBeside
+// finds them beside `owner` (the object's file).
+MaterialMaps LoadMaterialMaps(const Material& material, const std::string& owner);
 
 }  // namespace nerfar

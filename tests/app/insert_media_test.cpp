@@ -190,6 +190,16 @@ TEST(InsertMedia, AGlbsEmbeddedTextureColoursTheObjectWhereItsUvsPutIt) {
     EXPECT_NEAR(top[c], red[c] / (red.x + red.y + red.z), 0.05) << "channel " << c << " of the +y half";
     EXPECT_NEAR(bottom[c], green[c] / (green.x + green.y + green.z), 0.05) << "channel " << c << " of the -y half";
   }
+  // Baked to an .ssdf from its own folder, the texture is "quad.glb#0":
+  // used from another folder, it is found beside the field, as the mesh is.
+  Result baked = testing::RunCommand("cd " + dir.path() + " && " + std::string(NERFAR_BINARY) +
+                                     " bake quad.glb -o quad.ssdf --preset fast");
+  ASSERT_EQ(baked.exit_code, 0) << baked.output;
+  baked = RunNerfar("insert --nerf " + dir.File("slab.nerf") + " --env " + dir.File("env.json") + " --object " +
+                    dir.File("quad.ssdf") + " --pose " + dir.File("pose.json") + " --dataset " + dir.File("ds") +
+                    " -o " + dir.File("from_ssdf") + " --preset fast --threads 2");
+  ASSERT_EQ(baked.exit_code, 0) << baked.output;
+  EXPECT_EQ(ReadExrRgb(dir.File("from_ssdf/r_000_object.exr")).pixels, object.pixels);
 }
 
 TEST(InsertMedia, AnObjectJsonIsBakedInMemoryAsBakeWritesIt) {
