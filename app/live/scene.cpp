@@ -93,6 +93,7 @@ LiveObjectAsset LoadLiveObject(const std::string& path) {
     asset.material.base_color = material->albedo;
     asset.material.roughness = material->roughness;
     asset.material.metallic = material->metallic;
+    asset.maps = LoadMaterialMaps(*material, path);
   }
   return asset;
 }

@@ -15,6 +15,7 @@
 #include <string>
 
 #include "app/camera_path.h"
+#include "app/live/scene.h"
 #include "app/video.h"
 #include "calib/camera.h"
 #include "calib/core/atomic_file.h"
@@ -147,6 +148,19 @@ void WriteTexturedQuadGlb(const std::string& path, const std::string& png) {
   WriteFileAtomic(path, glb);
 }
 
+// DIR/quad.glb, its texture 8 × 8 pixels: the top four rows red, the bottom
+// four green (sRGB 230 / 30).
+void WriteTwoColourQuad(const testing::TempDir& dir) {
+  Image8 texture(8, 8, 3);
+  for (int y = 0; y < 8; ++y)
+    for (int x = 0; x < 8; ++x) {
+      uint8_t* p = texture.Pixel(x, y);
+      p[0] = y < 4 ? 230 : 30, p[1] = y < 4 ? 30 : 230, p[2] = 30;
+    }
+  WriteImage8(dir.File("texture.png"), texture);
+  WriteTexturedQuadGlb(dir.File("quad.glb"), ReadFileBytes(dir.File("texture.png")));
+}
+
 // The rendered object's chromaticity (each channel's share of the sum) at a
 // world point of the quad, from the object layer (I_v) of the view.
 Vec3 ChromaticityAt(const ImageF& object, const Vec3& world) {
@@ -162,15 +176,7 @@ Vec3 ChromaticityAt(const ImageF& object, const Vec3& world) {
 TEST(InsertMedia, AGlbsEmbeddedTextureColoursTheObjectWhereItsUvsPutIt) {
   testing::TempDir dir;
   WriteScene(dir);
-  // 8 × 8: the top four rows red, the bottom four green (sRGB 230 / 30).
-  Image8 texture(8, 8, 3);
-  for (int y = 0; y < 8; ++y)
-    for (int x = 0; x < 8; ++x) {
-      uint8_t* p = texture.Pixel(x, y);
-      p[0] = y < 4 ? 230 : 30, p[1] = y < 4 ? 30 : 230, p[2] = 30;
-    }
-  WriteImage8(dir.File("texture.png"), texture);
-  WriteTexturedQuadGlb(dir.File("quad.glb"), ReadFileBytes(dir.File("texture.png")));
+  WriteTwoColourQuad(dir);
   const Result r = RunNerfar("insert --nerf " + dir.File("slab.nerf") + " --env " + dir.File("env.json") +
                              " --object " + dir.File("quad.glb") + " --pose " + dir.File("pose.json") + " --dataset " +
                              dir.File("ds") + " -o " + dir.File("out") + " --preset fast --threads 2");
@@ -200,6 +206,24 @@ TEST(InsertMedia, AGlbsEmbeddedTextureColoursTheObjectWhereItsUvsPutIt) {
                     " -o " + dir.File("from_ssdf") + " --preset fast --threads 2");
   ASSERT_EQ(baked.exit_code, 0) << baked.output;
   EXPECT_EQ(ReadExrRgb(dir.File("from_ssdf/r_000_object.exr")).pixels, object.pixels);
+}
+
+// `live` loads the same maps: row 0 is v = 0 of the mesh's UVs (the
+// image's bottom row, green), linear values (sRGB 230 -> 0.79), times the
+// glTF factor 1.
+TEST(InsertMedia, LiveLoadsAGlbsTextureAsTheInserterSamplesIt) {
+  testing::TempDir dir;
+  WriteTwoColourQuad(dir);
+  const LiveObjectAsset asset = LoadLiveObject(dir.File("quad.glb"));
+  ASSERT_TRUE(asset.maps.albedo.has_value());
+  const ImageF& albedo = *asset.maps.albedo;
+  ASSERT_EQ(albedo.width, 8);
+  ASSERT_EQ(albedo.height, 8);
+  // 1e-6: the same float conversion of an 8-bit value.
+  EXPECT_NEAR(albedo.at(3, 0, 1), SrgbToLinear(230 / 255.0f), 1e-6);
+  EXPECT_NEAR(albedo.at(3, 0, 0), SrgbToLinear(30 / 255.0f), 1e-6);
+  EXPECT_NEAR(albedo.at(3, 7, 0), SrgbToLinear(230 / 255.0f), 1e-6);
+  EXPECT_FALSE(asset.maps.roughness.has_value());
 }
 
 TEST(InsertMedia, AnObjectJsonIsBakedInMemoryAsBakeWritesIt) {
