@@ -138,7 +138,7 @@ struct InsertArgs {
   bool orbit = false;
   std::string camera_path;
   int orbit_frames = 72, video_width = -1;
-  double orbit_radius = -1, orbit_elevation_deg = -1000, fps = -1;
+  double orbit_radius = -1, orbit_elevation_deg = NAN, fps = -1;  // NaN: not given
   // Derived: ground-truth geometry and a light probe stand in for the NeRF.
   bool without_nerf = false;
   bool video = false;  // --orbit or --camera-path
@@ -355,6 +355,8 @@ void CheckUsage(const InsertArgs& a) {
     usage.Add("--video-width", std::to_string(a.video_width) + " (expected at least 2 pixels)");
   if (a.fps != -1 && !(a.fps > 0)) usage.Add("--fps", "expected a positive frame rate");
   if (a.orbit_radius != -1 && !(a.orbit_radius > 0)) usage.Add("--orbit-radius", "expected a positive distance");
+  if (!std::isnan(a.orbit_elevation_deg) && !(std::abs(a.orbit_elevation_deg) < 90))
+    usage.Add("--orbit-elevation", "expected an angle between -90 and 90 degrees");
   usage.ThrowIfAny();
 }
 
@@ -848,7 +850,7 @@ Dataset VideoViews(const InsertArgs& a, const Dataset& capture, const CameraPath
     for (const DatasetFrame& frame : capture.frames) capture_poses.push_back(frame.T_world_camera);
     Orbit orbit = OrbitOfCapture(capture_poses, centre, a.orbit_frames);
     if (a.orbit_radius != -1) orbit.radius_m = a.orbit_radius;
-    if (a.orbit_elevation_deg != -1000) orbit.elevation_rad = a.orbit_elevation_deg * kPi / 180.0;
+    if (!std::isnan(a.orbit_elevation_deg)) orbit.elevation_rad = a.orbit_elevation_deg * kPi / 180.0;
     for (const Pose& pose : OrbitPoses(orbit)) path.views.push_back({capture.camera, pose});
     LogInfo("insert: orbit of " + std::to_string(orbit.frames) + " frames around (" + Shown(centre.x) + ", " +
             Shown(centre.y) + ", " + Shown(centre.z) + ") at " + Shown(orbit.radius_m) + " m, " +

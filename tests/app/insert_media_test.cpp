@@ -358,6 +358,25 @@ std::string OrbitCommand(const testing::TempDir& dir, int frames) {
          " --video-width 48 --preset fast --threads 2";
 }
 
+TEST(InsertVideo, FlagsThatDoNotGoWithAPathExitTwoNamingTheFlag) {
+  const std::string common = "insert --nerf n.nerf --object o.obj --pose p.json --dataset d -o out ";
+  const std::pair<std::string, std::string> cases[] = {
+      {"--orbit --camera-path path.json", "--camera-path"},
+      {"--orbit --frames frames", "--frames"},
+      {"--orbit --truth truth", "--truth"},
+      {"--orbit --orbit-frames 0", "--orbit-frames"},
+      {"--orbit --orbit-elevation 95", "--orbit-elevation"},
+      {"--orbit --video-width 1", "--video-width"},
+      {"--orbit --fps 0", "--fps"},
+      {"--orbit --orbit-radius -2", "--orbit-radius"},
+  };
+  for (const auto& [flags, named] : cases) {
+    const Result r = RunNerfar(common + flags);
+    EXPECT_EQ(r.exit_code, 2) << flags << "\n" << r.output;
+    EXPECT_NE(r.output.find(named), std::string::npos) << flags << "\n" << r.output;
+  }
+}
+
 TEST(InsertVideo, AnOrbitWritesItsFramesAndADecodableMp4OfTheStatedSize) {
   if (!FindOnPath("ffmpeg") || !FindOnPath("ffprobe"))
     GTEST_SKIP() << "ffmpeg / ffprobe not on PATH (setup.sh installs them)";
