@@ -7,6 +7,7 @@
 
 #include "app/cli.h"
 #include "app/commands.h"
+#include "app/object_assets.h"
 #include "calib/core/atomic_file.h"
 #include "calib/core/error.h"
 #include "calib/core/log.h"
@@ -52,29 +53,21 @@ int RunBake(const CommandArgs& args) {
   }
 
   // OBJECT: a material JSON names its mesh; a mesh may carry its own material.
-  std::optional<Material> material;
-  std::string mesh_path = object;
-  std::vector<std::string> inputs = {object};
-  if (std::filesystem::path(object).extension() == ".json") {
-    material = ReadMaterial(object);
-    if (material->mesh.empty()) ThrowInputError(object, "no \"mesh\" entry (expected the mesh file of the object)");
-    mesh_path = material->mesh;
-    inputs.push_back(mesh_path);
-  }
+  const ObjectSource source = ResolveObjectSource(object);
+  std::optional<Material> material = source.material;
+  std::vector<std::string> inputs = source.inputs;
   if (!material_path.empty()) {
     material = ReadMaterial(material_path);
     inputs.push_back(material_path);
   }
   CheckOutputsSpareInputs({output}, inputs);
-  const TriangleMesh mesh = ReadMesh(mesh_path);
+  const TriangleMesh mesh = ReadMesh(source.mesh_path);
   if (!material) material = mesh.material;
 
-  LogInfo("bake: " + mesh_path + " (" + std::to_string(mesh.TriangleCount()) + " triangles), options " +
+  LogInfo("bake: " + source.mesh_path + " (" + std::to_string(mesh.TriangleCount()) + " triangles), options " +
           options.ToJson() + ", threads " + std::to_string(ThreadCount()));
   SsdfBakeReport report;
-  Progress progress("bake", static_cast<size_t>(options.grid) * options.grid * options.grid);
-  const SsdfField field = BakeSsdf(mesh, options, material, &progress, &report);
-  progress.Finish();
+  const SsdfField field = BakeObjectField(mesh, options, material, &report);
   WriteSsdf(output, field);
   const double bytes = static_cast<double>(std::filesystem::file_size(output));
   char line[256];

@@ -6,6 +6,8 @@
 // _kappa.exr, the incident light at the object centre as OUT/probe.exr
 // (equirect, scenes/README.md convention), per-stage timings in
 // OUT/timings.json and, with --truth, the metrics of DESIGN.md in OUT/report.json.
+// With --orbit or --camera-path the views are a camera path's instead, over
+// the NeRF's rendering: OUT/frame_NNNN.png and OUT/video.mp4.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -15,9 +17,12 @@
 #include <sstream>
 
 #include "app/bench.h"
+#include "app/camera_path.h"
 #include "app/cli.h"
 #include "app/command_files.h"
 #include "app/commands.h"
+#include "app/object_assets.h"
+#include "app/video.h"
 #include "calib/core/atomic_file.h"
 #include "calib/core/error.h"
 #include "calib/core/exr.h"
@@ -51,18 +56,16 @@ struct LoadedObject {
   TriangleMesh mesh;
   ObjectPlacement placement;
   SgMaterial material;
+  MaterialMaps maps;
   std::unique_ptr<SsdfVisibility> visibility;
 };
 
 // The mesh an .ssdf was baked from: as stored, or relative to the field's folder.
 std::string ResolveMesh(const std::string& reference, const std::string& ssdf_path) {
   if (reference.empty()) ThrowInputError(ssdf_path, "names no mesh (give --mesh FILE)");
-  const fs::path p(reference);
-  std::error_code error;
-  if (p.is_absolute() || fs::is_regular_file(p, error)) return reference;
-  const fs::path beside = fs::path(ssdf_path).parent_path() / p;
-  if (fs::is_regular_file(beside, error)) return beside.string();
-  ThrowInputError(ssdf_path, "its mesh '" + reference + "' was not found (give --mesh FILE)");
+  const std::string found = FindBeside(reference, ssdf_path);
+  if (found.empty()) ThrowInputError(ssdf_path, "its mesh '" + reference + "' was not found (give --mesh FILE)");
+  return found;
 }
 
 ImageF ReadFrame(const std::string& path) {
@@ -131,8 +134,14 @@ struct InsertArgs {
   bool light_from_centre = false, no_seen_radiance = false, expected_depth = false, no_support_plane = false;
   bool no_see_through = false, seen_whole_band = false, no_views_cache = false;
   bool specular_parallax = false, no_specular_parallax = false;
+  // A video along a camera path instead of the dataset's views.
+  bool orbit = false;
+  std::string camera_path;
+  int orbit_frames = 72, video_width = -1;
+  double orbit_radius = -1, orbit_elevation_deg = NAN, fps = -1;  // NaN: not given
   // Derived: ground-truth geometry and a light probe stand in for the NeRF.
   bool without_nerf = false;
+  bool video = false;  // --orbit or --camera-path
 };
 
 // A preset's value as the help shows it.
@@ -148,10 +157,13 @@ void AddInputFlags(ArgParser& parser, InsertArgs& a) {
       "--nerf", &a.nerf_path, "FILE",
       "the scene's HDR NeRF (.nerf; required unless --truth-geometry with --light-probe: then nothing occludes)");
   parser.Option("--env", &a.env_path, "FILE", "environment SGs (env.json from `nerfar env`; default: none)");
-  parser.Option("--object", &a.object_paths, "FILE", "an object's SSDF field (.ssdf from `nerfar bake`); repeatable");
+  parser.Option("--object", &a.object_paths, "FILE",
+                "an object: its SSDF field (.ssdf from `nerfar bake`), or a mesh (.obj .ply .gltf .glb) or object "
+                "JSON whose field is baked here; repeatable");
   parser.Required("--object");
   parser.Option("--pose", &a.pose_paths, "FILE", "the object's pose.json (object_to_world); one per --object");
-  parser.Option("--mesh", &a.mesh_paths, "FILE", "the object's mesh (default: the one the .ssdf names); per --object");
+  parser.Option("--mesh", &a.mesh_paths, "FILE",
+                "the object's mesh (default: the one the .ssdf or JSON names); per --object");
   parser.Option("--material", &a.material_paths, "FILE",
                 "the object's material JSON (default: the .ssdf's); per --object");
   parser.Option("--dataset", &a.dataset_dir, "DIR", "dataset folder with the cameras");
@@ -292,10 +304,30 @@ void AddTruthFlags(ArgParser& parser, InsertArgs& a) {
       "(probe_<i>.exr for further objects), OUT/timings.json, OUT/options.json [, OUT/report.json]\n"
       "with --truth also OUT/probe_samples.exr (the light's rays before the SG fit), OUT/probe_opacity.exr\n"
       "(R: the scene's opacity from the centre, G: opacity x hit distance) and the light per region of the sphere\n"
-      "example:\n"
+      "with --orbit or --camera-path instead: OUT/frame_NNNN.png (one exposure throughout) and OUT/video.mp4\n"
+      "(H.264 by ffmpeg; without ffmpeg the frames stay and the error gives the command to encode them)\n"
+      "examples:\n"
       "  nerfar insert --nerf lamps.nerf --object monkey.ssdf --pose "
       "../shared/scenes/lamps/insert/monkey_diffuse/pose.json \\\n"
-      "      --dataset ../shared/scenes/lamps -o out/monkey\n");
+      "      --dataset ../shared/scenes/lamps -o out/monkey\n"
+      "  nerfar insert --nerf lamps.nerf --env env.json --object chair.glb --pose pose.json \\\n"
+      "      --dataset ../shared/scenes/lamps -o out/orbit --orbit --video-width 640\n");
+}
+
+// A video along an orbit or a nerfstudio camera path.
+void AddVideoFlags(ArgParser& parser, InsertArgs& a) {
+  parser.Flag("--orbit", &a.orbit,
+              "a video orbiting the first object, over the NeRF's rendering: OUT/frame_NNNN.png and OUT/video.mp4 "
+              "(ffmpeg); the orbit's radius and elevation are the capture cameras' median ones");
+  parser.Option("--orbit-frames", &a.orbit_frames, "N", "frames of one turn (default 72: 3 s at 24 fps)");
+  parser.Option("--orbit-radius", &a.orbit_radius, "M", "distance from the object, metres (default: the capture's)");
+  parser.Option("--orbit-elevation", &a.orbit_elevation_deg, "DEG",
+                "angle above the horizontal, degrees (default: the capture's)");
+  parser.Option("--camera-path", &a.camera_path, "FILE",
+                "a video along nerfstudio's camera_path.json (its camera_to_world in the dataset's world)");
+  parser.Option("--video-width", &a.video_width, "W",
+                "video width in pixels, the aspect kept (default: the dataset camera's, or the camera path's)");
+  parser.Option("--fps", &a.fps, "F", "video frame rate (default: the camera path's, else 24)");
 }
 
 // Every problem with the flags' combination, thrown together.
@@ -314,6 +346,17 @@ void CheckUsage(const InsertArgs& a) {
     usage.Add("--material", "expected none or one per --object");
   if (a.background != "images" && a.background != "nerf")
     usage.Add("--background", "'" + a.background + "' (expected images or nerf)");
+  if (a.orbit && !a.camera_path.empty()) usage.Add("--orbit", "and --camera-path both given (expected one path)");
+  if (a.video && a.without_nerf) usage.Add("--orbit / --camera-path", "need --nerf (it renders the background)");
+  if (a.video && !a.frames_dir.empty()) usage.Add("--frames", "has no frames to give a video (the NeRF renders them)");
+  if (a.video && !a.truth_dir.empty()) usage.Add("--truth", "has no views of a camera path to compare with");
+  if (a.orbit_frames < 1) usage.Add("--orbit-frames", std::to_string(a.orbit_frames) + " (expected at least 1)");
+  if (a.video_width != -1 && a.video_width < 2)
+    usage.Add("--video-width", std::to_string(a.video_width) + " (expected at least 2 pixels)");
+  if (a.fps != -1 && !(a.fps > 0)) usage.Add("--fps", "expected a positive frame rate");
+  if (a.orbit_radius != -1 && !(a.orbit_radius > 0)) usage.Add("--orbit-radius", "expected a positive distance");
+  if (!std::isnan(a.orbit_elevation_deg) && !(std::abs(a.orbit_elevation_deg) < 90))
+    usage.Add("--orbit-elevation", "expected an angle between -90 and 90 degrees");
   usage.ThrowIfAny();
 }
 
@@ -325,8 +368,10 @@ bool ParseInsertArgs(const CommandArgs& args, InsertArgs& a) {
   AddLightFlags(parser, a);
   AddShadingFlags(parser, a);
   AddTruthFlags(parser, a);
+  AddVideoFlags(parser, a);
   if (!parser.Parse(args)) return false;
   a.without_nerf = a.nerf_path.empty() && a.truth_geometry && !a.light_probe.empty();
+  a.video = a.orbit || !a.camera_path.empty();
   CheckUsage(a);
   return true;
 }
@@ -426,14 +471,34 @@ ProbeLight FitProbe(const std::string& path, const InsertOptions& options) {
   return probe;
 }
 
+// An .ssdf and the mesh it names (or --mesh), as `nerfar bake` wrote them.
+void LoadBakedObject(const InsertArgs& a, size_t i, LoadedObject& o) {
+  o.field = ReadSsdf(a.object_paths[i]);
+  const std::string mesh_path =
+      a.mesh_paths.empty() ? ResolveMesh(o.field.mesh_reference, a.object_paths[i]) : a.mesh_paths[i];
+  o.mesh = ReadMesh(mesh_path);
+}
+
+// A mesh or an object JSON: its field baked here with the preset's bake
+// options (a second or so for a few thousand triangles, a few seconds for a
+// million: less than inserting it into one view).
+void BakeObject(const InsertArgs& a, size_t i, LoadedObject& o) {
+  const ObjectSource source = ResolveObjectSource(a.object_paths[i]);
+  o.mesh = ReadMesh(a.mesh_paths.empty() ? source.mesh_path : a.mesh_paths[i]);
+  LogInfo("insert: baking the field of " + a.object_paths[i] + " (" + std::to_string(o.mesh.TriangleCount()) +
+          " triangles) in memory; `nerfar bake` keeps it for the next run");
+  o.field =
+      BakeObjectField(o.mesh, SsdfBakeOptions::Preset(a.preset), source.material ? source.material : o.mesh.material);
+}
+
 std::vector<LoadedObject> LoadObjects(const InsertArgs& a) {
   std::vector<LoadedObject> loaded(a.object_paths.size());
   for (size_t i = 0; i < a.object_paths.size(); ++i) {
     LoadedObject& o = loaded[i];
-    o.field = ReadSsdf(a.object_paths[i]);
-    const std::string mesh_path =
-        a.mesh_paths.empty() ? ResolveMesh(o.field.mesh_reference, a.object_paths[i]) : a.mesh_paths[i];
-    o.mesh = ReadMesh(mesh_path);
+    if (fs::path(a.object_paths[i]).extension() == ".ssdf")
+      LoadBakedObject(a, i, o);
+    else
+      BakeObject(a, i, o);
     o.placement = ReadObjectPlacement(a.pose_paths[i]);
     std::optional<Material> material = o.field.material;
     if (!a.material_paths.empty()) material = ReadMaterial(a.material_paths[i]);
@@ -442,12 +507,20 @@ std::vector<LoadedObject> LoadObjects(const InsertArgs& a) {
       o.material.base_color = material->albedo;
       o.material.roughness = material->roughness;
       o.material.metallic = material->metallic;
+      o.maps = LoadMaterialMaps(*material, a.object_paths[i]);
     } else {
       LogWarning("insert: " + a.object_paths[i] + " carries no material; using the default grey");
     }
     o.visibility = std::make_unique<SsdfVisibility>(o.field, o.placement.T_world_object, o.placement.scale);
   }
   return loaded;
+}
+
+// The world point an object's incident light is taken at (the inserter's rule).
+Vec3 ObjectCentre(const LoadedObject& object) {
+  const ObjectPlacement& placement = object.placement;
+  return placement.center_world.value_or(placement.T_world_object *
+                                         (ComputeBoundingSphere(object.mesh).center * placement.scale));
 }
 
 // The probe's lobe distances per object (--probe-distances), from a NeRF's
@@ -470,8 +543,7 @@ ProbeDistances ProbeDistancesFrom(const std::string& nerf_path, const SgMixture&
   for (size_t i = 0; i < loaded.size(); ++i) {
     std::vector<float> opacity, depth;
     const ObjectPlacement& placement = loaded[i].placement;
-    const Vec3 center = placement.center_world.value_or(
-        placement.T_world_object * (ComputeBoundingSphere(loaded[i].mesh).center * placement.scale));
+    const Vec3 center = ObjectCentre(loaded[i]);
     // As the inserter does: the rays start where they leave the object.
     std::vector<float> starts;
     if (options.light.start_outside_object)
@@ -507,6 +579,10 @@ std::vector<InsertObject> InsertObjects(const std::vector<LoadedObject>& loaded,
     o.scale = loaded[i].placement.scale;
     o.material = loaded[i].material;
     o.visibility = loaded[i].visibility.get();
+    const MaterialMaps& maps = loaded[i].maps;
+    if (maps.albedo) o.albedo_map = &*maps.albedo;
+    if (maps.roughness) o.roughness_map = &*maps.roughness;
+    if (maps.metallic) o.metallic_map = &*maps.metallic;
     o.light_center = loaded[i].placement.center_world;
     if (probe != nullptr)
       o.light_override = &probe->light, o.light_samples = &probe->samples, o.light_compact = &probe->compact;
@@ -571,7 +647,24 @@ struct ViewJob {
   const std::vector<InsertObject>& objects;
   Inserter& inserter;
   bool nerf_background;  // --background nerf: the NeRF's rendering, else the camera frames
+  // A video's frames: the tone-mapped composite alone, at the first frame's
+  // exposure throughout (a per-frame exposure would flicker); nullptr: the
+  // composite, its PNG and the layers per view.
+  float* video_exposure = nullptr;
 };
+
+// A view's composite, its PNG and its layers (object, alpha, κ).
+void WriteViewLayers(const fs::path& out, const std::string& stem, const CameraIntrinsics& camera, const ImageF& frame,
+                     const ImageF& without, const InsertLayers& layers) {
+  WriteExrRgb((out / (stem + ".exr")).string(), frame);
+  WriteImage8((out / (stem + ".png")).string(), ToneMapToDisplay(frame, ExposureForPercentile(without)));
+  WriteExrRgb((out / (stem + "_object.exr")).string(),
+              ExpandLayer(layers.object, layers.gbuffer.rect, camera.width, camera.height, 0.0f));
+  WriteExr((out / (stem + "_alpha.exr")).string(),
+           ExpandLayer(layers.alpha, layers.gbuffer.rect, camera.width, camera.height, 0.0f), {"Y"});
+  WriteExr((out / (stem + "_kappa.exr")).string(),
+           ExpandLayer(layers.kappa, layers.kappa_rect, camera.width, camera.height, 1.0f), {"Y"});
+}
 
 // One view: its background, the insertion, the composite and layers
 // written, its timings and metrics into `totals` and one table row.
@@ -579,7 +672,7 @@ void InsertView(const ViewJob& job, const DatasetFrame& frame_info, ViewTotals& 
   const InsertArgs& a = job.a;
   const fs::path image_path(frame_info.image_path);
   const std::string stem = image_path.stem().string();
-  CameraIntrinsics camera = job.dataset.camera;
+  CameraIntrinsics camera = job.dataset.CameraOf(frame_info);
   ImageF frame;
   double background_ms = 0;
   if (job.nerf_background) {
@@ -608,14 +701,12 @@ void InsertView(const ViewJob& job, const DatasetFrame& frame_info, ViewTotals& 
   const InsertTimings t =
       job.inserter.Render(camera, frame_info.T_world_camera, job.objects, frame, &layers, receivers);
   const fs::path out(a.output);
-  WriteExrRgb((out / (stem + ".exr")).string(), frame);
-  WriteImage8((out / (stem + ".png")).string(), ToneMapToDisplay(frame, ExposureForPercentile(without)));
-  WriteExrRgb((out / (stem + "_object.exr")).string(),
-              ExpandLayer(layers.object, layers.gbuffer.rect, camera.width, camera.height, 0.0f));
-  WriteExr((out / (stem + "_alpha.exr")).string(),
-           ExpandLayer(layers.alpha, layers.gbuffer.rect, camera.width, camera.height, 0.0f), {"Y"});
-  WriteExr((out / (stem + "_kappa.exr")).string(),
-           ExpandLayer(layers.kappa, layers.kappa_rect, camera.width, camera.height, 1.0f), {"Y"});
+  if (job.video_exposure == nullptr) {
+    WriteViewLayers(out, stem, camera, frame, without, layers);
+  } else {
+    if (*job.video_exposure <= 0) *job.video_exposure = ExposureForPercentile(without);
+    WriteImage8((out / (stem + ".png")).string(), ToneMapToDisplay(frame, *job.video_exposure));
+  }
   Json view = {{"name", stem},
                {"light_ms", t.light_ms},
                {"fit_ms", t.fit_ms},
@@ -749,6 +840,47 @@ void WriteProbesAndTimings(const InsertArgs& a, const Inserter& inserter, size_t
                  {"views", totals.views}});
 }
 
+// The views of --orbit (around `centre`, by default as the capture's cameras
+// see it) or --camera-path as a dataset of frames named frame_NNNN, each
+// with its own camera.
+Dataset VideoViews(const InsertArgs& a, const Dataset& capture, const CameraPath& from_file, const Vec3& centre) {
+  CameraPath path = from_file;
+  if (a.orbit) {
+    std::vector<Pose> capture_poses;
+    for (const DatasetFrame& frame : capture.frames) capture_poses.push_back(frame.T_world_camera);
+    Orbit orbit = OrbitOfCapture(capture_poses, centre, a.orbit_frames);
+    if (a.orbit_radius != -1) orbit.radius_m = a.orbit_radius;
+    if (!std::isnan(a.orbit_elevation_deg)) orbit.elevation_rad = a.orbit_elevation_deg * kPi / 180.0;
+    for (const Pose& pose : OrbitPoses(orbit)) path.views.push_back({capture.camera, pose});
+    LogInfo("insert: orbit of " + std::to_string(orbit.frames) + " frames around (" + Shown(centre.x) + ", " +
+            Shown(centre.y) + ", " + Shown(centre.z) + ") at " + Shown(orbit.radius_m) + " m, " +
+            Shown(orbit.elevation_rad * 180.0 / kPi) + " degrees up");
+  }
+  Dataset views;
+  views.dir = a.output;
+  views.per_frame_cameras = true;
+  for (size_t i = 0; i < path.views.size(); ++i) {
+    DatasetFrame frame;
+    frame.image_path = (fs::path(a.output) / VideoFrameName(i)).string() + ".png";
+    frame.T_world_camera = path.views[i].T_world_camera;
+    const CameraIntrinsics& camera = path.views[i].camera;
+    frame.camera = VideoCamera(camera, a.video_width != -1 ? a.video_width : camera.width);
+    views.frames.push_back(frame);
+  }
+  views.camera = views.frames.front().camera;
+  return views;
+}
+
+// OUT/video.mp4 from the frames written, at the path's or --fps's rate.
+void WriteVideo(const InsertArgs& a, const Dataset& views, double path_fps) {
+  const double fps = a.fps != -1 ? a.fps : path_fps;
+  const std::string video = (fs::path(a.output) / "video.mp4").string();
+  EncodeMp4((fs::path(a.output) / VideoFramePattern()).string(), fps, video);
+  LogInfo("insert: wrote " + video + " (" + std::to_string(views.camera.width) + "x" +
+          std::to_string(views.camera.height) + ", " + std::to_string(views.frames.size()) + " frames at " +
+          Shown(fps) + " fps)");
+}
+
 }  // namespace
 
 int RunInsert(const CommandArgs& args) {
@@ -759,18 +891,23 @@ int RunInsert(const CommandArgs& args) {
   ValidateOptions(options, nerf_options);
 
   // Inputs.
-  const Dataset dataset = ReadDataset(DatasetSplitPath(a.dataset_dir, a.split));
-  CheckOutputsSpareInputs(
-      InsertOutputs(a.output, dataset, a.object_paths.size()),
-      Paths(a.nerf_path, a.env_path, a.light_probe, a.probe_distances, a.frames_dir, DatasetInputs(dataset),
-            a.object_paths, a.pose_paths, a.mesh_paths, a.material_paths, InsertTruthInputs(a.truth_dir)));
+  const Dataset capture = ReadDataset(DatasetSplitPath(a.dataset_dir, a.split));
+  const CameraPath path_file = a.camera_path.empty() ? CameraPath{} : ReadCameraPath(a.camera_path);
+  const size_t path_views = a.orbit ? static_cast<size_t>(a.orbit_frames) : path_file.views.size();
+  CheckOutputsSpareInputs(a.video ? VideoOutputs(a.output, path_views, a.object_paths.size())
+                                  : InsertOutputs(a.output, capture, a.object_paths.size()),
+                          Paths(a.nerf_path, a.env_path, a.light_probe, a.probe_distances, a.frames_dir,
+                                DatasetInputs(capture), a.object_paths, a.pose_paths, a.mesh_paths, a.material_paths,
+                                InsertTruthInputs(a.truth_dir), a.camera_path));
+  if (a.video && !FindOnPath("ffmpeg"))
+    LogWarning("insert: ffmpeg not found on PATH (apt-get install ffmpeg): the frames are written, the video not");
   // Without a NeRF (ground-truth inputs) the scene is empty: nothing occludes.
   NerfField nerf = a.without_nerf ? NerfField{} : LoadNerf(a.nerf_path);
   // The field does not change from here on: rays read its compact copy (same samples, quantised values).
   if (!a.without_nerf) nerf.UpdateRenderCopy();
   std::unique_ptr<SceneField> scene_field;
   if (a.without_nerf)
-    scene_field = std::make_unique<EmptyScene>(dataset.aabb ? *dataset.aabb : Aabb{{-1, -1, -1}, {1, 1, 1}});
+    scene_field = std::make_unique<EmptyScene>(capture.aabb ? *capture.aabb : Aabb{{-1, -1, -1}, {1, 1, 1}});
   else
     scene_field = std::make_unique<NerfScene>(nerf, nerf_options);
   const SceneField& scene = *scene_field;
@@ -783,6 +920,7 @@ int RunInsert(const CommandArgs& args) {
     }
   }
   const std::vector<LoadedObject> loaded = LoadObjects(a);
+  const Dataset dataset = a.video ? VideoViews(a, capture, path_file, ObjectCentre(loaded.front())) : capture;
   const ProbeLight probe = a.light_probe.empty() ? ProbeLight{} : FitProbe(a.light_probe, options);
   const ProbeDistances distances = ProbeDistancesFrom(a.probe_distances, probe.light, loaded, options, nerf_options);
   MakeDirectories(a.output);
@@ -806,9 +944,17 @@ int RunInsert(const CommandArgs& args) {
   ViewTotals totals;
   std::printf("%-8s %9s %7s %8s %8s %8s %9s %8s %9s %10s %8s\n", "view", "light_ms", "fit_ms", "raster", "shade",
               "occlude", "kappa_ms", "total", "bg_ms", "psnr_obj", "shadow");
-  const ViewJob job{a, dataset, objects, inserter, a.background == "nerf"};
-  for (const DatasetFrame& frame_info : dataset.frames) InsertView(job, frame_info, totals);
+  float video_exposure = 0;
+  const ViewJob job{
+      a, dataset, objects, inserter, a.video || a.background == "nerf", a.video ? &video_exposure : nullptr};
+  Progress progress("insert", dataset.frames.size());
+  for (size_t i = 0; i < dataset.frames.size(); ++i) {
+    InsertView(job, dataset.frames[i], totals);
+    progress.Update(i + 1);
+  }
+  progress.Finish();
   WriteProbesAndTimings(a, inserter, objects.size(), totals);
+  if (a.video) WriteVideo(a, dataset, path_file.views.empty() ? 24.0 : path_file.fps);
   if (!a.truth_dir.empty()) WriteReport(a, options, inserter, totals);
   LogInfo("insert: wrote " + std::to_string(dataset.frames.size()) + " views to " + a.output);
   return 0;

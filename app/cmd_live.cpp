@@ -323,8 +323,11 @@ int RunLive(const CommandArgs& args) {
   // composited at half size: a quarter of the frame, not half of it.
   if (a.render_divisor == 0 && options.render_divisor == 1 && camera.width > 480) options.alongside_scale = 0.25;
   std::vector<LiveAsset> assets;
-  for (const LiveObjectAsset& o : objects)
-    assets.push_back({o.name, &o.mesh, o.field ? &*o.field : nullptr, o.material});
+  for (const LiveObjectAsset& o : objects) {
+    const auto map = [](const std::optional<ImageF>& m) { return m ? &*m : nullptr; };
+    assets.push_back({o.name, &o.mesh, o.field ? &*o.field : nullptr, o.material, map(o.maps.albedo),
+                      map(o.maps.roughness), map(o.maps.metallic)});
+  }
   source =
       ReconnectOnLoss(std::move(source), [&a, source_options] { return OpenSource(a.source_name, source_options); });
   LivePipeline pipeline(*source, board, camera, *scene.field, scene.env.lobes, assets, options);

@@ -45,6 +45,19 @@ PathList InsertOutputs(const std::string& folder, const Dataset& dataset, size_t
   return FilesIn(folder, names);
 }
 
+std::string VideoFrameName(size_t i) {
+  char name[32];
+  std::snprintf(name, sizeof name, "frame_%04zu", i);
+  return name;
+}
+
+PathList VideoOutputs(const std::string& folder, size_t views, size_t objects) {
+  PathList names = {"video.mp4", "probe.exr", "options.json", "timings.json"};
+  for (size_t i = 1; i < objects; ++i) names.push_back("probe_" + std::to_string(i) + ".exr");
+  for (size_t i = 0; i < views; ++i) names.push_back(VideoFrameName(i) + ".png");
+  return FilesIn(folder, names);
+}
+
 PathList InsertTruthInputs(const std::string& truth_dir) {
   if (truth_dir.empty()) return {};
   const fs::path parent = fs::absolute(truth_dir).lexically_normal().parent_path();

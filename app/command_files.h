@@ -45,6 +45,14 @@ PathList DatasetFolderInputs(const std::string& dir);
 // _kappa .exr, _sheet.png; probe.exr (probe_<i>.exr per further object),
 // probe_samples.exr, probe_opacity.exr, options.json, timings.json, report.json.
 PathList InsertOutputs(const std::string& folder, const Dataset& dataset, size_t objects);
+// `nerfar insert --orbit | --camera-path -o FOLDER` with `views` views:
+// frame_NNNN.png, video.mp4, probe.exr (probe_<i>.exr per further object),
+// options.json, timings.json.
+PathList VideoOutputs(const std::string& folder, size_t views, size_t objects);
+// A video's frame i without its extension ("frame_0007"), and the printf
+// pattern of their PNG files.
+std::string VideoFrameName(size_t i);
+inline const char* VideoFramePattern() { return "frame_%04d.png"; }
 // The ground truth `nerfar insert --truth DIR` reads: DIR and the folder above it (bg_XXX.exr).
 PathList InsertTruthInputs(const std::string& truth_dir);
 

@@ -28,33 +28,6 @@ std::string FormatNumber(double v) {
   return buffer;
 }
 
-// Problems with a row-major 4x4 that should be a rigid transform.
-void CheckRigid(const std::array<double, 16>& m, const std::string& pointer, Problems& problems) {
-  if (std::abs(m[12]) > 1e-9 || std::abs(m[13]) > 1e-9 || std::abs(m[14]) > 1e-9 || std::abs(m[15] - 1) > 1e-9) {
-    problems.Add(pointer + "/3", "is [" + FormatNumber(m[12]) + ", " + FormatNumber(m[13]) + ", " +
-                                     FormatNumber(m[14]) + ", " + FormatNumber(m[15]) + "] (expected [0, 0, 0, 1])");
-  }
-  double worst = 0;
-  for (int i = 0; i < 3; ++i) {
-    for (int j = 0; j < 3; ++j) {
-      const double dot = m[i] * m[j] + m[4 + i] * m[4 + j] + m[8 + i] * m[8 + j];  // columns i, j
-      worst = std::max(worst, std::abs(dot - (i == j ? 1.0 : 0.0)));
-    }
-  }
-  const double det =
-      m[0] * (m[5] * m[10] - m[6] * m[9]) - m[1] * (m[4] * m[10] - m[6] * m[8]) + m[2] * (m[4] * m[9] - m[5] * m[8]);
-  if (worst > kRigidTolerance || det < 0) {
-    problems.Add(pointer, "rotation block is not a rotation (largest deviation of R^T R from identity " +
-                              FormatNumber(worst) + ", det " + FormatNumber(det) +
-                              "; expected a rigid camera-to-world transform without scale)");
-  }
-  for (int r = 0; r < 3; ++r) {
-    if (std::abs(m[r * 4 + 3]) > kMaxTranslation)
-      problems.Add(pointer + "/" + std::to_string(r) + "/3",
-                   "is " + FormatNumber(m[r * 4 + 3]) + " (expected a position within 1e6 m)");
-  }
-}
-
 std::string ResolvePath(const std::string& dir, const std::string& file) {
   const fs::path p(file);
   return p.is_absolute() ? p.lexically_normal().string() : (fs::path(dir) / p).lexically_normal().string();
@@ -219,6 +192,32 @@ std::string IgnoredKeysLine(const std::map<std::string, size_t>& root, const std
 
 }  // namespace
 
+void CheckRigidTransform(const std::array<double, 16>& m, const std::string& pointer, Problems& problems) {
+  if (std::abs(m[12]) > 1e-9 || std::abs(m[13]) > 1e-9 || std::abs(m[14]) > 1e-9 || std::abs(m[15] - 1) > 1e-9) {
+    problems.Add(pointer + "/3", "is [" + FormatNumber(m[12]) + ", " + FormatNumber(m[13]) + ", " +
+                                     FormatNumber(m[14]) + ", " + FormatNumber(m[15]) + "] (expected [0, 0, 0, 1])");
+  }
+  double worst = 0;
+  for (int i = 0; i < 3; ++i) {
+    for (int j = 0; j < 3; ++j) {
+      const double dot = m[i] * m[j] + m[4 + i] * m[4 + j] + m[8 + i] * m[8 + j];  // columns i, j
+      worst = std::max(worst, std::abs(dot - (i == j ? 1.0 : 0.0)));
+    }
+  }
+  const double det =
+      m[0] * (m[5] * m[10] - m[6] * m[9]) - m[1] * (m[4] * m[10] - m[6] * m[8]) + m[2] * (m[4] * m[9] - m[5] * m[8]);
+  if (worst > kRigidTolerance || det < 0) {
+    problems.Add(pointer, "rotation block is not a rotation (largest deviation of R^T R from identity " +
+                              FormatNumber(worst) + ", det " + FormatNumber(det) +
+                              "; expected a rigid camera-to-world transform without scale)");
+  }
+  for (int r = 0; r < 3; ++r) {
+    if (std::abs(m[r * 4 + 3]) > kMaxTranslation)
+      problems.Add(pointer + "/" + std::to_string(r) + "/3",
+                   "is " + FormatNumber(m[r * 4 + 3]) + " (expected a position within 1e6 m)");
+  }
+}
+
 Pose PoseFromTransformMatrix(const std::array<double, 16>& camera_to_world_opengl) {
   // OpenGL camera (x right, y up, -z forward) -> OpenCV camera (x right, y
   // down, z forward): T_world_cv = T_world_gl * diag(1, -1, -1, 1), i.e. the
@@ -272,7 +271,7 @@ DatasetFrame ReadFrame(const Json& frame_json, size_t index, FramesReading& read
   const size_t before = problems.items().size();
   const std::array<double, 16> m = item.Matrix4("transform_matrix");
   if (item.valid() && problems.items().size() == before && item.Has("transform_matrix"))
-    CheckRigid(m, item.PointerTo("transform_matrix"), problems);
+    CheckRigidTransform(m, item.PointerTo("transform_matrix"), problems);
   item.Finish();
   if (item.valid() && item.Has("file_path") && frame.file_path.empty())
     problems.Add(item.PointerTo("file_path"), "is empty (expected an image path)");

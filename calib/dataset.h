@@ -21,6 +21,7 @@
 #include <vector>
 
 #include "calib/camera.h"
+#include "calib/core/error.h"
 #include "calib/core/math.h"
 
 namespace nerfar {
@@ -66,6 +67,11 @@ struct Dataset {
 // The one OpenGL <-> OpenCV conversion (right-multiplication by diag(1,-1,-1,1)).
 Pose PoseFromTransformMatrix(const std::array<double, 16>& camera_to_world_opengl);
 std::array<double, 16> TransformMatrixFromPose(const Pose& T_world_camera);
+
+// Adds a problem at `pointer` unless the row-major 4x4 is a rigid transform
+// (last row 0 0 0 1, orthonormal rotation within the 8 decimals files
+// store, a position within 1e6 m).
+void CheckRigidTransform(const std::array<double, 16>& m, const std::string& pointer, Problems& problems);
 
 // Reads and validates a transforms file (every problem listed, typos of our
 // keys rejected, image and mask files checked to exist when check_images).

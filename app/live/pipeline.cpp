@@ -441,6 +441,9 @@ std::vector<InsertObject> LivePipeline::PlaceObjects(const std::vector<LiveObjec
     o.T_world_object = ObjectPose(i, states[i]);
     o.scale = states[i].scale;
     o.material = states[i].material;
+    o.albedo_map = assets_[i].albedo_map;
+    o.roughness_map = assets_[i].roughness_map;
+    o.metallic_map = assets_[i].metallic_map;
     if (assets_[i].field != nullptr) {
       PosedField& posed = visibility_[i];
       if (!posed.field || !SamePose(posed.T_world_object, o.T_world_object) || posed.scale != o.scale) {

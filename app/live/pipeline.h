@@ -51,6 +51,11 @@ struct LiveAsset {
   const TriangleMesh* mesh = nullptr;
   const SsdfField* field = nullptr;  // nullptr: no shadows, no self-shadows
   SgMaterial material;               // initial material
+  // Textures at the mesh's UVs (InsertObject's maps); where given they
+  // override the material's constant, the panel's edits included.
+  const ImageF* albedo_map = nullptr;
+  const ImageF* roughness_map = nullptr;
+  const ImageF* metallic_map = nullptr;
 };
 
 // What the user edits, per object.

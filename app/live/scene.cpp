@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <filesystem>
 
+#include "app/object_assets.h"
 #include "calib/core/error.h"
 #include "calib/core/log.h"
 #include "render/insert/nerf_scene.h"
@@ -19,15 +20,6 @@ std::string FirstExisting(const std::vector<fs::path>& candidates) {
   for (const fs::path& p : candidates)
     if (fs::is_regular_file(p, error)) return p.string();
   return {};
-}
-
-std::string ResolveBeside(const std::string& reference, const std::string& owner) {
-  std::error_code error;
-  const fs::path p(reference);
-  if (p.is_absolute() || fs::is_regular_file(p, error)) return reference;
-  const fs::path beside = fs::path(owner).parent_path() / p;
-  if (fs::is_regular_file(beside, error)) return beside.string();
-  ThrowInputError(owner, "its mesh '" + reference + "' was not found (expected it beside the file)");
 }
 
 }  // namespace
@@ -87,7 +79,11 @@ LiveObjectAsset LoadLiveObject(const std::string& path) {
     asset.field = ReadSsdf(path);
     if (asset.field->mesh_reference.empty())
       ThrowInputError(path, "names no mesh (expected a field baked from a mesh)");
-    asset.mesh = ReadMesh(ResolveBeside(asset.field->mesh_reference, path));
+    const std::string mesh = FindBeside(asset.field->mesh_reference, path);
+    if (mesh.empty())
+      ThrowInputError(path,
+                      "its mesh '" + asset.field->mesh_reference + "' was not found (expected it beside the file)");
+    asset.mesh = ReadMesh(mesh);
     material = asset.field->material;
   } else {
     asset.mesh = ReadMesh(path);
@@ -97,6 +93,7 @@ LiveObjectAsset LoadLiveObject(const std::string& path) {
     asset.material.base_color = material->albedo;
     asset.material.roughness = material->roughness;
     asset.material.metallic = material->metallic;
+    asset.maps = LoadMaterialMaps(*material, path);
   }
   return asset;
 }

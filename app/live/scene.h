@@ -7,7 +7,7 @@
 //       --camera, or the synthetic stream's own intrinsics)
 //   SCENE/*.ssdf                               objects (the default --object)
 // Objects: an .ssdf (its mesh and material from the field, shadows on) or a
-// bare mesh (no shadows). Folders called `scene` instead of `dataset` are
+// bare mesh (no shadows); either with its material's textures. Folders called `scene` instead of `dataset` are
 // accepted too (scripts/demo.sh's earlier layout).
 #pragma once
 
@@ -16,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "app/object_assets.h"
 #include "calib/board.h"
 #include "calib/camera_file.h"
 #include "render/lighting/env_light.h"
@@ -54,6 +55,7 @@ struct LiveObjectAsset {
   TriangleMesh mesh;
   std::optional<SsdfField> field;
   SgMaterial material;
+  MaterialMaps maps;  // its textures, which override the material's constants where given
 };
 
 // An object from an .ssdf (mesh resolved beside it) or a mesh file.

@@ -6,6 +6,7 @@
 #include <fstream>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <sstream>
 #include <stdexcept>
 #include <tuple>
 #include <utility>
@@ -25,7 +26,7 @@ int64_t BigEndian(const unsigned char* bytes, int count) {
 
 // A JPEG's frame size from its SOF segment, walking the segments from after
 // the SOI marker (a valid file states it before its first scan).
-std::pair<int64_t, int64_t> JpegFrameSize(std::ifstream& file, const std::string& path) {
+std::pair<int64_t, int64_t> JpegFrameSize(std::istream& file, const std::string& path) {
   file.clear();
   file.seekg(2);
   for (int segment = 0; segment < 4096; ++segment) {
@@ -50,52 +51,57 @@ std::pair<int64_t, int64_t> JpegFrameSize(std::ifstream& file, const std::string
   ThrowInputError(path, "JPEG without a readable frame header (the file is corrupt)");
 }
 
-}  // namespace
-
-void CheckPngOrJpegHeader(const std::string& path) {
+// CheckPngOrJpegHeader on any stream; `source` names it in errors.
+void CheckImageHeader(std::istream& file, const std::string& source) {
   static constexpr unsigned char kPng[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
   static constexpr unsigned char kJpeg[3] = {0xff, 0xd8, 0xff};
   unsigned char head[24] = {};
-  std::ifstream file(path, std::ios::binary);
   file.read(reinterpret_cast<char*>(head), sizeof head);
   const std::streamsize got = file.gcount();
   int64_t width = 0, height = 0;
   if (got >= 8 && std::equal(kPng, kPng + 8, head)) {
     // The first chunk is IHDR: length, type, then width and height.
     if (got < 24 || !std::equal(head + 12, head + 16, "IHDR"))
-      ThrowInputError(path, "PNG without its IHDR header (the file is corrupt)");
+      ThrowInputError(source, "PNG without its IHDR header (the file is corrupt)");
     width = BigEndian(head + 16, 4);
     height = BigEndian(head + 20, 4);
   } else if (got >= 3 && std::equal(kJpeg, kJpeg + 3, head)) {
-    std::tie(width, height) = JpegFrameSize(file, path);
+    std::tie(width, height) = JpegFrameSize(file, source);
   } else {
-    ThrowInputError(path, "not a PNG or JPEG file (its first bytes are neither signature)");
+    ThrowInputError(source, "not a PNG or JPEG file (its first bytes are neither signature)");
   }
   if (width < 1 || height < 1 || width > kMaxImageSide || height > kMaxImageSide || width * height > kMaxImagePixels)
-    ThrowInputError(path, "header states " + std::to_string(width) + "x" + std::to_string(height) +
-                              " pixels (expected 1.." + std::to_string(kMaxImageSide) + " a side, at most " +
-                              std::to_string(kMaxImagePixels) + " pixels)");
+    ThrowInputError(source, "header states " + std::to_string(width) + "x" + std::to_string(height) +
+                                " pixels (expected 1.." + std::to_string(kMaxImageSide) + " a side, at most " +
+                                std::to_string(kMaxImagePixels) + " pixels)");
 }
 
-Image8 ReadImage8(const std::string& path) {
-  std::error_code error;
-  if (!std::filesystem::is_regular_file(path, error)) ThrowInputError(path, "no such file (expected an image)");
-  CheckPngOrJpegHeader(path);
+}  // namespace
+
+void CheckPngOrJpegHeader(const std::string& path) {
+  std::ifstream file(path, std::ios::binary);
+  CheckImageHeader(file, path);
+}
+
+Image8 DecodeImage8(std::string_view bytes, const std::string& source) {
+  std::istringstream stream{std::string(bytes)};
+  CheckImageHeader(stream, source);
   cv::Mat mat;
   try {
-    mat = cv::imread(path, cv::IMREAD_UNCHANGED);
+    const cv::Mat encoded(1, static_cast<int>(bytes.size()), CV_8U, const_cast<char*>(bytes.data()));
+    mat = cv::imdecode(encoded, cv::IMREAD_UNCHANGED);
   } catch (const cv::Exception& e) {
-    ThrowInputError(path, std::string("cannot decode image (") + e.what() + ")");
+    ThrowInputError(source, std::string("cannot decode image (") + e.what() + ")");
   }
-  if (mat.empty()) ThrowInputError(path, "cannot decode image (expected PNG or JPEG)");
+  if (mat.empty()) ThrowInputError(source, "cannot decode image (expected PNG or JPEG)");
   if (mat.depth() != CV_8U) {
-    if (mat.depth() != CV_16U) ThrowInputError(path, "pixel type is not 8 or 16 bit (expected an 8-bit image)");
+    if (mat.depth() != CV_16U) ThrowInputError(source, "pixel type is not 8 or 16 bit (expected an 8-bit image)");
     mat.convertTo(mat, CV_8U, 1.0 / 257.0);
   }
   if (mat.cols > kMaxImageSide || mat.rows > kMaxImageSide || int64_t(mat.total()) > kMaxImagePixels)
-    ThrowInputError(path, "image of " + std::to_string(mat.cols) + "x" + std::to_string(mat.rows) +
-                              " pixels is too large (at most " + std::to_string(kMaxImageSide) + " a side and " +
-                              std::to_string(kMaxImagePixels) + " pixels)");
+    ThrowInputError(source, "image of " + std::to_string(mat.cols) + "x" + std::to_string(mat.rows) +
+                                " pixels is too large (at most " + std::to_string(kMaxImageSide) + " a side and " +
+                                std::to_string(kMaxImagePixels) + " pixels)");
   cv::Mat converted;
   switch (mat.channels()) {
     case 1:
@@ -108,13 +114,19 @@ Image8 ReadImage8(const std::string& path) {
       cv::cvtColor(mat, converted, cv::COLOR_BGRA2RGB);
       break;
     default:
-      ThrowInputError(path, std::to_string(mat.channels()) + " channels (expected 1, 3 or 4)");
+      ThrowInputError(source, std::to_string(mat.channels()) + " channels (expected 1, 3 or 4)");
   }
   Image8 image(converted.cols, converted.rows, converted.channels());
   for (int y = 0; y < converted.rows; ++y)
     std::copy_n(converted.ptr<std::uint8_t>(y), static_cast<size_t>(converted.cols) * converted.channels(),
                 image.Pixel(0, y));
   return image;
+}
+
+Image8 ReadImage8(const std::string& path) {
+  std::error_code error;
+  if (!std::filesystem::is_regular_file(path, error)) ThrowInputError(path, "no such file (expected an image)");
+  return DecodeImage8(ReadFileBytes(path), path);
 }
 
 void WriteImage8(const std::string& path, const Image8& image) {

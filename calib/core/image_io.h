@@ -5,6 +5,7 @@
 #pragma once
 
 #include <string>
+#include <string_view>
 
 #include "calib/core/image.h"
 
@@ -13,6 +14,9 @@ namespace nerfar {
 // Reads an 8-bit image with 1 (grey) or 3 (RGB) channels as stored; alpha is
 // dropped. InputError naming the file if it is missing or not a PNG or JPEG.
 Image8 ReadImage8(const std::string& path);
+// The same from a PNG or JPEG file's bytes held in memory (a texture embedded
+// in a GLB); `source` names them in errors.
+Image8 DecodeImage8(std::string_view bytes, const std::string& source);
 // InputError naming the file unless it starts as a PNG or a JPEG does and its
 // header states a size within kMaxImageSide and kMaxImagePixels. Files are
 // checked before OpenCV decodes them: OpenCV picks a decoder by content among

@@ -3,6 +3,7 @@
 #include <assimp/material.h>
 #include <assimp/postprocess.h>
 #include <assimp/scene.h>
+#include <assimp/texture.h>
 
 #include <algorithm>
 #include <assimp/Importer.hpp>
@@ -16,6 +17,7 @@
 #include <vector>
 
 #include "calib/core/atomic_file.h"
+#include "calib/core/image_io.h"
 
 namespace nerfar {
 
@@ -408,6 +410,30 @@ TriangleMesh ReadMesh(const std::string& path) {
   if (!normals_ok) ComputeVertexNormals(mesh);
   for (Vec3f& n : mesh.normals) n = Normalized(n);
   return mesh;
+}
+
+Image8 ReadMeshTexture(const std::string& reference) {
+  const size_t hash = reference.rfind('#');
+  if (hash == std::string::npos) return ReadImage8(reference);
+  const std::string mesh_path = reference.substr(0, hash), index_text = reference.substr(hash + 1);
+  if (index_text.empty() || index_text.find_first_not_of("0123456789") != std::string::npos)
+    return ReadImage8(reference);  // a file name with a '#' in it
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(mesh_path, ec))
+    ThrowInputError(reference, "no such mesh file (expected the GLB the texture is embedded in)");
+  CheckGlbHeader(mesh_path, std::filesystem::file_size(mesh_path, ec));
+  Assimp::Importer importer;
+  const aiScene* scene = importer.ReadFile(mesh_path, 0);
+  if (scene == nullptr) ThrowInputError(mesh_path, std::string("cannot read the mesh: ") + importer.GetErrorString());
+  const unsigned long index = std::stoul(index_text);
+  if (index >= scene->mNumTextures)
+    ThrowInputError(reference, "no embedded texture " + index_text + " (the file holds " +
+                                   std::to_string(scene->mNumTextures) + ")");
+  const aiTexture& texture = *scene->mTextures[index];
+  // glTF embeds images as the bytes of their PNG or JPEG files (assimp: mHeight 0, mWidth bytes).
+  if (texture.mHeight != 0)
+    ThrowInputError(reference, "an embedded texture of raw texels (expected PNG or JPEG bytes)");
+  return DecodeImage8(std::string_view(reinterpret_cast<const char*>(texture.pcData), texture.mWidth), reference);
 }
 
 void WriteMeshObj(const std::string& path, const TriangleMesh& mesh) {

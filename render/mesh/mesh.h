@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "calib/core/error.h"
+#include "calib/core/image.h"
 #include "calib/core/math.h"
 #include "calib/object.h"
 
@@ -72,6 +73,13 @@ void ComputeVertexNormals(TriangleMesh& mesh);
 // "path: what is wrong (what was expected)" for missing, unreadable, empty or
 // invalid files.
 TriangleMesh ReadMesh(const std::string& path);
+
+// The image a material's texture reference names: a PNG or JPEG file, or
+// "<mesh path>#<index>" for a texture embedded in a GLB (as ReadMesh writes
+// them). Row 0 is the image's top row; the mesh's UVs have v = 0 at its
+// bottom row (OBJ's convention, and glTF's as assimp flips it), so v maps to
+// row (1 − v) × height. InputError naming the reference when unreadable.
+Image8 ReadMeshTexture(const std::string& reference);
 
 // Writes positions, normals (and UVs) as OBJ, atomically. Material not written.
 void WriteMeshObj(const std::string& path, const TriangleMesh& mesh);
