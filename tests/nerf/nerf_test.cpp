@@ -1221,7 +1221,7 @@ TEST(NerfTrain, DistortionPriorGathersTheWeightsOntoSurfaces) {
   // 36.5 dB. The prior gathers the weights but does not place them: on this
   // scene's 4.5 cm pixels the gathered surface sits 2-18 cm in front of the
   // true face, 1-10 cm further forward than without the prior; see
-  // docs/BENCHMARKS.md, session 5, for the same on lamps.)
+  // docs/history/nerf.md, "Preset choices", for the same on a shared scene.)
   const NerfTrainData data = TinyScene();
   auto train = [&](double distortion) {
     NerfTrainOptions o = TinyOptions();
