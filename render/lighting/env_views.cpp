@@ -121,157 +121,173 @@ struct ViewPick {
   std::vector<float> layer;
 };
 
-}  // namespace
-
-EnvSurfaceSamples SampleSurfaces(const NerfField& field, const EnvEstimateOptions& options, EnvViewReport* report,
-                                 const EnvProgress& progress) {
-  const std::vector<std::string> problems = options.Validate();
-  if (!problems.empty()) ThrowInputError("env options", problems.front());
-  NERFAR_CHECK(!field.empty());
-  const Vec3 centre = (field.aabb.min + field.aabb.max) * 0.5;
-  const double radius = options.view_distance_scale * 0.5 * Length(field.aabb.max - field.aabb.min);
+// The virtual camera every sampled view uses.
+CameraIntrinsics ViewCamera(const EnvEstimateOptions& options) {
   CameraIntrinsics camera;
   camera.width = options.view_width;
   camera.height = options.view_height;
   camera.fx = camera.fy = 0.5 * camera.width / std::tan(0.5 * options.view_fov_deg * kPi / 180);
   camera.cx = 0.5 * camera.width;
   camera.cy = 0.5 * camera.height;
-  const bool use_brisque = options.brisque_max < 100;
-  std::unique_ptr<BrisqueScorer> scorer;
-  if (use_brisque) scorer = std::make_unique<BrisqueScorer>();
-  const double z_min = std::sin(options.min_view_elevation_deg * kPi / 180);
+  return camera;
+}
 
-  std::vector<ViewPick> views;
-  EnvViewReport local;
-  int accepted = 0;
-  for (int a = 0; a < options.max_view_attempts && accepted < options.views; ++a) {
-    const double z = z_min + (1 - z_min) * Uniform(options.seed, kViewDir, a, 0);
-    const double phi = 2 * kPi * Uniform(options.seed, kViewDir, a, 1);
-    const double r = std::sqrt(std::max(0.0, 1 - z * z));
-    const Vec3 eye = centre + Vec3{r * std::cos(phi), r * std::sin(phi), z} * radius;
-    const Pose pose = LookAt(eye, centre);
-    const std::vector<NerfRay> rays = CameraRays(camera, pose, field.aabb);
-    std::vector<NerfRayResult> results(rays.size());
-    field.RenderRays(rays.data(), rays.size(), results.data(), options.render);
+// One rendered view's surface samples: its pixels in a random order, each
+// accepted as a sample where the NeRF shows a surface there with a usable
+// normal seen not too grazing.
+class ViewSampler {
+ public:
+  ViewSampler(const NerfField& field, const EnvEstimateOptions& options, const CameraIntrinsics& camera,
+              const Pose& pose, int attempt)
+      : field_(field), options_(options), camera_(camera), pose_(pose), attempt_(attempt) {
+    rays_ = CameraRays(camera, pose, field.aabb);
+    results_.resize(rays_.size());
+    field.RenderRays(rays_.data(), rays_.size(), results_.data(), options.render);
+  }
 
-    ViewPick pick;
-    if (use_brisque) {
-      ImageF color(camera.width, camera.height, 3);
-      for (size_t i = 0; i < results.size(); ++i)
-        for (int c = 0; c < 3; ++c) color.pixels[i * 3 + c] = results[i].color[c];
-      pick.score = scorer->ScoreLinear(color);
-    }
-    std::vector<uint32_t> eligible;
-    for (size_t i = 0; i < results.size(); ++i)
-      if (results[i].opacity > options.min_pixel_opacity && rays[i].t_far > rays[i].t_near)
-        eligible.push_back(static_cast<uint32_t>(i));
-    // Partial Fisher-Yates with counter-based draws: a random order of the
-    // first `tries` eligible pixels, taken in that order until P are accepted.
-    const size_t per_view = static_cast<size_t>(options.pixels_per_view);
-    const size_t tries = std::min(eligible.size(), static_cast<size_t>(options.max_pixel_tries_factor) * per_view);
-    for (size_t k = 0; k < tries; ++k) {
-      const size_t j = k + static_cast<size_t>(Uniform(options.seed, kPixelPick, a, k) * (eligible.size() - k));
-      std::swap(eligible[k], eligible[std::min(j, eligible.size() - 1)]);
-    }
-    enum Outcome { kAccepted, kNotSurface, kNoNormal, kGrazing, kNotFinite };
-    struct Candidate {
-      Outcome outcome = kNotFinite;
-      Vec3f x, n, radiance;
-      float layer = 0;
-    };
-    const auto evaluate = [&](size_t k, Candidate& c) {
-      const NerfRay& ray = rays[eligible[k]];
-      const NerfRayResult& res = results[eligible[k]];
-      // The surface: the median of the ray's opacity (see MarchSurface),
-      // kept only where the opacity builds up within a few voxels.
-      const RaySurface surf = MarchSurface(field, ray, options.surface_step_voxels);
-      if (!surf.valid || surf.t75 - surf.t25 > options.max_surface_spread_voxels * field.voxel_m) {
-        c.outcome = kNotSurface;
-        return;
-      }
-      c.x = ray.origin + ray.dir * surf.t50;
-      if (options.normal_from_depth) {
-        const double px = eligible[k] % camera.width + 0.5, py = eligible[k] / camera.width + 0.5;
-        if (!DepthNormal(field, camera, pose, px, py, c.x, ray.dir, options, &c.n)) {
-          c.outcome = kNoNormal;
-          return;
-        }
-      } else {
-        if (!SmoothedNormal(field, c.x, static_cast<float>(options.normal_scale_voxels), &c.n)) {
-          c.outcome = kNoNormal;
-          return;
-        }
-        if (Dot(c.n, ray.dir) > 0) c.n = -c.n;  // the camera sees the surface: face it
-      }
-      // A surface seen at a grazing angle is where a noisy density gradient
-      // most often gives a wrong normal (e.g. the table top's normal turned
-      // sideways or down); such samples drive light from below the horizon.
-      if (-Dot(c.n, ray.dir) < options.min_view_cosine) {
-        c.outcome = kGrazing;
-        return;
-      }
-      // Observed radiance: the pixel as rendered (what the camera saw; the
-      // scenes' background is black, so a translucent trained surface's pixel
-      // is its radiance), or divided by the opacity (partial coverage).
-      c.radiance = options.radiance_over_opacity ? res.color * (1.0f / res.opacity) : res.color;
-      c.layer = (surf.t50 - surf.t_top) * std::fabs(Dot(c.n, ray.dir));
-      c.outcome = std::isfinite(c.radiance.x + c.radiance.y + c.radiance.z) ? kAccepted : kNotFinite;
-    };
+  // The view as an image, for BRISQUE.
+  ImageF Image() const {
+    ImageF color(camera_.width, camera_.height, 3);
+    for (size_t i = 0; i < results_.size(); ++i)
+      for (int c = 0; c < 3; ++c) color.pixels[i * 3 + c] = results_[i].color[c];
+    return color;
+  }
+
+  // Up to pixels_per_view samples into `pick`.
+  void Pick(ViewPick& pick) {
+    ShuffleEligible();
     // Candidates are evaluated in parallel, a batch at a time, and taken in
     // order: the result does not depend on the thread count.
-    for (size_t next = 0; next < tries && pick.positions.size() < per_view;) {
-      const size_t end = std::min(tries, next + std::max<size_t>(per_view - pick.positions.size(), 16));
+    const size_t per_view = static_cast<size_t>(options_.pixels_per_view);
+    for (size_t next = 0; next < tries_ && pick.positions.size() < per_view;) {
+      const size_t end = std::min(tries_, next + std::max<size_t>(per_view - pick.positions.size(), 16));
       std::vector<Candidate> batch(end - next);
       ParallelFor(
-          batch.size(), [&](size_t i) { evaluate(next + i, batch[i]); }, 1);
+          batch.size(), [&](size_t i) { Evaluate(next + i, batch[i]); }, 1);
       for (const Candidate& c : batch) {
         if (pick.positions.size() >= per_view) break;
-        ++pick.tried;
-        switch (c.outcome) {
-          case kAccepted:
-            pick.positions.push_back(c.x);
-            pick.normals.push_back(c.n);
-            pick.radiance.push_back(c.radiance);
-            pick.layer.push_back(c.layer);
-            break;
-          case kNotSurface:
-            ++pick.not_surface;
-            break;
-          case kNoNormal:
-            ++pick.no_normal;
-            break;
-          case kGrazing:
-            ++pick.grazing;
-            break;
-          case kNotFinite:
-            break;
-        }
+        Take(c, pick);
       }
       next = end;
     }
-    const bool ok = !use_brisque || pick.score <= options.brisque_max;
-    local.scores.push_back(pick.score);
-    local.kept.push_back(ok);
-    local.poses.push_back(pose);
-    if (ok) ++accepted;
-    views.push_back(std::move(pick));
-    if (progress) progress("views", static_cast<size_t>(accepted), static_cast<size_t>(options.views));
   }
-  local.rendered = static_cast<int>(views.size());
-  local.camera = camera;
-  if (accepted < options.views) {
-    const int passed = accepted;
-    // Too few views passed: take the best-scoring of the rest (the paper repeats
-    // until 100 pass; a bounded budget must end).
-    std::vector<size_t> rest;
-    for (size_t v = 0; v < views.size(); ++v)
-      if (!local.kept[v]) rest.push_back(v);
-    std::stable_sort(rest.begin(), rest.end(), [&](size_t a, size_t b) { return views[a].score < views[b].score; });
-    for (size_t i = 0; i < rest.size() && accepted < options.views; ++i, ++accepted) local.kept[rest[i]] = true;
-    LogWarning("env: only " + std::to_string(passed) + " of " + std::to_string(local.rendered) + " views scored <= " +
-               std::to_string(options.brisque_max) + " by BRISQUE; the best-scoring others were kept");
+
+ private:
+  enum Outcome { kAccepted, kNotSurface, kNoNormal, kGrazing, kNotFinite };
+  struct Candidate {
+    Outcome outcome = kNotFinite;
+    Vec3f x, n, radiance;
+    float layer = 0;
+  };
+
+  // The pixels opaque enough, the first `tries_` of them in a random order:
+  // a partial Fisher-Yates with counter-based draws, taken in that order
+  // until P are accepted.
+  void ShuffleEligible() {
+    for (size_t i = 0; i < results_.size(); ++i)
+      if (results_[i].opacity > options_.min_pixel_opacity && rays_[i].t_far > rays_[i].t_near)
+        eligible_.push_back(static_cast<uint32_t>(i));
+    const size_t per_view = static_cast<size_t>(options_.pixels_per_view);
+    tries_ = std::min(eligible_.size(), static_cast<size_t>(options_.max_pixel_tries_factor) * per_view);
+    for (size_t k = 0; k < tries_; ++k) {
+      const size_t j =
+          k + static_cast<size_t>(Uniform(options_.seed, kPixelPick, attempt_, k) * (eligible_.size() - k));
+      std::swap(eligible_[k], eligible_[std::min(j, eligible_.size() - 1)]);
+    }
   }
-  local.accepted = accepted;
+
+  void Evaluate(size_t k, Candidate& c) const {
+    const NerfRay& ray = rays_[eligible_[k]];
+    const NerfRayResult& res = results_[eligible_[k]];
+    // The surface: the median of the ray's opacity (see MarchSurface),
+    // kept only where the opacity builds up within a few voxels.
+    const RaySurface surf = MarchSurface(field_, ray, options_.surface_step_voxels);
+    if (!surf.valid || surf.t75 - surf.t25 > options_.max_surface_spread_voxels * field_.voxel_m) {
+      c.outcome = kNotSurface;
+      return;
+    }
+    c.x = ray.origin + ray.dir * surf.t50;
+    if (!Normal(eligible_[k], ray, c)) {
+      c.outcome = kNoNormal;
+      return;
+    }
+    // A surface seen at a grazing angle is where a noisy density gradient
+    // most often gives a wrong normal (e.g. the table top's normal turned
+    // sideways or down); such samples drive light from below the horizon.
+    if (-Dot(c.n, ray.dir) < options_.min_view_cosine) {
+      c.outcome = kGrazing;
+      return;
+    }
+    // Observed radiance: the pixel as rendered (what the camera saw; the
+    // scenes' background is black, so a translucent trained surface's pixel
+    // is its radiance), or divided by the opacity (partial coverage).
+    c.radiance = options_.radiance_over_opacity ? res.color * (1.0f / res.opacity) : res.color;
+    c.layer = (surf.t50 - surf.t_top) * std::fabs(Dot(c.n, ray.dir));
+    c.outcome = std::isfinite(c.radiance.x + c.radiance.y + c.radiance.z) ? kAccepted : kNotFinite;
+  }
+
+  // The normal at the candidate's point, facing the camera: from the rendered
+  // depth around the pixel, or the smoothed density gradient.
+  bool Normal(uint32_t pixel, const NerfRay& ray, Candidate& c) const {
+    if (options_.normal_from_depth) {
+      const double px = pixel % camera_.width + 0.5, py = pixel / camera_.width + 0.5;
+      return DepthNormal(field_, camera_, pose_, px, py, c.x, ray.dir, options_, &c.n);
+    }
+    if (!SmoothedNormal(field_, c.x, static_cast<float>(options_.normal_scale_voxels), &c.n)) return false;
+    if (Dot(c.n, ray.dir) > 0) c.n = -c.n;  // the camera sees the surface: face it
+    return true;
+  }
+
+  static void Take(const Candidate& c, ViewPick& pick) {
+    ++pick.tried;
+    switch (c.outcome) {
+      case kAccepted:
+        pick.positions.push_back(c.x);
+        pick.normals.push_back(c.n);
+        pick.radiance.push_back(c.radiance);
+        pick.layer.push_back(c.layer);
+        break;
+      case kNotSurface:
+        ++pick.not_surface;
+        break;
+      case kNoNormal:
+        ++pick.no_normal;
+        break;
+      case kGrazing:
+        ++pick.grazing;
+        break;
+      case kNotFinite:
+        break;
+    }
+  }
+
+  const NerfField& field_;
+  const EnvEstimateOptions& options_;
+  const CameraIntrinsics& camera_;
+  const Pose pose_;
+  const int attempt_;
+  std::vector<NerfRay> rays_;
+  std::vector<NerfRayResult> results_;
+  std::vector<uint32_t> eligible_;
+  size_t tries_ = 0;
+};
+
+// Too few views passed BRISQUE: the best-scoring of the rest are kept (the
+// paper repeats until 100 pass; a bounded budget must end).
+void KeepBestScoring(const std::vector<ViewPick>& views, const EnvEstimateOptions& options, EnvViewReport& local) {
+  const int passed = local.accepted;
+  std::vector<size_t> rest;
+  for (size_t v = 0; v < views.size(); ++v)
+    if (!local.kept[v]) rest.push_back(v);
+  std::stable_sort(rest.begin(), rest.end(), [&](size_t a, size_t b) { return views[a].score < views[b].score; });
+  for (size_t i = 0; i < rest.size() && local.accepted < options.views; ++i, ++local.accepted)
+    local.kept[rest[i]] = true;
+  LogWarning("env: only " + std::to_string(passed) + " of " + std::to_string(local.rendered) + " views scored <= " +
+             std::to_string(options.brisque_max) + " by BRISQUE; the best-scoring others were kept");
+}
+
+// The kept views' samples, in view order, and their pixel counts.
+EnvSurfaceSamples GatherKept(const std::vector<ViewPick>& views, EnvViewReport& local) {
   EnvSurfaceSamples samples;
   for (size_t v = 0; v < views.size(); ++v) {
     if (!local.kept[v]) continue;
@@ -284,6 +300,49 @@ EnvSurfaceSamples SampleSurfaces(const NerfField& field, const EnvEstimateOption
     samples.radiance.insert(samples.radiance.end(), views[v].radiance.begin(), views[v].radiance.end());
     samples.layer_m.insert(samples.layer_m.end(), views[v].layer.begin(), views[v].layer.end());
   }
+  return samples;
+}
+
+}  // namespace
+
+EnvSurfaceSamples SampleSurfaces(const NerfField& field, const EnvEstimateOptions& options, EnvViewReport* report,
+                                 const EnvProgress& progress) {
+  const std::vector<std::string> problems = options.Validate();
+  if (!problems.empty()) ThrowInputError("env options", problems.front());
+  NERFAR_CHECK(!field.empty());
+  const Vec3 centre = (field.aabb.min + field.aabb.max) * 0.5;
+  const double radius = options.view_distance_scale * 0.5 * Length(field.aabb.max - field.aabb.min);
+  const CameraIntrinsics camera = ViewCamera(options);
+  const bool use_brisque = options.brisque_max < 100;
+  std::unique_ptr<BrisqueScorer> scorer;
+  if (use_brisque) scorer = std::make_unique<BrisqueScorer>();
+  const double z_min = std::sin(options.min_view_elevation_deg * kPi / 180);
+
+  // Views from random directions above min_view_elevation_deg, looking at
+  // the volume's centre, until `views` pass BRISQUE or the attempts run out.
+  std::vector<ViewPick> views;
+  EnvViewReport local;
+  for (int a = 0; a < options.max_view_attempts && local.accepted < options.views; ++a) {
+    const double z = z_min + (1 - z_min) * Uniform(options.seed, kViewDir, a, 0);
+    const double phi = 2 * kPi * Uniform(options.seed, kViewDir, a, 1);
+    const double r = std::sqrt(std::max(0.0, 1 - z * z));
+    const Pose pose = LookAt(centre + Vec3{r * std::cos(phi), r * std::sin(phi), z} * radius, centre);
+    ViewSampler sampler(field, options, camera, pose, a);
+    ViewPick pick;
+    if (use_brisque) pick.score = scorer->ScoreLinear(sampler.Image());
+    sampler.Pick(pick);
+    const bool ok = !use_brisque || pick.score <= options.brisque_max;
+    local.scores.push_back(pick.score);
+    local.kept.push_back(ok);
+    local.poses.push_back(pose);
+    if (ok) ++local.accepted;
+    views.push_back(std::move(pick));
+    if (progress) progress("views", static_cast<size_t>(local.accepted), static_cast<size_t>(options.views));
+  }
+  local.rendered = static_cast<int>(views.size());
+  local.camera = camera;
+  if (local.accepted < options.views) KeepBestScoring(views, options, local);
+  EnvSurfaceSamples samples = GatherKept(views, local);
   if (report) *report = std::move(local);
   return samples;
 }
