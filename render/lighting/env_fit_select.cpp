@@ -30,6 +30,12 @@ double GainAfterSteps(FitState& without, FitState& with, int steps) {
   return ReflectingGain(without, with);
 }
 
+// The sharpest lobes of the dictionary (MakeDictionary's last level): the
+// broadest light the rest of the model imitates a source with.
+double DictionarySharpnessMax(const EnvEstimateOptions& o) {
+  return o.dictionary_sharpness * std::pow(4.0, o.dictionary_levels - 1);
+}
+
 // Appends a lobe (amplitude 0) as a column of the fit.
 void AppendLobe(FitState& st, const Vec3& axis, double sharpness, bool source, const EnvShadowRays& shadow,
                 const EnvEstimateOptions& o) {
@@ -62,25 +68,47 @@ void RemoveLobe(FitState& st, Eigen::Index k) {
 // and the whole model re-solved for a few steps; it is kept when its
 // log-likelihood gain (the robust loss as a Cauchy likelihood, as the
 // environment's own model selection) exceeds BIC's penalty for one lobe's
-// parameters, and the search goes on; otherwise the search stops. Returns
-// the sources kept.
+// parameters, and the search goes on; otherwise the search stops. A source
+// sharper than the dictionary must also owe its gain to its sharpness (its
+// shadows and their penumbrae): against the dictionary's sharpest lobe on the
+// same axis, re-solved alike, it must gain more than BIC's penalty for the
+// one parameter it adds (the sharpness) and for its direction's search:
+// within the broad lobe's extent the search chose the best of about
+// λ/λ_broad distinguishable directions of the sharp one (their solid angles
+// ~2π/λ), and the largest of K independent log-likelihood gains of one
+// parameter each (χ²₁/2, tail ~e^−t) is about ln K under pure noise.
+// Brightness alone (light that some samples ask for from that side) a broad
+// lobe gives as well, and the dictionary's lobes will. Returns the sources
+// kept.
 int AddSources(FitState& st, const EnvShadowRays& shadow, const EnvEstimateOptions& o, const EnvProgress& progress) {
-  const double penalty = BicPenalty(st, o, kSgLobeParameters);
+  const double penalty = BicPenalty(st, o, kSgLobeParameters), one_parameter = BicPenalty(st, o, 1);
   int kept = 0;
   for (; kept < o.sources_max; ++kept) {
     if (progress) progress("sources", static_cast<size_t>(kept), static_cast<size_t>(o.sources_max));
     const SourceCandidate found = FindSource(st, shadow, o);
     if (!(found.score > 0)) break;
-    FitState trial = st;
+    FitState trial = st, broad = st;
     AppendLobe(trial, found.axis, found.sharpness, true, shadow, o);
     const double gain = GainAfterSteps(st, trial, o.source_steps);
+    const double broad_sharpness = DictionarySharpnessMax(o);
+    double sharpness_gain = 0;
+    if (found.sharpness > broad_sharpness) {
+      AppendLobe(broad, found.axis, broad_sharpness, false, shadow, o);
+      int steps = 0;
+      Iterate(broad, o.source_steps, &steps, 0, nullptr);
+      sharpness_gain = ReflectingGain(broad, trial);
+    }
+    const double sharpness_penalty = one_parameter + std::log(std::max(1.0, found.sharpness / broad_sharpness));
+    const bool sharp_enough = found.sharpness <= broad_sharpness || sharpness_gain > sharpness_penalty;
     const double elevation = std::asin(std::clamp(found.axis.z, -1.0, 1.0)) * 180 / kPi;
     const double azimuth = std::atan2(found.axis.y, found.axis.x) * 180 / kPi;
     LogInfo("env fit: source " + std::to_string(kept + 1) + " at azimuth " + std::to_string(azimuth) + " elevation " +
             std::to_string(elevation) + " deg, sharpness " + std::to_string(found.sharpness) +
             ": log-likelihood gain " + std::to_string(gain) + ", BIC penalty " + std::to_string(penalty) +
-            (gain > penalty ? " (kept)" : " (not supported: search ends)"));
-    if (!(gain > penalty)) break;
+            "; over a lobe of sharpness " + std::to_string(broad_sharpness) + " " + std::to_string(sharpness_gain) +
+            ", penalty " + std::to_string(sharpness_penalty) +
+            (gain > penalty && sharp_enough ? " (kept)" : " (not supported: search ends)"));
+    if (!(gain > penalty && sharp_enough)) break;
     st = std::move(trial);
   }
   if (progress) progress("sources", static_cast<size_t>(o.sources_max), static_cast<size_t>(o.sources_max));
