@@ -31,6 +31,8 @@ namespace nerfar {
 
 struct VertexGamma;
 struct KappaCache;
+struct DragFrame;
+class DragHold;
 struct LightPrepCache;
 struct LightPrep;
 struct WorldSphere;
@@ -86,6 +88,7 @@ struct InsertTimings {
   double kappa_ms = 0;      // receivers + κ + multiplying the background
   double total_ms = 0;
   int lights_recomputed = 0;
+  int lights_held = 0;         // objects lit by the light held through a drag (InsertOptions::drag_hold)
   size_t kappa_evaluated = 0;  // κ values computed this frame (cache misses, or every receiver without the cache)
   size_t kappa_marched = 0;    // receiver rays marched through the scene for κ this frame
   size_t kappa_reused = 0;     // receivers taken from the last frame's instead of marching (kappa_receiver_reuse)
@@ -170,12 +173,14 @@ class Inserter {
 
  private:
   // Render's first steps: each object's incident light refreshed (or its
-  // override taken) with its lobes' distances; every object's light
-  // prepared, again only when a light, its parallax or an object changed.
+  // override taken, or held through a drag) with its lobes' distances;
+  // every object's light prepared, again only when a light, its parallax or
+  // an object changed.
   std::vector<LightParallax> UpdateLights(const std::vector<InsertObject>& objects,
-                                          const std::vector<WorldSphere>& spheres, InsertTimings& times);
+                                          const std::vector<WorldSphere>& spheres, const DragFrame& drag,
+                                          InsertTimings& times);
   std::vector<LightPrep>& PrepareLights(const std::vector<InsertObject>& objects,
-                                        const std::vector<LightParallax>& parallax);
+                                        const std::vector<LightParallax>& parallax, const DragFrame& drag);
 
   const SceneField& scene_;
   SgMixture environment_;
@@ -188,6 +193,7 @@ class Inserter {
   // Every object's prepared light (SG shader, γ table rows, SSDF queries),
   // kept while the lights, their parallax and the objects are unchanged.
   std::unique_ptr<LightPrepCache> preps_;
+  std::unique_ptr<DragHold> drag_;  // the light held through a drag (InsertOptions::drag_hold)
 
  public:
   ~Inserter();

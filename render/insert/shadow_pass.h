@@ -31,7 +31,11 @@ struct ViewKey {
 // compared exactly as a whole: its length varies with the objects and lobes).
 struct KappaCache {
   std::vector<double> key;
+  // The lattice's nodes (and its shadow box) lie at world point node +
+  // shift: 0, but through a drag (DragFrame::shift) the lattice is kept in
+  // the objects' frame as taken with the held light.
   KappaLattice lattice;
+  Vec3 shift;
   // Views whose whole reach rectangle was passed under the current key:
   // each visible receiver there has its nodes here.
   std::vector<ViewKey> explored;
@@ -67,6 +71,7 @@ KappaSpacing KappaSpacingFor(const InsertOptions& options, int width);
 
 // The frame's inputs to the shadow pass (loans for the call).
 struct ShadowSources;
+struct DragFrame;
 
 struct ShadowPassInputs {
   const SceneField& scene;
@@ -80,6 +85,7 @@ struct ShadowPassInputs {
   const ReceiverOverride& receivers;
   const std::vector<ShadowSources>* sources = nullptr;  // per object, κ from samples (KappaContext::sources)
   const SupportPlane* support = nullptr;                // receivers ending on it are taken onto it
+  const DragFrame* drag = nullptr;                      // dragged: the lattice kept in the objects' frame
 };
 
 // κ over the casters' reach rectangle into layers.kappa / kappa_rect /
