@@ -21,6 +21,7 @@
 #include "app/live/display.h"
 #include "app/live/pipeline.h"
 #include "app/live/report.h"
+#include "app/live/window.h"
 #include "calib/core/log.h"
 #include "calib/core/parallel.h"
 #include "render/insert/nerf_scene.h"
@@ -212,6 +213,33 @@ void AddFloorAndHud(int width, int height, std::vector<BenchFigure>& figures) {
   figures.push_back({"hud_blend_ms", blend, "ms", "the cached HUD blended into a frame (every frame)"});
 }
 
+// The window's share when a display is there (Xvfb: Mesa's software GL): a
+// width x height view presented as a new frame (uploaded to its texture
+// once) and presented again unchanged (drawn from the texture, as a redraw
+// between frames is). Without a display, nothing.
+void AddWindowPresent(int width, int height, std::vector<BenchFigure>& figures) {
+  if (!LiveWindow::DisplayAvailable()) {
+    LogInfo("bench live: no display, the window's figures skipped (run under xvfb-run for them)");
+    return;
+  }
+  std::unique_ptr<LiveWindow> opened;
+  try {
+    opened = std::make_unique<LiveWindow>("nerfar bench live", width, height);
+  } catch (const std::exception& e) {
+    LogInfo(std::string("bench live: the window's figures skipped: ") + e.what());
+    return;
+  }
+  LiveWindow& window = *opened;
+  Image8 frames[2] = {Image8(width, height, 3, 60), Image8(width, height, 3, 190)};
+  const std::function<void()> no_panel;
+  int next = 0;
+  const double upload = MedianMilliseconds([&] { window.Present({&frames[next++ % 2]}, no_panel, true); }, 30);
+  const double kept = MedianMilliseconds([&] { window.Present({&frames[0]}, no_panel, false); }, 30);
+  const std::string size = std::to_string(width) + "x" + std::to_string(height);
+  figures.push_back({"window_present_new_ms", upload, "ms", "a new " + size + " frame uploaded once and drawn"});
+  figures.push_back({"window_present_kept_ms", kept, "ms", "the same frame drawn again from its texture"});
+}
+
 }  // namespace
 
 std::vector<BenchFigure> BenchLive(const BenchOptions& options) {
@@ -236,6 +264,7 @@ std::vector<BenchFigure> BenchLive(const BenchOptions& options) {
   const SsdfField field = BakeSsdf(mesh, bake, std::nullopt);
   LogInfo("bench live: baked the object's SSDF in " + FormatDuration(NowSeconds() - t));
   AddFloorAndHud(width, height, figures);
+  AddWindowPresent(width, height, figures);
 
   const int threads_before = ThreadCount();
   struct Motion {

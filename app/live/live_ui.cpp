@@ -229,7 +229,9 @@ bool LiveUi::Tick(std::chrono::milliseconds wait) {
     DrawText(waiting, "waiting for the first frame...", 8, 8);
     views.push_back(&waiting);
   }
-  const std::vector<InputEvent> events = window_.Present(views, [this] { DrawPanel(); });
+  // A redraw without a new frame (the panel, the cursor) keeps the textures.
+  const std::vector<InputEvent> events = window_.Present(
+      views, [this] { DrawPanel(); }, frame.has_value() || !shown_);
   if (frame) {
     pipeline_.MarkDisplayed(*shown_);
     if (video_) {
