@@ -6,7 +6,7 @@
 // NeRF table (BenchTabletopNerf). Three motions: the camera still, hand-held
 // (the synthetic camera's trajectory), and the object dragged across the
 // table under a still camera, with the light held through the drag (the
-// live default, InsertOptions::drag_hold) and, as "dragexact", recomputed
+// live default, LiveOptions::drag_hold) and, as "dragexact", recomputed
 // every frame. Per motion, preset (fast, balanced) and thread
 // count (1, 2): displayed fps, frames dropped, per-stage p50/p90 and
 // capture-to-display latency p50/p90 over the frames after a warm-up; and the
@@ -140,6 +140,7 @@ std::vector<LiveFrameRecord> RunOnce(const RunSetup& r, LiveCounters* counters, 
     if (r.drag) {
       const double t = std::chrono::duration<double>(LiveClock::now() - t0).count();
       LiveObjectState s = start;
+      s.dragging = true;
       s.anchor_world = start.anchor_world + along * (0.06 * std::sin(2 * kPi * t / 3.0));
       pipeline.set_object(0, s);
     }

@@ -67,7 +67,7 @@ std::string LiveUi::Screenshot() {
   return pending_screenshot_;
 }
 
-void LiveUi::PlaceAt(int view, double x, double y) {
+void LiveUi::PlaceAt(int view, double x, double y, bool dragging) {
   if (!shown_ || pipeline_.object_count() == 0) return;
   if (view == 1 && (pipeline_.views() & kViewAlongside)) {
     // The alongside view is the AR camera at a smaller size.
@@ -85,24 +85,33 @@ void LiveUi::PlaceAt(int view, double x, double y) {
   LiveObjectState state = pipeline_.object(selected_);
   state.placed = true;
   state.anchor_world = *hit;
+  state.dragging = dragging;
   pipeline_.set_object(selected_, state);
   char text[128];
   std::snprintf(text, sizeof text, "placed at (%.3f, %.3f, %.3f) m", hit->x, hit->y, hit->z);
   status_ = text;
 }
 
+void LiveUi::EndDrag() {
+  if (pipeline_.object_count() == 0) return;
+  LiveObjectState state = pipeline_.object(selected_);
+  state.dragging = false;
+  pipeline_.set_object(selected_, state);
+}
+
 void LiveUi::HandleEvent(const InputEvent& e) {
   switch (e.kind) {
     case InputEvent::Kind::kPress:
       if (e.button == 0 && e.view >= 0) {
-        PlaceAt(e.view, e.x, e.y);
+        PlaceAt(e.view, e.x, e.y, true);
         dragging_ = true;
       }
       break;
     case InputEvent::Kind::kDrag:
-      if (dragging_ && e.view >= 0) PlaceAt(e.view, e.x, e.y);
+      if (dragging_ && e.view >= 0) PlaceAt(e.view, e.x, e.y, true);
       break;
     case InputEvent::Kind::kRelease:
+      if (dragging_) EndDrag();
       dragging_ = false;
       break;
     case InputEvent::Kind::kScroll: {

@@ -189,7 +189,7 @@ LivePipeline::LivePipeline(FrameSource& source, const Board& board, const Camera
     problems.ThrowIfAny();
   }
   tracker_ = std::make_unique<Tracker>(board, camera_, options_.tracker);
-  inserter_ = std::make_unique<Inserter>(scene_, std::move(environment), InsertOptionsFor(options_.preset));
+  inserter_ = std::make_unique<Inserter>(scene_, std::move(environment), InsertOptions::Preset(options_.preset));
   preset_ = options_.preset;
   hud_on_.store(options_.hud);
   for (const LiveAsset& a : assets_) {
@@ -427,12 +427,6 @@ void LivePipeline::UpdateGain(const LiveFrame& frame) {
   }
 }
 
-InsertOptions LivePipeline::InsertOptionsFor(const std::string& preset) const {
-  InsertOptions o = InsertOptions::Preset(preset);
-  o.drag_hold = options_.drag_hold;
-  return o;
-}
-
 std::vector<InsertObject> LivePipeline::PlaceObjects(const std::vector<LiveObjectState>& states) {
   // A posed SSDF field is kept while its object stands still: the
   // inserter's caches (per-vertex self-shadow, κ lattice) are keyed by the
@@ -447,6 +441,7 @@ std::vector<InsertObject> LivePipeline::PlaceObjects(const std::vector<LiveObjec
     o.T_world_object = ObjectPose(i, states[i]);
     o.scale = states[i].scale;
     o.material = states[i].material;
+    o.dragged = options_.drag_hold && states[i].dragging;
     if (assets_[i].field != nullptr) {
       PosedField& posed = visibility_[i];
       if (!posed.field || !SamePose(posed.T_world_object, o.T_world_object) || posed.scale != o.scale) {
@@ -573,7 +568,7 @@ LiveFrame LivePipeline::Process(Captured captured) {
     std::lock_guard<std::mutex> lock(edit_mutex_);
     states = states_;
     if (preset_changed_) {
-      inserter_->set_options(InsertOptionsFor(preset_));
+      inserter_->set_options(InsertOptions::Preset(preset_));
       preset_changed_ = false;
     }
   }

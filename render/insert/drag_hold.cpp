@@ -48,17 +48,14 @@ std::vector<Vec3> Positions(const std::vector<InsertObject>& objects) {
 
 }  // namespace
 
-DragFrame DragHold::Begin(const std::vector<InsertObject>& objects, const std::vector<WorldSphere>& spheres,
-                          bool enabled) {
-  std::vector<double> shape = ShapeKey(objects);
-  std::vector<Vec3> positions = Positions(objects);
-  const bool moved = !objects.empty() && shape == last_shape_ && positions != last_positions_;
-  last_shape_ = shape;
-  last_positions_ = positions;
-  if (!enabled || !moved) {
+DragFrame DragHold::Begin(const std::vector<InsertObject>& objects, const std::vector<WorldSphere>& spheres) {
+  const bool dragged = std::any_of(objects.begin(), objects.end(), [](const InsertObject& o) { return o.dragged; });
+  if (!dragged) {
     holding_ = false;
     return {};
   }
+  std::vector<double> shape = ShapeKey(objects);
+  std::vector<Vec3> positions = Positions(objects);
   if (holding_ && shape == hold_shape_) {
     const Vec3 shift = positions[0] - hold_positions_[0];
     bool together = true;

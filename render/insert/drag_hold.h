@@ -1,7 +1,7 @@
-// Internal to render/insert: what a drag may keep (InsertOptions::drag_hold).
-// While the objects move together by a translation from frame to frame (an
-// object dragged along the table), the light taken when the drag began is
-// held and carried with them: each object's fitted SGs and its lobes'
+// Internal to render/insert: what a drag may keep (InsertObject::dragged).
+// While the user moves the objects (any flagged dragged) and they keep one
+// common translation from where their light was taken (an object dragged
+// along the table), that light is held and carried with them: each object's fitted SGs and its lobes'
 // distances, re-centred on the object's centre. Given the same light, the
 // objects' self-shadows γ and the shadows κ at a receiver relative to the
 // objects do not change with the translation (re-aimed near lobes move with
@@ -11,7 +11,7 @@
 // once the objects have moved farther than the smallest one's bounding
 // radius from where it was taken (the light at the centre already stands
 // for every point of the object, up to a radius away from it), and the
-// first frame they stand still takes the full-quality path (the light
+// first frame no object is dragged takes the full-quality path (the light
 // refitted where they are, γ and κ anew). World frame, metres.
 #pragma once
 
@@ -24,7 +24,7 @@
 namespace nerfar {
 
 enum class DragPhase {
-  kNone,   // not dragged (or the option off): every cache keyed by the objects' poses
+  kNone,   // not dragged: every cache keyed by the objects' poses
   kStart,  // dragged, the light taken anew this frame (then DragHold::Take)
   kHeld,   // dragged within reach of where the light was taken: the held light, shifted
 };
@@ -42,9 +42,9 @@ struct DragFrame {
 
 class DragHold {
  public:
-  // This frame's phase from the objects' poses against the last frame's;
-  // `enabled` false: always kNone (and any hold dropped).
-  DragFrame Begin(const std::vector<InsertObject>& objects, const std::vector<WorldSphere>& spheres, bool enabled);
+  // This frame's phase from the objects' drag flags and poses against
+  // those the light was taken at; no object dragged: kNone (the hold dropped).
+  DragFrame Begin(const std::vector<InsertObject>& objects, const std::vector<WorldSphere>& spheres);
   // At kStart: the lights just taken and their parallax, held from now on.
   void Take(const std::vector<SgMixture>& lights, const std::vector<LightParallax>& parallax);
   // At kHeld: object i's held light, and its parallax re-centred by `shift`.
@@ -52,10 +52,8 @@ class DragHold {
   LightParallax Parallax(size_t i, const Vec3& shift) const;
 
  private:
-  std::vector<double> last_shape_;  // the last frame's objects without their positions (ShapeKey)
-  std::vector<Vec3> last_positions_;
   bool holding_ = false;
-  std::vector<double> hold_shape_;
+  std::vector<double> hold_shape_;  // the objects without their positions (ShapeKey) as the light was taken
   std::vector<Vec3> hold_positions_;
   std::vector<double> key_;  // DragFrame::key
   std::vector<SgMixture> lights_;

@@ -138,7 +138,6 @@ std::string InsertOptions::ToJson() const {
   j["kappa_plane_upsampling"] = kappa_plane_upsampling;
   j["kappa_receiver_reuse"] = kappa_receiver_reuse;
   j["receiver_normal_per_cell"] = receiver_normal_per_cell;
-  j["drag_hold"] = drag_hold;
   j["kappa_reuse_tolerance_radii"] = kappa_reuse_tolerance_radii;
   j["kappa_step"] = kappa_step;
   j["kappa_coarse_factor"] = kappa_coarse_factor;

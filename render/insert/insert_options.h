@@ -163,16 +163,6 @@ struct InsertOptions {
   bool receiver_normal_per_cell = true;
   double kappa_reuse_tolerance_radii = 0.02;
 
-  // While the objects are dragged (moved together by a translation from
-  // frame to frame), hold the light taken when the drag began and carry it
-  // with them, so that γ per vertex, the prefiltered specular and κ's
-  // lattice (kept in the objects' frame) are reused instead of recomputed
-  // each frame; the light is taken anew every bounding radius of travel and
-  // when they stand still again (drag_hold.h). Still objects are unaffected.
-  // false (every preset; nerfar live turns it on): every moved frame
-  // recomputes the light, γ and κ.
-  bool drag_hold = false;
-
   // "fast", "balanced" (the defaults) or "accurate"; InputError otherwise.
   static InsertOptions Preset(const std::string& name);
   // Every problem as "field: what is wrong (what was expected)".

@@ -242,7 +242,7 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
   used_lights_.resize(n_objects);
 
   const std::vector<WorldSphere> spheres = WorldSpheres(objects);
-  const DragFrame drag = drag_->Begin(objects, spheres, options_.drag_hold);
+  const DragFrame drag = drag_->Begin(objects, spheres);
 
   // 1. Incident light per object (cached while it stands still, held while
   // it is dragged), with its lobes' distances for the parallax of near light.

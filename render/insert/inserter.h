@@ -63,6 +63,10 @@ struct InsertObject {
   // InsertOptions::specular_parallax); nullptr: none.
   const DistanceMap* light_sample_distances = nullptr;
   std::optional<Vec3> light_center;  // world point the incident light is taken at (default: bounding-sphere centre)
+  // Being moved by the user (a drag): while every object keeps one common
+  // translation from where the light was taken, the light is held and γ
+  // and κ reused (drag_hold.h). false on every object: the plain path.
+  bool dragged = false;
 };
 
 // The distance map of parallax-corrected reflections (DistanceMap) from the
@@ -88,7 +92,7 @@ struct InsertTimings {
   double kappa_ms = 0;      // receivers + κ + multiplying the background
   double total_ms = 0;
   int lights_recomputed = 0;
-  int lights_held = 0;         // objects lit by the light held through a drag (InsertOptions::drag_hold)
+  int lights_held = 0;         // objects lit by the light held through a drag (InsertObject::dragged)
   size_t kappa_evaluated = 0;  // κ values computed this frame (cache misses, or every receiver without the cache)
   size_t kappa_marched = 0;    // receiver rays marched through the scene for κ this frame
   size_t kappa_reused = 0;     // receivers taken from the last frame's instead of marching (kappa_receiver_reuse)
@@ -194,7 +198,7 @@ class Inserter {
   // Every object's prepared light (SG shader, γ table rows, SSDF queries),
   // kept while the lights, their parallax and the objects are unchanged.
   std::unique_ptr<LightPrepCache> preps_;
-  std::unique_ptr<DragHold> drag_;  // the light held through a drag (InsertOptions::drag_hold)
+  std::unique_ptr<DragHold> drag_;  // the light held through a drag (InsertObject::dragged)
 
  public:
   ~Inserter();

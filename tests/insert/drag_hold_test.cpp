@@ -1,10 +1,11 @@
-// render/insert: the light held through a drag (InsertOptions::drag_hold).
-// A still object's frames are the same bit for bit with the hold on or off;
-// a dragged ball's κ, taken from the lattice kept in its frame, stays with
-// exact κ at each position while evaluating far fewer nodes; the first
-// frame it stands still is the plain path's frame bit for bit; the light is
-// taken anew beyond a bounding radius of travel and at rest, and only a
-// common translation of every object is held.
+// render/insert: the light held through a drag (InsertObject::dragged).
+// An object marked dragged that does not move renders as an unmarked one,
+// bit for bit; a dragged ball's κ, taken from the lattice kept in its frame,
+// stays with exact κ at each position while evaluating far fewer nodes; the
+// first frame after the drag is the plain path's frame bit for bit; the
+// light is held through a pause, taken anew beyond a bounding radius of
+// travel and after the drag, and only a common translation of every object
+// is held.
 #include <gtest/gtest.h>
 
 #include <cstdio>
@@ -30,7 +31,7 @@ struct Ball {
   TriangleMesh mesh = MakeUvSphere(1.0, 48, 24);
   double radius = 0.04;
   std::vector<std::unique_ptr<SphereVisibility>> fields;  // kept alive for the inserter's loans
-  InsertObject At(const Vec3& center, const SgMixture* light) {
+  InsertObject At(const Vec3& center, const SgMixture* light, bool dragged) {
     fields.push_back(std::make_unique<SphereVisibility>(center, radius));
     InsertObject o;
     o.mesh = &mesh;
@@ -40,6 +41,7 @@ struct Ball {
     o.material.roughness = 0.6;
     o.visibility = fields.back().get();
     o.light_override = light;
+    o.dragged = dragged;
     return o;
   }
 };
@@ -55,11 +57,7 @@ struct DragScene {
     light.push_back(OneLobe({0, 0, 1}, 1.0, 0.3)[0]);
     environment = light;
   }
-  static InsertOptions Options(bool hold) {
-    InsertOptions o = InsertOptions::Preset("balanced");
-    o.drag_hold = hold;
-    return o;
-  }
+  const InsertOptions options = InsertOptions::Preset("balanced");
   ImageF Background() const {
     ImageF b(camera.width, camera.height, 3);
     for (size_t i = 0; i < b.pixels.size(); ++i) b.pixels[i] = 0.2f + 0.6f * float((i * 7919) % 101) / 101.0f;
@@ -81,35 +79,36 @@ struct DragScene {
 
 bool SameBits(const ImageF& a, const ImageF& b) { return a.pixels == b.pixels; }
 
-// Nothing moves but the camera (a hand-held view): the hold never engages,
-// and the frames, with the light taken from the scene, are the same bit for
-// bit as without it.
-TEST(DragHold, StillObjectFramesAreTheSameWithAndWithoutTheHold) {
+// Grabbed but not moved, under a hand-held camera: the held light is the
+// light taken there and κ's lattice, in the object's frame, has its nodes
+// where the world lattice has them, so the frames (light from the scene)
+// are those of the object not grabbed, bit for bit.
+TEST(DragHold, GrabbedObjectThatDoesNotMoveRendersAsOneNotGrabbed) {
   DragScene s;
   Ball ball;
-  Inserter held(s.scene, s.environment, DragScene::Options(true));
-  Inserter plain(s.scene, s.environment, DragScene::Options(false));
-  const InsertObject object = ball.At({-0.04, 0.1, 0.04}, nullptr);
+  Inserter grabbed(s.scene, s.environment, s.options);
+  Inserter plain(s.scene, s.environment, s.options);
   for (int f = 0; f < 4; ++f) {
     const Pose view = LookAt({0.22 + 0.003 * (f % 2), -0.3, 0.35}, {-0.05, 0.1, 0.02});
-    const DragScene::Frame a = s.Render(held, view, {object});
-    const DragScene::Frame b = s.Render(plain, view, {object});
+    const DragScene::Frame a = s.Render(grabbed, view, {ball.At({-0.04, 0.1, 0.04}, nullptr, true)});
+    const DragScene::Frame b = s.Render(plain, view, {ball.At({-0.04, 0.1, 0.04}, nullptr, false)});
     EXPECT_TRUE(SameBits(a.composite, b.composite)) << "frame " << f;
-    EXPECT_EQ(a.times.lights_held, 0) << "frame " << f;
+    EXPECT_EQ(a.times.lights_held, f == 0 ? 0 : 1) << "frame " << f;
   }
 }
 
 // The ball dragged 4 mm a frame (under one radius in all) under a given
 // light: each held frame's κ follows exact κ at the ball's position (no
 // lattice) within the lattice's own tolerance, with a fraction of the nodes
-// the first frame of the drag evaluated; when it stops, the frame is the
-// plain path's (every moved frame recomputed) bit for bit.
-TEST(DragHold, DraggedKappaFollowsExactKappaWithFewNodesAndTheRestFrameIsThePlainOne) {
+// the first frame of the drag evaluated; after the drag, the frame is the
+// plain path's (the ball never marked dragged: every moved frame
+// recomputed) bit for bit.
+TEST(DragHold, DraggedKappaFollowsExactKappaWithFewNodesAndTheFrameAfterIsThePlainOne) {
   DragScene s;
   Ball ball;
-  Inserter held(s.scene, {}, DragScene::Options(true));
-  Inserter plain(s.scene, {}, DragScene::Options(false));
-  InsertOptions exact_options = DragScene::Options(false);
+  Inserter held(s.scene, {}, s.options);
+  Inserter plain(s.scene, {}, s.options);
+  InsertOptions exact_options = s.options;
   exact_options.kappa_cache_spacing_radii = 0.0;  // κ at every receiver (no lattice, no reuse)
   const Vec3 start{-0.04, 0.1, 0.04};
   const Vec3 step{0.004, 0.001, 0.0};
@@ -121,11 +120,11 @@ TEST(DragHold, DraggedKappaFollowsExactKappaWithFewNodesAndTheRestFrameIsThePlai
   Vec3 at = start;
   for (int f = 0; f < 8; ++f) {
     at = start + step * double(f);
-    const DragScene::Frame h = s.Render(held, s.cam, {ball.At(at, &s.light)});
-    s.Render(plain, s.cam, {ball.At(at, &s.light)});
-    if (f == 0) continue;  // just placed: nothing dragged yet
+    const DragScene::Frame h = s.Render(held, s.cam, {ball.At(at, &s.light, f > 0)});
+    s.Render(plain, s.cam, {ball.At(at, &s.light, false)});
+    if (f == 0) continue;  // just placed: not dragged yet
     Inserter fresh(s.scene, {}, exact_options);
-    const DragScene::Frame exact = s.Render(fresh, s.cam, {ball.At(at, &s.light)});
+    const DragScene::Frame exact = s.Render(fresh, s.cam, {ball.At(at, &s.light, false)});
     const testing::KappaDifference d = testing::CompareKappa(h.kappa, exact.kappa);
     ASSERT_GT(d.shadow, 50.0) << "frame " << f;
     EXPECT_LT(d.Relative(), kMean) << "frame " << f;
@@ -141,49 +140,52 @@ TEST(DragHold, DraggedKappaFollowsExactKappaWithFewNodesAndTheRestFrameIsThePlai
     std::printf("frame %d: κ vs exact %.4f (worst pixel %.3f), nodes %zu of the drag's first %zu\n", f, d.Relative(),
                 d.max, h.times.kappa_evaluated, start_nodes);
   }
-  // It stops: both recompute at rest, and agree to the bit, twice over.
+  // Let go: the held inserter recomputes, and both agree to the bit, twice over.
   for (int f = 0; f < 2; ++f) {
-    const DragScene::Frame h = s.Render(held, s.cam, {ball.At(at, &s.light)});
-    const DragScene::Frame p = s.Render(plain, s.cam, {ball.At(at, &s.light)});
-    EXPECT_TRUE(SameBits(h.composite, p.composite)) << "rest frame " << f;
-    EXPECT_TRUE(SameBits(h.kappa, p.kappa)) << "rest frame " << f;
+    const DragScene::Frame h = s.Render(held, s.cam, {ball.At(at, &s.light, false)});
+    const DragScene::Frame p = s.Render(plain, s.cam, {ball.At(at, &s.light, false)});
+    EXPECT_TRUE(SameBits(h.composite, p.composite)) << "frame after " << f;
+    EXPECT_TRUE(SameBits(h.kappa, p.kappa)) << "frame after " << f;
     EXPECT_EQ(h.times.lights_held, 0);
   }
 }
 
-// The light from the scene: taken when the drag starts, held for up to a
-// bounding radius of travel (0.4 radii a frame: frames 2 and 3 held, 4 at
-// 1.2 radii takes it anew), and refitted on the first frame at rest.
-TEST(DragHold, LightTakenAnewBeyondARadiusAndAtRest) {
+// The light from the scene: taken when the drag starts (frame 1), held for
+// up to a bounding radius of travel (0.4 radii a frame: frames 2, 3 and the
+// pause at 3 held; frame 5 at 1.2 radii takes it anew), and refitted on the
+// first frame after the drag.
+TEST(DragHold, LightHeldThroughAPauseTakenAnewBeyondARadiusAndAfterTheDrag) {
   DragScene s;
   Ball ball;
-  Inserter held(s.scene, s.environment, DragScene::Options(true));
+  Inserter held(s.scene, s.environment, s.options);
   const Vec3 start{-0.04, 0.1, 0.04};
   const Vec3 step{0.4 * ball.radius, 0.0, 0.0};
-  const int expect_recomputed[] = {1, 1, 0, 0, 1, 0};
-  const int expect_held[] = {0, 0, 1, 1, 0, 1};
+  const int steps[] = {0, 1, 2, 3, 3, 4, 5};
+  const int expect_recomputed[] = {1, 1, 0, 0, 0, 1, 0};
+  const int expect_held[] = {0, 0, 1, 1, 1, 0, 1};
   Vec3 at = start;
-  for (int f = 0; f < 6; ++f) {
-    at = start + step * double(f);
-    const DragScene::Frame h = s.Render(held, s.cam, {ball.At(at, nullptr)});
+  for (int f = 0; f < 7; ++f) {
+    at = start + step * double(steps[f]);
+    const DragScene::Frame h = s.Render(held, s.cam, {ball.At(at, nullptr, f > 0)});
     EXPECT_EQ(h.times.lights_recomputed, expect_recomputed[f]) << "frame " << f;
     EXPECT_EQ(h.times.lights_held, expect_held[f]) << "frame " << f;
   }
-  const DragScene::Frame rest = s.Render(held, s.cam, {ball.At(at, nullptr)});
-  EXPECT_EQ(rest.times.lights_recomputed, 1);
-  EXPECT_EQ(rest.times.lights_held, 0);
-  const DragScene::Frame again = s.Render(held, s.cam, {ball.At(at, nullptr)});
+  const DragScene::Frame after = s.Render(held, s.cam, {ball.At(at, nullptr, false)});
+  EXPECT_EQ(after.times.lights_recomputed, 1);
+  EXPECT_EQ(after.times.lights_held, 0);
+  const DragScene::Frame again = s.Render(held, s.cam, {ball.At(at, nullptr, false)});
   EXPECT_EQ(again.times.lights_recomputed, 0);  // kept while it stands still
 }
 
-// Two balls, only one moved: not a common translation, nothing held.
-TEST(DragHold, OneOfTwoObjectsMovedIsNotHeld) {
+// Two balls, one dragged away from the other: not a common translation,
+// nothing held after the first frame of the drag.
+TEST(DragHold, OneOfTwoObjectsDraggedIsNotHeld) {
   DragScene s;
   Ball a, b;
-  Inserter held(s.scene, {}, DragScene::Options(true));
-  const InsertObject still = b.At({0.1, -0.05, 0.04}, &s.light);
+  Inserter held(s.scene, {}, s.options);
+  const InsertObject still = b.At({0.1, -0.05, 0.04}, &s.light, false);
   for (int f = 0; f < 4; ++f) {
-    const DragScene::Frame h = s.Render(held, s.cam, {a.At({-0.04 + 0.004 * f, 0.1, 0.04}, &s.light), still});
+    const DragScene::Frame h = s.Render(held, s.cam, {a.At({-0.04 + 0.004 * f, 0.1, 0.04}, &s.light, true), still});
     EXPECT_EQ(h.times.lights_held, 0) << "frame " << f;
   }
 }
