@@ -155,7 +155,7 @@ std::vector<LiveFrameRecord> RunOnce(const RunSetup& r, LiveCounters* counters, 
 
 void AddRunFigures(const std::string& label, const std::string& note, const std::vector<LiveFrameRecord>& records,
                    int frames, int warmup, std::vector<BenchFigure>& figures) {
-  std::vector<double> latency, track, expose, insert, light, shade, kappa, display, process, rewritten;
+  std::vector<double> latency, track, expose, insert, light, shade, kappa, display, process, rewritten, nodes;
   int displayed = 0, relit = 0;
   for (const LiveFrameRecord& f : records) {
     if (f.index < warmup) continue;
@@ -169,6 +169,7 @@ void AddRunFigures(const std::string& label, const std::string& note, const std:
     display.push_back(f.times.display_ms);
     process.push_back(f.times.process_ms);
     rewritten.push_back(static_cast<double>(f.pixels_rewritten));
+    nodes.push_back(static_cast<double>(f.times.insert.kappa_evaluated));
     if (f.latency_ms >= 0) {
       latency.push_back(f.latency_ms);
       ++displayed;
@@ -185,6 +186,7 @@ void AddRunFigures(const std::string& label, const std::string& note, const std:
     figures.push_back({label + "_" + name + "_p90_ms", PercentileOf(*values, 0.9), "ms", ""});
   }
   figures.push_back({label + "_rewritten_px", PercentileOf(rewritten, 0.5), "px", "median, display path"});
+  figures.push_back({label + "_kappa_nodes", PercentileOf(nodes, 0.5), "nodes", "median, κ values computed a frame"});
   figures.push_back({label + "_relit", double(relit), "frames", "processed frames that took the light anew"});
 }
 
