@@ -1,18 +1,19 @@
 // Internal to render/insert: what a drag may keep (InsertObject::dragged).
 // While the user moves the objects (any flagged dragged) and they keep one
 // common translation from where their light was taken (an object dragged
-// along the table), that light is held and carried with them: each object's fitted SGs and its lobes'
-// distances, re-centred on the object's centre. Given the same light, the
-// objects' self-shadows γ and the shadows κ at a receiver relative to the
-// objects do not change with the translation (re-aimed near lobes move with
-// the centre too), so γ per vertex is kept and κ's lattice is kept in the
-// objects' frame, shifted with them: a drag evaluates κ only at nodes it
-// has not met yet instead of at every node anew. The light is taken again
-// once the objects have moved farther than the smallest one's bounding
-// radius from where it was taken (the light at the centre already stands
-// for every point of the object, up to a radius away from it), and the
-// first frame no object is dragged takes the full-quality path (the light
-// refitted where they are, γ and κ anew). World frame, metres.
+// along the table), that light is held and carried with them: each
+// object's fitted SGs and its lobes' distances, re-centred on the object's
+// centre. Given the same light, the objects' self-shadows γ and the shadows
+// κ at a receiver relative to the objects do not change with the
+// translation (re-aimed near lobes move with the centre too), so γ per
+// vertex is kept and κ's lattice is kept in the objects' frame, shifted
+// with them: a drag evaluates κ only at nodes it has not met yet instead of
+// at every node anew. The light is taken again once the objects have moved
+// farther than the smallest one's bounding radius from where it was taken
+// (the light at the centre already stands for every point of the object,
+// up to a radius away from it), and the first frame no object is dragged
+// takes the full-quality path (the light refitted where they are, γ and κ
+// anew). World frame, metres.
 #pragma once
 
 #include <vector>
