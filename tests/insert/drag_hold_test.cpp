@@ -28,19 +28,14 @@ using testing::PlainTable;
 // sphere visibility is made anew at each position, as nerfar live poses its
 // SSDF anew when the object moves.
 struct Ball {
-  TriangleMesh mesh = MakeUvSphere(1.0, 48, 24);
   double radius = 0.04;
+  testing::SphereObject shape{{0, 0, radius}, radius};    // the mesh and material, one for every position
   std::vector<std::unique_ptr<SphereVisibility>> fields;  // kept alive for the inserter's loans
   InsertObject At(const Vec3& center, const SgMixture* light, bool dragged) {
     fields.push_back(std::make_unique<SphereVisibility>(center, radius));
-    InsertObject o;
-    o.mesh = &mesh;
-    o.T_world_object = {Mat3::Identity(), center};
-    o.scale = radius;
-    o.material.base_color = {0.8, 0.5, 0.3};
-    o.material.roughness = 0.6;
+    InsertObject o = shape.Object(light);
+    o.T_world_object.translation = center;
     o.visibility = fields.back().get();
-    o.light_override = light;
     o.dragged = dragged;
     return o;
   }
