@@ -93,10 +93,13 @@ void LiveUi::PlaceAt(int view, double x, double y, bool dragging) {
 }
 
 void LiveUi::EndDrag() {
-  if (pipeline_.object_count() == 0) return;
-  LiveObjectState state = pipeline_.object(selected_);
-  state.dragging = false;
-  pipeline_.set_object(selected_, state);
+  // Every object, in case the selection changed during the drag (Tab).
+  for (size_t i = 0; i < pipeline_.object_count(); ++i) {
+    LiveObjectState state = pipeline_.object(i);
+    if (!state.dragging) continue;
+    state.dragging = false;
+    pipeline_.set_object(i, state);
+  }
 }
 
 void LiveUi::HandleEvent(const InputEvent& e) {

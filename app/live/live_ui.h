@@ -49,7 +49,7 @@ class LiveUi {
   // The selected object placed on the surface under view pixel (x, y),
   // marked as being dragged or not (LiveObjectState::dragging).
   void PlaceAt(int view, double x, double y, bool dragging);
-  void EndDrag();  // the selected object no longer dragged
+  void EndDrag();  // no object dragged any more
   void ReportFailure(const std::string& what, const std::exception& e);
 
   LiveWindow& window_;

@@ -294,11 +294,15 @@ TEST_F(LiveAppTest, ClickPlacesTheObjectWhereClickedAndDragMovesIt) {
   ASSERT_EQ(xdotool("mousemove --window " + id + " " + std::to_string(from_x) + " " + std::to_string(from_y) +
                     " mousedown 1 mousemove --window " + id + " " + std::to_string(from_x + 50) + " " +
                     std::to_string(from_y) + " mousemove --window " + id + " " + std::to_string(from_x + 100) + " " +
-                    std::to_string(from_y) + " mouseup 1"),
+                    std::to_string(from_y)),
             0);
   const Vec3 before = pipeline_->object(0).anchor_world;
   ASSERT_TRUE(TickUntil(ui, [&] { return Length(pipeline_->object(0).anchor_world - before) > 0.02; }))
       << "the drag did not move the ball";
+  // Marked dragged while the button is down (its light held), no longer once released.
+  EXPECT_TRUE(pipeline_->object(0).dragging);
+  ASSERT_EQ(xdotool("mouseup 1"), 0);
+  ASSERT_TRUE(TickUntil(ui, [&] { return !pipeline_->object(0).dragging; })) << "the release did not end the drag";
   const Image8 dragged = Shot(window, ui);
   const Blob moved = DiffBlob(without, dragged, from_x + 100 - 80, from_y - 80, from_x + 100 + 80, from_y + 80);
   ASSERT_GT(moved.count, 400);
