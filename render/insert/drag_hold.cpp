@@ -46,43 +46,62 @@ std::vector<Vec3> Positions(const std::vector<InsertObject>& objects) {
   return p;
 }
 
+// The objects' common translation from `from` into *shift, false when they
+// did not move together.
+bool CommonShift(const std::vector<Vec3>& from, const std::vector<Vec3>& to, Vec3* shift) {
+  if (from.size() != to.size() || to.empty()) return false;
+  *shift = to[0] - from[0];
+  for (size_t i = 0; i < to.size(); ++i)
+    if (Length(to[i] - from[i] - *shift) > kSameShiftM) return false;
+  return true;
+}
+
 }  // namespace
 
-DragFrame DragHold::Begin(const std::vector<InsertObject>& objects, const std::vector<WorldSphere>& spheres) {
+DragFrame DragHold::Begin(const std::vector<InsertObject>& objects, const std::vector<WorldSphere>& spheres,
+                          bool kappa_through_retakes) {
   const bool dragged = std::any_of(objects.begin(), objects.end(), [](const InsertObject& o) { return o.dragged; });
-  if (!dragged) {
-    holding_ = false;
-    return {};
+  std::vector<double> shape = dragged ? ShapeKey(objects) : std::vector<double>{};
+  if (!dragged || shape != shape_) light_.valid = kappa_.valid = false;
+  if (!dragged) return {};
+  const std::vector<Vec3> positions = Positions(objects);
+  float reach = std::numeric_limits<float>::infinity();
+  for (const WorldSphere& s : spheres) reach = std::min(reach, s.radius);
+  DragFrame frame;
+  if (light_.valid && CommonShift(light_.positions, positions, &frame.shift) && Length(frame.shift) <= double(reach)) {
+    frame.phase = DragPhase::kHeld;
+  } else {
+    // The light is taken anew here: the objects as they stand key the hold.
+    frame = {DragPhase::kStart, Vec3{}, nullptr};
+    light_.valid = false;  // until Take
+    light_.positions = positions;
+    light_.key = shape;
+    for (const Vec3& p : positions) light_.key.insert(light_.key.end(), {p.x, p.y, p.z});
   }
-  std::vector<double> shape = ShapeKey(objects);
-  std::vector<Vec3> positions = Positions(objects);
-  if (holding_ && shape == hold_shape_) {
-    const Vec3 shift = positions[0] - hold_positions_[0];
-    bool together = true;
-    float reach = std::numeric_limits<float>::infinity();
-    for (size_t i = 0; i < positions.size(); ++i) {
-      together = together && Length(positions[i] - hold_positions_[i] - shift) <= kSameShiftM;
-      reach = std::min(reach, spheres[i].radius);
-    }
-    if (together && Length(shift) <= double(reach)) return {DragPhase::kHeld, shift, &key_};
-  }
-  // The light is taken anew here: the objects as they stand key the hold.
-  holding_ = false;  // until Take
-  hold_shape_ = shape;
-  hold_positions_ = positions;
-  key_ = std::move(shape);
-  for (const Vec3& p : positions) key_.insert(key_.end(), {p.x, p.y, p.z});
-  return {DragPhase::kStart, Vec3{}, &key_};
+  frame.key = &light_.key;
+  shape_ = std::move(shape);
+  Vec3 kappa_shift;
+  if (!kappa_through_retakes || !kappa_.valid || !CommonShift(kappa_.positions, positions, &kappa_shift))
+    kappa_.valid = false;  // taken with the light (Take)
+  const bool kappa_apart = kappa_.valid && !(kappa_is_light_ && frame.phase == DragPhase::kHeld);
+  frame.kappa_shift = kappa_apart ? kappa_shift : frame.shift;
+  frame.kappa_key = kappa_apart ? &kappa_.key : &light_.key;
+  frame.kappa_apart = kappa_apart;
+  if (frame.phase == DragPhase::kStart) kappa_is_light_ = false;
+  return frame;
 }
 
 void DragHold::Take(const std::vector<SgMixture>& lights, const std::vector<LightParallax>& parallax) {
-  lights_ = lights;
-  parallax_ = parallax;
-  holding_ = true;
+  light_.lights = lights;
+  light_.parallax = parallax;
+  light_.valid = true;
+  if (kappa_.valid) return;
+  kappa_ = light_;
+  kappa_is_light_ = true;
 }
 
-LightParallax DragHold::Parallax(size_t i, const Vec3& shift) const {
-  LightParallax p = parallax_.at(i);
+LightParallax DragHold::Hold::Parallax(size_t i, const Vec3& shift) const {
+  LightParallax p = parallax.at(i);
   p.center = p.center + shift;
   return p;
 }

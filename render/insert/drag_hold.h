@@ -11,9 +11,11 @@
 // at every node anew. The light is taken again once the objects have moved
 // farther than the smallest one's bounding radius from where it was taken
 // (the light at the centre already stands for every point of the object,
-// up to a radius away from it), and the first frame no object is dragged
-// takes the full-quality path (the light refitted where they are, γ and κ
-// anew). World frame, metres.
+// up to a radius away from it); κ keeps the light the drag began with
+// through those retakes (its lattice stays valid, so a retake costs the
+// light and γ, not every κ node again: κ at a reduced rate), and the first
+// frame no object is dragged takes the full-quality path (the light
+// refitted where they are, γ and κ anew). World frame, metres.
 #pragma once
 
 #include <vector>
@@ -38,27 +40,48 @@ struct DragFrame {
   // scales, positions then): stands for their pose keys in the caches kept
   // in their frame (γ per vertex, κ's lattice) while phase != kNone.
   const std::vector<double>* key = nullptr;
+  // κ's light, held from the drag's start through the light's retakes: the
+  // objects' translation since then and their key then (the same as shift
+  // and key until the first retake); kappa_apart: κ's light is no longer
+  // this frame's (DragHold::kappa_light).
+  Vec3 kappa_shift;
+  const std::vector<double>* kappa_key = nullptr;
+  bool kappa_apart = false;
   bool dragged() const { return phase != DragPhase::kNone; }
 };
 
 class DragHold {
  public:
   // This frame's phase from the objects' drag flags and poses against
-  // those the light was taken at; no object dragged: kNone (the hold dropped).
-  DragFrame Begin(const std::vector<InsertObject>& objects, const std::vector<WorldSphere>& spheres);
-  // At kStart: the lights just taken and their parallax, held from now on.
+  // those the light was taken at; no object dragged: kNone (the holds
+  // dropped). `kappa_through_retakes` false: κ's light is retaken with the
+  // light (κ from the light's samples, InsertOptions::kappa_from_samples,
+  // needs the two to be one).
+  DragFrame Begin(const std::vector<InsertObject>& objects, const std::vector<WorldSphere>& spheres,
+                  bool kappa_through_retakes);
+  // At kStart: the lights just taken and their parallax, held from now on
+  // (and for κ too when its hold starts with them).
   void Take(const std::vector<SgMixture>& lights, const std::vector<LightParallax>& parallax);
-  // At kHeld: object i's held light, and its parallax re-centred by `shift`.
-  const SgMixture& light(size_t i) const { return lights_.at(i); }
-  LightParallax Parallax(size_t i, const Vec3& shift) const;
+  // At kHeld: object i's held light, and its parallax re-centred by `shift`;
+  // κ's held light likewise (with DragFrame::kappa_shift).
+  const SgMixture& light(size_t i) const { return light_.lights.at(i); }
+  LightParallax Parallax(size_t i, const Vec3& shift) const { return light_.Parallax(i, shift); }
+  const SgMixture& kappa_light(size_t i) const { return kappa_.lights.at(i); }
+  LightParallax KappaParallax(size_t i, const Vec3& shift) const { return kappa_.Parallax(i, shift); }
 
  private:
-  bool holding_ = false;
-  std::vector<double> hold_shape_;  // the objects without their positions (ShapeKey) as the light was taken
-  std::vector<Vec3> hold_positions_;
-  std::vector<double> key_;  // DragFrame::key
-  std::vector<SgMixture> lights_;
-  std::vector<LightParallax> parallax_;
+  // A light held with the objects' positions and key as it was taken.
+  struct Hold {
+    bool valid = false;
+    std::vector<Vec3> positions;
+    std::vector<double> key;  // DragFrame::key
+    std::vector<SgMixture> lights;
+    std::vector<LightParallax> parallax;
+    LightParallax Parallax(size_t i, const Vec3& shift) const;
+  };
+  std::vector<double> shape_;  // the objects without their positions (ShapeKey), as both holds took them
+  Hold light_, kappa_;
+  bool kappa_is_light_ = false;  // κ's hold was taken with the current light's
 };
 
 }  // namespace nerfar

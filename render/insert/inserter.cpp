@@ -224,6 +224,17 @@ std::vector<LightPrep>& Inserter::PrepareLights(const std::vector<InsertObject>&
   return preps;
 }
 
+void Inserter::HeldKappaLights(const std::vector<InsertObject>& objects, const DragFrame& drag,
+                               std::vector<SgMixture>& lights, std::vector<LightPrep>& preps) const {
+  lights.resize(objects.size());
+  preps = std::vector<LightPrep>(objects.size());
+  for (size_t o = 0; o < objects.size(); ++o) {
+    lights[o] = drag_->kappa_light(o);
+    const LightParallax parallax = drag_->KappaParallax(o, drag.kappa_shift);
+    PrepareLight(lights[o], objects, preps[o], &parallax);
+  }
+}
+
 InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_world_camera,
                                const std::vector<InsertObject>& objects, ImageF& frame, InsertLayers* layers_out,
                                const ReceiverOverride& receivers) {
@@ -242,7 +253,7 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
   used_lights_.resize(n_objects);
 
   const std::vector<WorldSphere> spheres = WorldSpheres(objects);
-  const DragFrame drag = drag_->Begin(objects, spheres);
+  const DragFrame drag = drag_->Begin(objects, spheres, !options_.kappa_from_samples);
 
   // 1. Incident light per object (cached while it stands still, held while
   // it is dragged), with its lobes' distances for the parallax of near light.
@@ -285,11 +296,16 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
   OccludeAndComposite(scene_, options_, camera, T_world_camera, covered, receivers, frame, layers);
   times.occlusion_ms = MsSince(t0);
 
-  // 5. Shadows κ on the scene where an object can shadow.
+  // 5. Shadows κ on the scene where an object can shadow (through a drag,
+  // with the light it began with: DragFrame::kappa_apart).
   t0 = InsertClock::now();
-  RenderShadows({scene_, options_, camera, T_world_camera, objects, spheres, used_lights_, g, receivers,
-                 options_.kappa_from_samples ? &shadow_sources : nullptr, support_ ? &*support_ : nullptr, &drag},
-                preps, kappa_cache_, frame, layers, times);
+  std::vector<SgMixture> kappa_lights;
+  std::vector<LightPrep> kappa_preps;
+  if (drag.kappa_apart) HeldKappaLights(objects, drag, kappa_lights, kappa_preps);
+  RenderShadows(
+      {scene_, options_, camera, T_world_camera, objects, spheres, drag.kappa_apart ? kappa_lights : used_lights_, g,
+       receivers, options_.kappa_from_samples ? &shadow_sources : nullptr, support_ ? &*support_ : nullptr, &drag},
+      drag.kappa_apart ? kappa_preps : preps, kappa_cache_, frame, layers, times);
   times.kappa_ms = MsSince(t0);
 
   // Pixels partly covered by an object whose centre misses it.

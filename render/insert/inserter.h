@@ -186,6 +186,9 @@ class Inserter {
                                           InsertTimings& times);
   std::vector<LightPrep>& PrepareLights(const std::vector<InsertObject>& objects,
                                         const std::vector<LightParallax>& parallax, const DragFrame& drag);
+  // κ's lights held from the drag's start (DragFrame::kappa_apart), prepared.
+  void HeldKappaLights(const std::vector<InsertObject>& objects, const DragFrame& drag, std::vector<SgMixture>& lights,
+                       std::vector<LightPrep>& preps) const;
 
   const SceneField& scene_;
   SgMixture environment_;

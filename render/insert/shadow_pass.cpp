@@ -374,11 +374,11 @@ class KappaPass {
                                options_.kappa_skip_covered ? 1.0 : 0.0};
     const std::vector<float> rule = ReceiverRule(in_);
     key.insert(key.end(), rule.begin(), rule.end());
-    // Through a drag, the objects as the held light was taken: κ relative
+    // Through a drag, the objects as κ's held light was taken: κ relative
     // to them does not change with their common translation.
     const bool dragged = in_.drag != nullptr && in_.drag->dragged();
     if (dragged)
-      key.insert(key.end(), in_.drag->key->begin(), in_.drag->key->end());
+      key.insert(key.end(), in_.drag->kappa_key->begin(), in_.drag->kappa_key->end());
     else
       for (size_t j : casters_) AppendObjectKey(in_.objects[j], key);
     for (const SgMixture& light : in_.lights) AppendLightKey(light, key);
@@ -392,7 +392,7 @@ class KappaPass {
       cache_owner_->Clear();
       cache_owner_->key = std::move(key);
     }
-    ShiftLattice(dragged ? in_.drag->shift : Vec3{});
+    ShiftLattice(dragged ? in_.drag->kappa_shift : Vec3{});
     cache_owner_->lattice.Publish();  // the last frame's nodes: read without locks this frame
     cache_ = cache_owner_.get();
   }

@@ -85,7 +85,7 @@ struct ShadowPassInputs {
   const ReceiverOverride& receivers;
   const std::vector<ShadowSources>* sources = nullptr;  // per object, κ from samples (KappaContext::sources)
   const SupportPlane* support = nullptr;                // receivers ending on it are taken onto it
-  const DragFrame* drag = nullptr;                      // dragged: the lattice kept in the objects' frame
+  const DragFrame* drag = nullptr;  // dragged: the lattice kept in the objects' frame (`lights`: κ's, DragFrame)
 };
 
 // κ over the casters' reach rectangle into layers.kappa / kappa_rect /
