@@ -32,8 +32,8 @@ struct ViewKey {
 struct KappaCache {
   std::vector<double> key;
   // The lattice's nodes (and its shadow box) lie at world point node +
-  // shift: 0, but through a drag (DragFrame::shift) the lattice is kept in
-  // the objects' frame as taken with the held light.
+  // shift: 0, but through a drag (DragFrame::kappa_shift) the lattice is
+  // kept in the objects' frame as κ's held light was taken.
   KappaLattice lattice;
   Vec3 shift;
   // Views whose whole reach rectangle was passed under the current key:
