@@ -5,7 +5,9 @@
 // stamps, the object covering ~10 % of the frame on the insertion benches'
 // NeRF table (BenchTabletopNerf). Three motions: the camera still, hand-held
 // (the synthetic camera's trajectory), and the object dragged across the
-// table under a still camera. Per motion, preset (fast, balanced) and thread
+// table under a still camera, with the light held through the drag (the
+// live default, LiveOptions::drag_hold) and, as "dragexact", recomputed
+// every frame. Per motion, preset (fast, balanced) and thread
 // count (1, 2): displayed fps, frames dropped, per-stage p50/p90 and
 // capture-to-display latency p50/p90 over the frames after a warm-up; and the
 // floor a display path cannot beat, one 1280x720 RGB frame copied.
@@ -19,6 +21,7 @@
 #include "app/live/display.h"
 #include "app/live/pipeline.h"
 #include "app/live/report.h"
+#include "app/live/window.h"
 #include "calib/core/log.h"
 #include "calib/core/parallel.h"
 #include "render/insert/nerf_scene.h"
@@ -99,7 +102,8 @@ struct RunSetup {
   const SsdfField* field = nullptr;
   std::string preset;
   bool drag = false;
-  int warmup = 15;  // frames left out of the figures (tracking confirms, the first light fit is cold)
+  bool drag_hold = true;  // LiveOptions::drag_hold
+  int warmup = 15;        // frames left out of the figures (tracking confirms, the first light fit is cold)
 };
 
 // One run: the pipeline threaded as in the window, a display loop that takes
@@ -117,6 +121,7 @@ std::vector<LiveFrameRecord> RunOnce(const RunSetup& r, LiveCounters* counters, 
   options.tracker = TrackerOptions::Preset("balanced");  // the live command's default
   options.response = "display";                          // the synthetic camera's encoding
   options.render_divisor = 1;
+  options.drag_hold = r.drag_hold;
   LivePipeline pipeline(source, r.sequence->camera->board(), r.sequence->camera->camera(), *r.scene, *r.environment,
                         {asset}, options);
   const LiveObjectState start = PlaceCovering(pipeline, *r.mesh, *r.sequence, coverage);
@@ -135,6 +140,7 @@ std::vector<LiveFrameRecord> RunOnce(const RunSetup& r, LiveCounters* counters, 
     if (r.drag) {
       const double t = std::chrono::duration<double>(LiveClock::now() - t0).count();
       LiveObjectState s = start;
+      s.dragging = true;
       s.anchor_world = start.anchor_world + along * (0.06 * std::sin(2 * kPi * t / 3.0));
       pipeline.set_object(0, s);
     }
@@ -149,16 +155,21 @@ std::vector<LiveFrameRecord> RunOnce(const RunSetup& r, LiveCounters* counters, 
 
 void AddRunFigures(const std::string& label, const std::string& note, const std::vector<LiveFrameRecord>& records,
                    int frames, int warmup, std::vector<BenchFigure>& figures) {
-  std::vector<double> latency, track, expose, insert, display, process, rewritten;
-  int displayed = 0;
+  std::vector<double> latency, track, expose, insert, light, shade, kappa, display, process, rewritten, nodes;
+  int displayed = 0, relit = 0;
   for (const LiveFrameRecord& f : records) {
     if (f.index < warmup) continue;
+    relit += f.times.insert.lights_recomputed > 0 ? 1 : 0;
     track.push_back(f.times.track_ms);
     expose.push_back(f.times.expose_ms);
     insert.push_back(f.times.insert.total_ms);
+    light.push_back(f.times.insert.light_ms + f.times.insert.fit_ms);
+    shade.push_back(f.times.insert.shade_ms);
+    kappa.push_back(f.times.insert.kappa_ms);
     display.push_back(f.times.display_ms);
     process.push_back(f.times.process_ms);
     rewritten.push_back(static_cast<double>(f.pixels_rewritten));
+    nodes.push_back(static_cast<double>(f.times.insert.kappa_evaluated));
     if (f.latency_ms >= 0) {
       latency.push_back(f.latency_ms);
       ++displayed;
@@ -167,14 +178,16 @@ void AddRunFigures(const std::string& label, const std::string& note, const std:
   const int fed = std::max(0, frames - warmup);
   figures.push_back({label + "_fps", fed > 0 ? displayed * kFps / fed : 0, "fps", note + ", displayed"});
   figures.push_back({label + "_dropped", double(fed - displayed), "frames", "of " + std::to_string(fed) + " fed"});
-  const std::pair<const char*, const std::vector<double>*> stages[] = {{"latency", &latency}, {"process", &process},
-                                                                       {"track", &track},     {"expose", &expose},
-                                                                       {"insert", &insert},   {"display", &display}};
+  const std::pair<const char*, const std::vector<double>*> stages[] = {
+      {"latency", &latency}, {"process", &process}, {"track", &track}, {"expose", &expose},  {"insert", &insert},
+      {"light", &light},     {"shade", &shade},     {"kappa", &kappa}, {"display", &display}};
   for (const auto& [name, values] : stages) {
     figures.push_back({label + "_" + name + "_p50_ms", PercentileOf(*values, 0.5), "ms", ""});
     figures.push_back({label + "_" + name + "_p90_ms", PercentileOf(*values, 0.9), "ms", ""});
   }
   figures.push_back({label + "_rewritten_px", PercentileOf(rewritten, 0.5), "px", "median, display path"});
+  figures.push_back({label + "_kappa_nodes", PercentileOf(nodes, 0.5), "nodes", "median, κ values computed a frame"});
+  figures.push_back({label + "_relit", double(relit), "frames", "processed frames that took the light anew"});
 }
 
 // The floor: one 1280x720 RGB frame (2.76 MB) read and written once, as
@@ -203,6 +216,33 @@ void AddFloorAndHud(int width, int height, std::vector<BenchFigure>& figures) {
   figures.push_back({"hud_blend_ms", blend, "ms", "the cached HUD blended into a frame (every frame)"});
 }
 
+// The window's share when a display is there (Xvfb: Mesa's software GL): a
+// width x height view presented as a new frame (uploaded to its texture
+// once) and presented again unchanged (drawn from the texture, as a redraw
+// between frames is). Without a display, nothing.
+void AddWindowPresent(int width, int height, std::vector<BenchFigure>& figures) {
+  if (!LiveWindow::DisplayAvailable()) {
+    LogInfo("bench live: no display, the window's figures skipped (run under xvfb-run for them)");
+    return;
+  }
+  std::unique_ptr<LiveWindow> opened;
+  try {
+    opened = std::make_unique<LiveWindow>("nerfar bench live", width, height);
+  } catch (const std::exception& e) {
+    LogInfo(std::string("bench live: the window's figures skipped: ") + e.what());
+    return;
+  }
+  LiveWindow& window = *opened;
+  Image8 frames[2] = {Image8(width, height, 3, 60), Image8(width, height, 3, 190)};
+  const std::function<void()> no_panel;
+  int next = 0;
+  const double upload = MedianMilliseconds([&] { window.Present({&frames[next++ % 2]}, no_panel, true); }, 30);
+  const double kept = MedianMilliseconds([&] { window.Present({&frames[0]}, no_panel, false); }, 30);
+  const std::string size = std::to_string(width) + "x" + std::to_string(height);
+  figures.push_back({"window_present_new_ms", upload, "ms", "a new " + size + " frame uploaded once and drawn"});
+  figures.push_back({"window_present_kept_ms", kept, "ms", "the same frame drawn again from its texture"});
+}
+
 }  // namespace
 
 std::vector<BenchFigure> BenchLive(const BenchOptions& options) {
@@ -227,14 +267,20 @@ std::vector<BenchFigure> BenchLive(const BenchOptions& options) {
   const SsdfField field = BakeSsdf(mesh, bake, std::nullopt);
   LogInfo("bench live: baked the object's SSDF in " + FormatDuration(NowSeconds() - t));
   AddFloorAndHud(width, height, figures);
+  AddWindowPresent(width, height, figures);
 
   const int threads_before = ThreadCount();
   struct Motion {
     const char* name;
     const Sequence* sequence;
-    bool drag;
+    bool drag, drag_hold;
   };
-  const Motion motions[] = {{"still", &still, false}, {"handheld", &hand_held, false}, {"drag", &still, true}};
+  // "dragexact": the same drag with the light, γ and κ recomputed every
+  // frame (drag_hold off), the comparison within one run.
+  const Motion motions[] = {{"still", &still, false, true},
+                            {"handheld", &hand_held, false, true},
+                            {"drag", &still, true, true},
+                            {"dragexact", &still, true, false}};
   const std::vector<std::string> presets =
       options.quick ? std::vector<std::string>{"fast"} : std::vector<std::string>{"fast", "balanced"};
   const std::vector<int> thread_counts = options.quick ? std::vector<int>{1} : std::vector<int>{1, 2};
@@ -242,7 +288,7 @@ std::vector<BenchFigure> BenchLive(const BenchOptions& options) {
     for (const std::string& preset : presets)
       for (const Motion& m : motions) {
         SetThreadCount(threads);
-        RunSetup r{m.sequence, &scene, &environment, &mesh, &field, preset, m.drag, warmup};
+        RunSetup r{m.sequence, &scene, &environment, &mesh, &field, preset, m.drag, m.drag_hold, warmup};
         LiveCounters counters;
         double coverage = 0;
         const std::vector<LiveFrameRecord> records = RunOnce(r, &counters, &coverage);

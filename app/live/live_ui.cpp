@@ -67,7 +67,7 @@ std::string LiveUi::Screenshot() {
   return pending_screenshot_;
 }
 
-void LiveUi::PlaceAt(int view, double x, double y) {
+void LiveUi::PlaceAt(int view, double x, double y, bool dragging) {
   if (!shown_ || pipeline_.object_count() == 0) return;
   if (view == 1 && (pipeline_.views() & kViewAlongside)) {
     // The alongside view is the AR camera at a smaller size.
@@ -85,24 +85,36 @@ void LiveUi::PlaceAt(int view, double x, double y) {
   LiveObjectState state = pipeline_.object(selected_);
   state.placed = true;
   state.anchor_world = *hit;
+  state.dragging = dragging;
   pipeline_.set_object(selected_, state);
   char text[128];
   std::snprintf(text, sizeof text, "placed at (%.3f, %.3f, %.3f) m", hit->x, hit->y, hit->z);
   status_ = text;
 }
 
+void LiveUi::EndDrag() {
+  // Every object, in case the selection changed during the drag (Tab).
+  for (size_t i = 0; i < pipeline_.object_count(); ++i) {
+    LiveObjectState state = pipeline_.object(i);
+    if (!state.dragging) continue;
+    state.dragging = false;
+    pipeline_.set_object(i, state);
+  }
+}
+
 void LiveUi::HandleEvent(const InputEvent& e) {
   switch (e.kind) {
     case InputEvent::Kind::kPress:
       if (e.button == 0 && e.view >= 0) {
-        PlaceAt(e.view, e.x, e.y);
+        PlaceAt(e.view, e.x, e.y, true);
         dragging_ = true;
       }
       break;
     case InputEvent::Kind::kDrag:
-      if (dragging_ && e.view >= 0) PlaceAt(e.view, e.x, e.y);
+      if (dragging_ && e.view >= 0) PlaceAt(e.view, e.x, e.y, true);
       break;
     case InputEvent::Kind::kRelease:
+      if (dragging_) EndDrag();
       dragging_ = false;
       break;
     case InputEvent::Kind::kScroll: {
@@ -229,7 +241,9 @@ bool LiveUi::Tick(std::chrono::milliseconds wait) {
     DrawText(waiting, "waiting for the first frame...", 8, 8);
     views.push_back(&waiting);
   }
-  const std::vector<InputEvent> events = window_.Present(views, [this] { DrawPanel(); });
+  // A redraw without a new frame (the panel, the cursor) keeps the textures.
+  const std::vector<InputEvent> events = window_.Present(
+      views, [this] { DrawPanel(); }, frame.has_value() || !shown_);
   if (frame) {
     pipeline_.MarkDisplayed(*shown_);
     if (video_) {

@@ -46,7 +46,10 @@ class LiveUi {
 
  private:
   void DrawPanel();
-  void PlaceAt(int view, double x, double y);
+  // The selected object placed on the surface under view pixel (x, y),
+  // marked as being dragged or not (LiveObjectState::dragging).
+  void PlaceAt(int view, double x, double y, bool dragging);
+  void EndDrag();  // no object dragged any more
   void ReportFailure(const std::string& what, const std::exception& e);
 
   LiveWindow& window_;

@@ -444,6 +444,7 @@ std::vector<InsertObject> LivePipeline::PlaceObjects(const std::vector<LiveObjec
     o.albedo_map = assets_[i].albedo_map;
     o.roughness_map = assets_[i].roughness_map;
     o.metallic_map = assets_[i].metallic_map;
+    o.dragged = options_.drag_hold && states[i].dragging;
     if (assets_[i].field != nullptr) {
       PosedField& posed = visibility_[i];
       if (!posed.field || !SamePose(posed.T_world_object, o.T_world_object) || posed.scale != o.scale) {

@@ -65,6 +65,7 @@ struct LiveObjectState {
   double yaw_rad = 0;  // rotation about the world z axis
   double scale = 1.0;  // uniform scale of the mesh
   SgMaterial material;
+  bool dragging = false;  // the user is moving it (InsertObject::dragged, with LiveOptions::drag_hold)
 };
 
 struct LiveOptions {
@@ -80,6 +81,11 @@ struct LiveOptions {
   // filter): tracking keeps the full frame (small tags need the pixels),
   // insertion costs 1/divisor² as much.
   int render_divisor = 1;
+  // While an object is dragged (LiveObjectState::dragging), hold its light
+  // and reuse γ and κ relative to it (InsertObject::dragged); the full
+  // recompute when the drag ends. false: every frame of a drag recomputes
+  // them (as nerfar insert does).
+  bool drag_hold = true;
   double alongside_scale = 0.5;  // size of the alongside and layers views relative to the frame
   int gain_every = 15;           // frames between exposure-gain updates (NeRF vs camera, coarse grid)
   int gain_grid_step = 8;        // pixel step of that grid

@@ -9,6 +9,7 @@
 #include <imgui.h>
 
 #include <algorithm>
+#include <cstdint>
 #include <cstdlib>
 #include <mutex>
 #include <optional>
@@ -71,6 +72,13 @@ struct LiveWindow::Impl {
   GLFWwindow* window = nullptr;
   GLuint program = 0, vao = 0, vbo = 0;
   std::vector<GLuint> textures;
+  // What each texture holds: the image it was uploaded from (its pixels'
+  // address) and its size, to upload a view only when it is new.
+  struct Uploaded {
+    const std::uint8_t* pixels = nullptr;
+    int width = 0, height = 0, channels = 0;
+  };
+  std::vector<Uploaded> uploaded;
   std::vector<ViewRect> rects;
   std::vector<InputEvent> events;
   bool dragging = false;
@@ -214,8 +222,29 @@ LiveWindow::~LiveWindow() {
 bool LiveWindow::ShouldClose() const { return glfwWindowShouldClose(impl_->window) == GLFW_TRUE; }
 void LiveWindow::RequestClose() { glfwSetWindowShouldClose(impl_->window, GLFW_TRUE); }
 
+namespace {
+// `image` into the bound texture, unless it holds it already (the same
+// image, unchanged: `changed` false): a new image of the texture's size
+// replaces its pixels in place, one of another size reallocates it.
+void UploadView(const Image8& image, bool changed, LiveWindow::Impl::Uploaded& held) {
+  const bool same_size = held.width == image.width && held.height == image.height && held.channels == image.channels;
+  if (!changed && same_size && held.pixels == image.pixels.data()) return;
+  glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
+  const GLenum format = image.channels == 1 ? GL_RED : (image.channels == 4 ? GL_RGBA : GL_RGB);
+  if (same_size) {
+    glTexSubImage2D(GL_TEXTURE_2D, 0, 0, 0, image.width, image.height, format, GL_UNSIGNED_BYTE, image.pixels.data());
+  } else {
+    glTexImage2D(GL_TEXTURE_2D, 0, GL_RGB8, image.width, image.height, 0, format, GL_UNSIGNED_BYTE,
+                 image.pixels.data());
+    const GLint grey[] = {GL_RED, GL_RED, GL_RED, GL_ONE}, colour[] = {GL_RED, GL_GREEN, GL_BLUE, GL_ALPHA};
+    glTexParameteriv(GL_TEXTURE_2D, GL_TEXTURE_SWIZZLE_RGBA, image.channels == 1 ? grey : colour);
+  }
+  held = {image.pixels.data(), image.width, image.height, image.channels};
+}
+}  // namespace
+
 std::vector<InputEvent> LiveWindow::Present(const std::vector<const Image8*>& views,
-                                            const std::function<void()>& draw_controls) {
+                                            const std::function<void()>& draw_controls, bool new_views) {
   glfwPollEvents();
   int fb_width = 0, fb_height = 0, win_width = 0, win_height = 0;
   glfwGetFramebufferSize(impl_->window, &fb_width, &fb_height);
@@ -234,6 +263,7 @@ std::vector<InputEvent> LiveWindow::Present(const std::vector<const Image8*>& vi
     glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
     glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
     impl_->textures.push_back(texture);
+    impl_->uploaded.emplace_back();
   }
   impl_->rects.clear();
   glUseProgram(impl_->program);
@@ -252,14 +282,7 @@ std::vector<InputEvent> LiveWindow::Present(const std::vector<const Image8*>& vi
     impl_->rects.push_back(rect);
     glActiveTexture(GL_TEXTURE0);
     glBindTexture(GL_TEXTURE_2D, impl_->textures[v]);
-    glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
-    const GLenum format = image.channels == 1 ? GL_RED : (image.channels == 4 ? GL_RGBA : GL_RGB);
-    glTexImage2D(GL_TEXTURE_2D, 0, GL_RGB8, image.width, image.height, 0, format, GL_UNSIGNED_BYTE,
-                 image.pixels.data());
-    if (image.channels == 1) {
-      const GLint swizzle[] = {GL_RED, GL_RED, GL_RED, GL_ONE};
-      glTexParameteriv(GL_TEXTURE_2D, GL_TEXTURE_SWIZZLE_RGBA, swizzle);
-    }
+    UploadView(image, new_views, impl_->uploaded[v]);
     // Window pixels (origin top-left) to clip space (origin centre, y up).
     const float x0 = static_cast<float>(rect.x0 / win_width * 2 - 1);
     const float y1 = static_cast<float>(1 - rect.y0 / win_height * 2);

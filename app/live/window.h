@@ -45,8 +45,12 @@ class LiveWindow {
   void RequestClose();
   // Draws the views side by side (each scaled to fit, aspect kept) and the
   // caller's ImGui panel, then presents. Events received since the last call
-  // are returned (ImGui consumes those over its own widgets).
-  std::vector<InputEvent> Present(const std::vector<const Image8*>& views, const std::function<void()>& draw_controls);
+  // are returned (ImGui consumes those over its own widgets). `new_views`
+  // false: the views are the images of the last call, unchanged, and their
+  // textures are drawn as uploaded then (a view whose image or size differs
+  // is uploaded all the same); true: each is uploaded, once.
+  std::vector<InputEvent> Present(const std::vector<const Image8*>& views, const std::function<void()>& draw_controls,
+                                  bool new_views = true);
   // The next Present() also captures what it shows (RGB, as the user sees
   // it, panel included); TakeScreenshot() hands it over once.
   void RequestScreenshot();

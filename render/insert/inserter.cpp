@@ -5,6 +5,7 @@
 #include "calib/core/error.h"
 #include "calib/core/parallel.h"
 #include "render/insert/cache_keys.h"
+#include "render/insert/drag_hold.h"
 #include "render/insert/insert_common.h"
 #include "render/insert/light_prep.h"
 #include "render/insert/object_shading.h"
@@ -112,13 +113,21 @@ Inserter::~Inserter() = default;
 Inserter::Inserter(Inserter&&) noexcept = default;
 
 Inserter::Inserter(const SceneField& scene, SgMixture environment, InsertOptions options)
-    : scene_(scene), environment_(std::move(environment)), options_(std::move(options)) {
+    : scene_(scene),
+      environment_(std::move(environment)),
+      options_(std::move(options)),
+      drag_(std::make_unique<DragHold>()) {
   Problems problems("insert options");
   for (const std::string& p : options_.Validate()) problems.Add("", p);
   problems.ThrowIfAny();
 }
 
 const SgMixture& Inserter::Light(size_t object) const { return used_lights_.at(object); }
+
+void Inserter::set_options(const InsertOptions& options) {
+  options_ = options;
+  drag_ = std::make_unique<DragHold>();
+}
 
 ImageF Inserter::RenderBackground(const CameraIntrinsics& camera, const Pose& T_world_camera) const {
   ImageF image(camera.width, camera.height, 3, 0.0f);
@@ -150,9 +159,18 @@ ImageF Inserter::RenderBackground(const CameraIntrinsics& camera, const Pose& T_
 }
 
 std::vector<LightParallax> Inserter::UpdateLights(const std::vector<InsertObject>& objects,
-                                                  const std::vector<WorldSphere>& spheres, InsertTimings& times) {
+                                                  const std::vector<WorldSphere>& spheres, const DragFrame& drag,
+                                                  InsertTimings& times) {
   const size_t n_objects = objects.size();
   std::vector<LightParallax> parallax(n_objects);
+  if (drag.phase == DragPhase::kHeld) {
+    for (size_t i = 0; i < n_objects; ++i) {
+      used_lights_[i] = drag_->light(i);
+      parallax[i] = drag_->Parallax(i, drag.shift);
+    }
+    times.lights_held = static_cast<int>(n_objects);
+    return parallax;
+  }
   for (size_t i = 0; i < n_objects; ++i) {
     const Vec3 at = objects[i].light_center.value_or(Vec3(spheres[i].center));
     parallax[i].center = at;
@@ -173,11 +191,12 @@ std::vector<LightParallax> Inserter::UpdateLights(const std::vector<InsertObject
     used_lights_[i] = lights_[i].light();
     parallax[i].distance = lights_[i].lobe_distances();
   }
+  if (drag.phase == DragPhase::kStart) drag_->Take(used_lights_, parallax);
   return parallax;
 }
 
 std::vector<LightPrep>& Inserter::PrepareLights(const std::vector<InsertObject>& objects,
-                                                const std::vector<LightParallax>& parallax) {
+                                                const std::vector<LightParallax>& parallax, const DragFrame& drag) {
   const size_t n_objects = objects.size();
   // Every object's light (the shadow pass needs those of objects not seen
   // too), prepared again only when a light, its parallax or an object (its
@@ -193,7 +212,8 @@ std::vector<LightPrep>& Inserter::PrepareLights(const std::vector<InsertObject>&
     }
     if (!preps_) preps_ = std::make_unique<LightPrepCache>();
     if (key != preps_->key) {
-      preps_->specular.clear();
+      // A held light keeps its samples, so their prefiltered map holds.
+      if (drag.phase != DragPhase::kHeld) preps_->specular.clear();
       preps_->shadow_sources.clear();
       preps_->preps = std::vector<LightPrep>(n_objects);
       preps_->key = std::move(key);
@@ -202,6 +222,17 @@ std::vector<LightPrep>& Inserter::PrepareLights(const std::vector<InsertObject>&
   std::vector<LightPrep>& preps = preps_->preps;
   for (size_t o = 0; o < n_objects; ++o) PrepareLight(used_lights_[o], objects, preps[o], &parallax[o]);
   return preps;
+}
+
+void Inserter::HeldKappaLights(const std::vector<InsertObject>& objects, const DragFrame& drag,
+                               std::vector<SgMixture>& lights, std::vector<LightPrep>& preps) const {
+  lights.resize(objects.size());
+  preps = std::vector<LightPrep>(objects.size());
+  for (size_t o = 0; o < objects.size(); ++o) {
+    lights[o] = drag_->kappa_light(o);
+    const LightParallax parallax = drag_->KappaParallax(o, drag.kappa_shift);
+    PrepareLight(lights[o], objects, preps[o], &parallax);
+  }
 }
 
 InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_world_camera,
@@ -222,10 +253,11 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
   used_lights_.resize(n_objects);
 
   const std::vector<WorldSphere> spheres = WorldSpheres(objects);
+  const DragFrame drag = drag_->Begin(objects, spheres, !options_.kappa_from_samples);
 
-  // 1. Incident light per object (cached while it stands still), with its
-  // lobes' distances for the parallax of near light.
-  const std::vector<LightParallax> parallax = UpdateLights(objects, spheres, times);
+  // 1. Incident light per object (cached while it stands still, held while
+  // it is dragged), with its lobes' distances for the parallax of near light.
+  const std::vector<LightParallax> parallax = UpdateLights(objects, spheres, drag, times);
 
   // 2. G-buffer.
   auto t0 = InsertClock::now();
@@ -243,7 +275,7 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
   t0 = InsertClock::now();
   layers.object = ImageF(g.rect.width(), g.rect.height(), 3, 0.0f);
   layers.alpha = ImageF(g.rect.width(), g.rect.height(), 1, 0.0f);
-  std::vector<LightPrep>& preps = PrepareLights(objects, parallax);
+  std::vector<LightPrep>& preps = PrepareLights(objects, parallax, drag);
   std::vector<PrefilteredRadiance>& specular = preps_->specular;
   UpdatePrefilteredSpecular(options_, objects, parallax, lights_, specular);
   std::vector<ShadowSources>& shadow_sources = preps_->shadow_sources;
@@ -253,8 +285,8 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
   const bool per_vertex = options_.self_shadow && options_.self_shadow_per_vertex;
   std::vector<std::vector<Vec3f>> vertex_normals(n_objects);
   if (per_vertex)
-    times.gamma_recomputed =
-        UpdateVertexGamma(objects, spheres, used_lights_, preps, options_, vertex_gamma_, vertex_normals);
+    times.gamma_recomputed = UpdateVertexGamma(objects, spheres, used_lights_, preps, options_, vertex_gamma_,
+                                               vertex_normals, drag.dragged() ? drag.key : nullptr);
   ShadeObjects(objects, spheres, preps, per_vertex ? &vertex_gamma_ : nullptr, vertex_normals, options_, g, covered,
                Vec3f(T_world_camera.translation), layers.object, specular);
   times.shade_ms = MsSince(t0);
@@ -264,11 +296,16 @@ InsertTimings Inserter::Render(const CameraIntrinsics& camera, const Pose& T_wor
   OccludeAndComposite(scene_, options_, camera, T_world_camera, covered, receivers, frame, layers);
   times.occlusion_ms = MsSince(t0);
 
-  // 5. Shadows κ on the scene where an object can shadow.
+  // 5. Shadows κ on the scene where an object can shadow (through a drag,
+  // with the light it began with: DragFrame::kappa_apart).
   t0 = InsertClock::now();
-  RenderShadows({scene_, options_, camera, T_world_camera, objects, spheres, used_lights_, g, receivers,
-                 options_.kappa_from_samples ? &shadow_sources : nullptr, support_ ? &*support_ : nullptr},
-                preps, kappa_cache_, frame, layers, times);
+  std::vector<SgMixture> kappa_lights;
+  std::vector<LightPrep> kappa_preps;
+  if (drag.kappa_apart) HeldKappaLights(objects, drag, kappa_lights, kappa_preps);
+  RenderShadows(
+      {scene_, options_, camera, T_world_camera, objects, spheres, drag.kappa_apart ? kappa_lights : used_lights_, g,
+       receivers, options_.kappa_from_samples ? &shadow_sources : nullptr, support_ ? &*support_ : nullptr, &drag},
+      drag.kappa_apart ? kappa_preps : preps, kappa_cache_, frame, layers, times);
   times.kappa_ms = MsSince(t0);
 
   // Pixels partly covered by an object whose centre misses it.

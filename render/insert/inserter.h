@@ -31,6 +31,8 @@ namespace nerfar {
 
 struct VertexGamma;
 struct KappaCache;
+struct DragFrame;
+class DragHold;
 struct LightPrepCache;
 struct LightPrep;
 struct WorldSphere;
@@ -61,6 +63,10 @@ struct InsertObject {
   // InsertOptions::specular_parallax); nullptr: none.
   const DistanceMap* light_sample_distances = nullptr;
   std::optional<Vec3> light_center;  // world point the incident light is taken at (default: bounding-sphere centre)
+  // Being moved by the user (a drag): while every object keeps one common
+  // translation from where the light was taken, the light is held and γ
+  // and κ reused (drag_hold.h). false on every object: the plain path.
+  bool dragged = false;
 };
 
 // The distance map of parallax-corrected reflections (DistanceMap) from the
@@ -86,6 +92,7 @@ struct InsertTimings {
   double kappa_ms = 0;      // receivers + κ + multiplying the background
   double total_ms = 0;
   int lights_recomputed = 0;
+  int lights_held = 0;         // objects lit by the light held through a drag (InsertObject::dragged)
   size_t kappa_evaluated = 0;  // κ values computed this frame (cache misses, or every receiver without the cache)
   size_t kappa_marched = 0;    // receiver rays marched through the scene for κ this frame
   size_t kappa_reused = 0;     // receivers taken from the last frame's instead of marching (kappa_receiver_reuse)
@@ -162,7 +169,8 @@ class Inserter {
   const SgMixture& Light(size_t object) const;
   const IncidentLight& LightCache(size_t object) const { return lights_.at(object); }
   const InsertOptions& options() const { return options_; }
-  void set_options(const InsertOptions& options) { options_ = options; }
+  // New options; a light held through a drag is dropped with the old ones.
+  void set_options(const InsertOptions& options);
   const SgMixture& environment() const { return environment_; }
   // A plane the scene is known to hold (the tag board's), onto which shadow
   // receivers that end on it are taken (ReceiversOnPlane); nullopt: none.
@@ -170,12 +178,17 @@ class Inserter {
 
  private:
   // Render's first steps: each object's incident light refreshed (or its
-  // override taken) with its lobes' distances; every object's light
-  // prepared, again only when a light, its parallax or an object changed.
+  // override taken, or held through a drag) with its lobes' distances;
+  // every object's light prepared, again only when a light, its parallax or
+  // an object changed.
   std::vector<LightParallax> UpdateLights(const std::vector<InsertObject>& objects,
-                                          const std::vector<WorldSphere>& spheres, InsertTimings& times);
+                                          const std::vector<WorldSphere>& spheres, const DragFrame& drag,
+                                          InsertTimings& times);
   std::vector<LightPrep>& PrepareLights(const std::vector<InsertObject>& objects,
-                                        const std::vector<LightParallax>& parallax);
+                                        const std::vector<LightParallax>& parallax, const DragFrame& drag);
+  // κ's lights held from the drag's start (DragFrame::kappa_apart), prepared.
+  void HeldKappaLights(const std::vector<InsertObject>& objects, const DragFrame& drag, std::vector<SgMixture>& lights,
+                       std::vector<LightPrep>& preps) const;
 
   const SceneField& scene_;
   SgMixture environment_;
@@ -188,6 +201,7 @@ class Inserter {
   // Every object's prepared light (SG shader, γ table rows, SSDF queries),
   // kept while the lights, their parallax and the objects are unchanged.
   std::unique_ptr<LightPrepCache> preps_;
+  std::unique_ptr<DragHold> drag_;  // the light held through a drag (InsertObject::dragged)
 
  public:
   ~Inserter();

@@ -13,6 +13,7 @@
 
 #include "calib/core/parallel.h"
 #include "render/insert/cache_keys.h"
+#include "render/insert/drag_hold.h"
 #include "render/insert/shadow_terms.h"
 
 namespace nerfar {
@@ -373,7 +374,13 @@ class KappaPass {
                                options_.kappa_skip_covered ? 1.0 : 0.0};
     const std::vector<float> rule = ReceiverRule(in_);
     key.insert(key.end(), rule.begin(), rule.end());
-    for (size_t j : casters_) AppendObjectKey(in_.objects[j], key);
+    // Through a drag, the objects as κ's held light was taken: κ relative
+    // to them does not change with their common translation.
+    const bool dragged = in_.drag != nullptr && in_.drag->dragged();
+    if (dragged)
+      key.insert(key.end(), in_.drag->kappa_key->begin(), in_.drag->kappa_key->end());
+    else
+      for (size_t j : casters_) AppendObjectKey(in_.objects[j], key);
     for (const SgMixture& light : in_.lights) AppendLightKey(light, key);
     // Near lobes re-aimed at each receiver change κ as much as the light does.
     for (const LightPrep& prep : preps_) {
@@ -385,8 +392,20 @@ class KappaPass {
       cache_owner_->Clear();
       cache_owner_->key = std::move(key);
     }
+    ShiftLattice(dragged ? in_.drag->kappa_shift : Vec3{});
     cache_owner_->Publish();  // the last frame's nodes: read without locks this frame
     cache_ = cache_owner_.get();
+  }
+
+  // The lattice's nodes moved with the objects: the views passed whole and
+  // the last layer no longer hold (the receivers sit elsewhere relative to
+  // the objects); the nodes themselves do.
+  void ShiftLattice(const Vec3& shift) {
+    shift_ = shift;
+    if (cache_owner_->shift == shift) return;
+    cache_owner_->shift = shift;
+    cache_owner_->explored.clear();
+    cache_owner_->last_view.reset();
   }
 
   // A view already passed whole under this cache (receivers marched by the
@@ -405,7 +424,7 @@ class KappaPass {
     PixelRect shadow;
     const Vec3f lo = cache_->lattice.shadow_min(), hi = cache_->lattice.shadow_max();
     if (lo.x <= hi.x) {
-      const Vec3 centre = Vec3((lo + hi) * 0.5f);
+      const Vec3 centre = Vec3((lo + hi) * 0.5f) + shift_;
       const double radius = 0.5 * Length(Vec3(hi - lo)) + 1.75 * spacing_;  // + the nodes' trilinear support
       shadow = ClipToImage(ProjectBall(camera_, T_world_camera_, centre, radius), camera_.width, camera_.height);
     }
@@ -558,13 +577,14 @@ class KappaPass {
     void Add(float v) { lowest = std::min(lowest, v), highest = std::max(highest, v); }
   };
 
-  // One lattice node's κ (computed and kept on a miss).
+  // One lattice node's κ (computed and kept on a miss); `node` in the
+  // lattice's frame (world point node + shift_).
   float NodeKappa(KappaLattice& lattice, uint64_t key, const Vec3f& node, uint32_t cell, ThreadScratch& sc,
                   size_t row) {
     float value;
     if (++looked_up_per_row_[row], lattice.Find(key, &value)) return value;
     bool queried = false;
-    value = KappaAt(context_, node, CellNormal(cell), sc.kappa, &queried);
+    value = KappaAt(context_, Vec3f(Vec3(node) + shift_), CellNormal(cell), sc.kappa, &queried);
     lattice.Insert(key, value);
     if (value < one_minus_eps_) cache_->lattice.GrowShadow(node);
     ++evaluated_per_row_[row];
@@ -575,7 +595,7 @@ class KappaPass {
   // Trilinear κ over the top level's nodes around x for x's normal cell,
   // through this thread's corner values and memo.
   float CoarseLatticeKappa(const Vec3f& x, uint32_t cell, ThreadScratch& sc, size_t row, Spread* spread) {
-    const double fx = x.x / spacing_, fy = x.y / spacing_, fz = x.z / spacing_;
+    const double fx = (x.x - shift_.x) / spacing_, fy = (x.y - shift_.y) / spacing_, fz = (x.z - shift_.z) / spacing_;
     const double bx = std::floor(fx), by = std::floor(fy), bz = std::floor(fz);
     const double wx = fx - bx, wy = fy - by, wz = fz - bz;
     const uint64_t corner_key = LatticeKey(int64_t(bx), int64_t(by), int64_t(bz), cell);
@@ -613,7 +633,7 @@ class KappaPass {
   // reached only inside a sharp penumbra, straight from the level's table.
   float FineLatticeKappa(KappaLattice& lattice, double spacing, const Vec3f& x, uint32_t cell, ThreadScratch& sc,
                          size_t row, Spread* spread) {
-    const double fx = x.x / spacing, fy = x.y / spacing, fz = x.z / spacing;
+    const double fx = (x.x - shift_.x) / spacing, fy = (x.y - shift_.y) / spacing, fz = (x.z - shift_.z) / spacing;
     const double bx = std::floor(fx), by = std::floor(fy), bz = std::floor(fz);
     const double wx = fx - bx, wy = fy - by, wz = fz - bz;
     double sum = 0.0, total = 0.0;
@@ -1104,6 +1124,7 @@ class KappaPass {
   float smallest_ = std::numeric_limits<float>::infinity();  // the smallest caster's radius
   KappaCache* cache_ = nullptr;    // the lattice and last layer; nullptr: κ exact per receiver
   double spacing_ = 0.0;           // the lattice's spacing, metres
+  Vec3 shift_;                     // the lattice's nodes lie at world point node + shift_ (KappaCache::shift)
   double penumbra_per_metre_ = 1;  // the sharpest light's penumbra width per metre from the caster
   float delta_lattice_ = 0;        // corners further apart than this are not interpolated (when sharp)
   double sample_angle_ = 0;        // radians between κ samples on screen (kappa_step pixels)

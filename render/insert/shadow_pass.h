@@ -31,10 +31,14 @@ struct ViewKey {
 // compared exactly as a whole: its length varies with the objects and lobes).
 struct KappaCache {
   std::vector<double> key;
+  // The lattice's nodes (and its shadow box) lie at world point node +
+  // shift: 0, but through a drag (DragFrame::kappa_shift) the lattice is
+  // kept in the objects' frame as κ's held light was taken.
   KappaLattice lattice;
   // Finer levels (spacing halved at each) where a sharp light's penumbra is
-  // narrower than a cell of the level above.
+  // narrower than a cell of the level above; in the same frame.
   std::array<KappaLattice, kKappaFineLevels> fine;
+  Vec3 shift;
   // Views whose whole reach rectangle was passed under the current key:
   // each visible receiver there has its nodes here.
   std::vector<ViewKey> explored;
@@ -82,6 +86,7 @@ KappaSpacing KappaSpacingFor(const InsertOptions& options, int width);
 
 // The frame's inputs to the shadow pass (loans for the call).
 struct ShadowSources;
+struct DragFrame;
 
 struct ShadowPassInputs {
   const SceneField& scene;
@@ -95,6 +100,7 @@ struct ShadowPassInputs {
   const ReceiverOverride& receivers;
   const std::vector<ShadowSources>* sources = nullptr;  // per object, κ from samples (KappaContext::sources)
   const SupportPlane* support = nullptr;                // receivers ending on it are taken onto it
+  const DragFrame* drag = nullptr;  // dragged: the lattice kept in the objects' frame (`lights`: κ's, DragFrame)
 };
 
 // κ over the casters' reach rectangle into layers.kappa / kappa_rect /

@@ -36,7 +36,7 @@ std::vector<Vec3f> WorldVertexNormals(const TriangleMesh& mesh, const Pose& T_wo
 bool UpdateVertexGamma(const std::vector<InsertObject>& objects, const std::vector<WorldSphere>& spheres,
                        const std::vector<SgMixture>& lights, const std::vector<LightPrep>& preps,
                        const InsertOptions& options, std::vector<VertexGamma>& cache,
-                       std::vector<std::vector<Vec3f>>& vertex_normals) {
+                       std::vector<std::vector<Vec3f>>& vertex_normals, const std::vector<double>* objects_key) {
   const size_t n_objects = objects.size();
   cache.resize(n_objects);
   vertex_normals.assign(n_objects, {});
@@ -48,7 +48,10 @@ bool UpdateVertexGamma(const std::vector<InsertObject>& objects, const std::vect
     std::vector<double> key = {double(reinterpret_cast<uintptr_t>(&mesh)), options.self_shadow_offset_radii,
                                options.self_shadow_horizon ? 1.0 : 0.0};
     AppendLightKey(lights[o], key);
-    for (size_t j = 0; j < n_objects; ++j) AppendObjectKey(objects[j], key);
+    if (objects_key)
+      key.insert(key.end(), objects_key->begin(), objects_key->end());
+    else
+      for (size_t j = 0; j < n_objects; ++j) AppendObjectKey(objects[j], key);
     VertexGamma& vg = cache[o];
     if (key == vg.key) continue;
     rebuilt = true;

@@ -24,10 +24,13 @@ std::vector<Vec3f> WorldVertexNormals(const TriangleMesh& mesh, const Pose& T_wo
 // its world vertex normals into vertex_normals[o], and cache[o] rebuilt when
 // what it depends on changed (SSD of every field at the vertices pushed off
 // along the normal by self_shadow_offset_radii, γ from their minimum).
-// Returns true when any object's γ was rebuilt.
+// Returns true when any object's γ was rebuilt. `objects_key` (optional)
+// stands for the objects' own keys (a drag: DragFrame::key, the objects as
+// its light was taken; γ does not change with their common translation).
 bool UpdateVertexGamma(const std::vector<InsertObject>& objects, const std::vector<WorldSphere>& spheres,
                        const std::vector<SgMixture>& lights, const std::vector<LightPrep>& preps,
                        const InsertOptions& options, std::vector<VertexGamma>& cache,
-                       std::vector<std::vector<Vec3f>>& vertex_normals);
+                       std::vector<std::vector<Vec3f>>& vertex_normals,
+                       const std::vector<double>* objects_key = nullptr);
 
 }  // namespace nerfar

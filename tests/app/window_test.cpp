@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -88,6 +89,36 @@ TEST_F(WindowTest, DrawsTheViewScaledToFitAndScreenshotsIt) {
   EXPECT_GT(shot.at(320, 100, 0), 200);
   EXPECT_LT(shot.at(320, 100, 1), 50);
   EXPECT_LT(shot.at(100, 100, 0), 80);  // grey background of the view
+}
+
+// A view is uploaded once per new frame: a redraw marked unchanged shows
+// the texture as uploaded (even if the image was since written over, which
+// the caller promised it was not), a new frame in the same image shows its
+// new pixels, and an image of another size is uploaded even when marked
+// unchanged.
+TEST_F(WindowTest, ViewsAreUploadedOncePerNewFrame) {
+  LiveWindow window("nerfar window test", 400, 200);
+  Image8 view = TestView();
+  const auto square_at_centre = [&](bool new_views) {
+    window.RequestScreenshot();
+    window.Present({&view}, nullptr, new_views);
+    const std::optional<Image8> shot = window.TakeScreenshot();
+    EXPECT_TRUE(shot.has_value());
+    return shot ? std::array<int, 3>{shot->at(320, 100, 0), shot->at(320, 100, 1), shot->at(320, 100, 2)}
+                : std::array<int, 3>{};
+  };
+  EXPECT_GT(square_at_centre(true)[0], 200);  // red, uploaded
+  for (int y = 40; y < 60; ++y)
+    for (int x = 150; x < 170; ++x) {
+      view.at(x, y, 0) = 0;
+      view.at(x, y, 1) = 255;
+    }
+  EXPECT_GT(square_at_centre(false)[0], 200);  // still the red uploaded: no upload
+  const std::array<int, 3> green = square_at_centre(true);
+  EXPECT_LT(green[0], 50);
+  EXPECT_GT(green[1], 200);
+  view = Image8(100, 50, 3, 250);              // another size, marked unchanged
+  EXPECT_GT(square_at_centre(false)[2], 200);  // uploaded all the same: white
 }
 
 TEST_F(WindowTest, RealMouseEventsArriveInViewPixels) {
@@ -264,11 +295,15 @@ TEST_F(LiveAppTest, ClickPlacesTheObjectWhereClickedAndDragMovesIt) {
   ASSERT_EQ(xdotool("mousemove --window " + id + " " + std::to_string(from_x) + " " + std::to_string(from_y) +
                     " mousedown 1 mousemove --window " + id + " " + std::to_string(from_x + 50) + " " +
                     std::to_string(from_y) + " mousemove --window " + id + " " + std::to_string(from_x + 100) + " " +
-                    std::to_string(from_y) + " mouseup 1"),
+                    std::to_string(from_y)),
             0);
   const Vec3 before = pipeline_->object(0).anchor_world;
   ASSERT_TRUE(TickUntil(ui, [&] { return Length(pipeline_->object(0).anchor_world - before) > 0.02; }))
       << "the drag did not move the ball";
+  // Marked dragged while the button is down (its light held), no longer once released.
+  EXPECT_TRUE(pipeline_->object(0).dragging);
+  ASSERT_EQ(xdotool("mouseup 1"), 0);
+  ASSERT_TRUE(TickUntil(ui, [&] { return !pipeline_->object(0).dragging; })) << "the release did not end the drag";
   const Image8 dragged = Shot(window, ui);
   const Blob moved = DiffBlob(without, dragged, from_x + 100 - 80, from_y - 80, from_x + 100 + 80, from_y + 80);
   ASSERT_GT(moved.count, 400);
