@@ -279,6 +279,35 @@ int FinishSession(const LivePipeline& pipeline, const std::string& session_dir, 
   return 0;
 }
 
+// The pipeline's options from the command line and the camera.
+LiveOptions LiveOptionsFor(const LiveArgs& a, const CameraIntrinsics& camera, bool synthetic) {
+  LiveOptions options;
+  options.preset = a.preset;
+  options.tracker = TrackerOptions::Preset(a.tracker_preset);
+  options.response = !a.response.empty() ? a.response : (synthetic ? "display" : "srgb");
+  options.hud = !a.no_hud;
+  // The display path rewrites only what the insertion changed, so a 1280x720
+  // frame composites at its own size within the frame budget (bench live).
+  options.render_divisor =
+      a.render_divisor > 0 ? a.render_divisor : (camera.width > 1280 || camera.height > 720 ? 2 : 1);
+  // The alongside and layers views (a NeRF rendering: its cost grows with
+  // its pixels) keep the size they had when frames wider than 480 px were
+  // composited at half size: a quarter of the frame, not half of it.
+  if (a.render_divisor == 0 && options.render_divisor == 1 && camera.width > 480) options.alongside_scale = 0.25;
+  return options;
+}
+
+// The loaded objects as the pipeline borrows them.
+std::vector<LiveAsset> AssetsOf(const std::vector<LiveObjectAsset>& objects) {
+  std::vector<LiveAsset> assets;
+  for (const LiveObjectAsset& o : objects) {
+    const auto map = [](const std::optional<ImageF>& m) { return m ? &*m : nullptr; };
+    assets.push_back({o.name, &o.mesh, o.field ? &*o.field : nullptr, o.material, map(o.maps.albedo),
+                      map(o.maps.roughness), map(o.maps.metallic)});
+  }
+  return assets;
+}
+
 }  // namespace
 
 int RunLive(const CommandArgs& args) {
@@ -309,25 +338,8 @@ int RunLive(const CommandArgs& args) {
   std::string used_camera;
   const CameraIntrinsics camera = ChooseCamera(a, synthetic, scene, paths, &used_camera);
   const Board board = ChooseBoard(a, synthetic, scene);
-  LiveOptions options;
-  options.preset = a.preset;
-  options.tracker = TrackerOptions::Preset(a.tracker_preset);
-  options.response = !a.response.empty() ? a.response : (synthetic != nullptr ? "display" : "srgb");
-  options.hud = !a.no_hud;
-  // The display path rewrites only what the insertion changed, so a 1280x720
-  // frame composites at its own size within the frame budget (bench live).
-  options.render_divisor =
-      a.render_divisor > 0 ? a.render_divisor : (camera.width > 1280 || camera.height > 720 ? 2 : 1);
-  // The alongside and layers views (a NeRF rendering: its cost grows with
-  // its pixels) keep the size they had when frames wider than 480 px were
-  // composited at half size: a quarter of the frame, not half of it.
-  if (a.render_divisor == 0 && options.render_divisor == 1 && camera.width > 480) options.alongside_scale = 0.25;
-  std::vector<LiveAsset> assets;
-  for (const LiveObjectAsset& o : objects) {
-    const auto map = [](const std::optional<ImageF>& m) { return m ? &*m : nullptr; };
-    assets.push_back({o.name, &o.mesh, o.field ? &*o.field : nullptr, o.material, map(o.maps.albedo),
-                      map(o.maps.roughness), map(o.maps.metallic)});
-  }
+  const LiveOptions options = LiveOptionsFor(a, camera, synthetic != nullptr);
+  const std::vector<LiveAsset> assets = AssetsOf(objects);
   source =
       ReconnectOnLoss(std::move(source), [&a, source_options] { return OpenSource(a.source_name, source_options); });
   LivePipeline pipeline(*source, board, camera, *scene.field, scene.env.lobes, assets, options);
