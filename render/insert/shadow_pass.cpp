@@ -592,28 +592,45 @@ class KappaPass {
     return value;
   }
 
+  // x's cell in a lattice of `spacing` (the lattice's frame: x − shift_):
+  // its lowest node and x's fractions along the axes.
+  struct LatticeCell {
+    int64_t i, j, k;
+    double wx, wy, wz;
+    // A corner (bits x, y, z): its node and trilinear weight.
+    int64_t I(int corner) const { return i + (corner & 1); }
+    int64_t J(int corner) const { return j + ((corner >> 1) & 1); }
+    int64_t K(int corner) const { return k + (corner >> 2); }
+    double Weight(int corner) const {
+      return (corner & 1 ? wx : 1 - wx) * ((corner >> 1) & 1 ? wy : 1 - wy) * (corner >> 2 ? wz : 1 - wz);
+    }
+  };
+  LatticeCell CellAt(const Vec3f& x, double spacing) const {
+    const double fx = (x.x - shift_.x) / spacing, fy = (x.y - shift_.y) / spacing, fz = (x.z - shift_.z) / spacing;
+    const double bx = std::floor(fx), by = std::floor(fy), bz = std::floor(fz);
+    return {int64_t(bx), int64_t(by), int64_t(bz), fx - bx, fy - by, fz - bz};
+  }
+  // Nodes that hardly count are not computed (a receiver plane on a lattice
+  // plane would otherwise pull in the layer beyond it).
+  static constexpr double kMinCornerWeight = 1e-3;
+
   // Trilinear κ over the top level's nodes around x for x's normal cell,
   // through this thread's corner values and memo.
   float CoarseLatticeKappa(const Vec3f& x, uint32_t cell, ThreadScratch& sc, size_t row, Spread* spread) {
-    const double fx = (x.x - shift_.x) / spacing_, fy = (x.y - shift_.y) / spacing_, fz = (x.z - shift_.z) / spacing_;
-    const double bx = std::floor(fx), by = std::floor(fy), bz = std::floor(fz);
-    const double wx = fx - bx, wy = fy - by, wz = fz - bz;
-    const uint64_t corner_key = LatticeKey(int64_t(bx), int64_t(by), int64_t(bz), cell);
+    const LatticeCell c = CellAt(x, spacing_);
+    const uint64_t corner_key = LatticeKey(c.i, c.j, c.k, cell);
     if (corner_key != sc.corner_key) {
       sc.corner_key = corner_key;
       sc.corner_value.fill(-1.0f);
     }
     double sum = 0.0, total = 0.0;
     for (int corner = 0; corner < 8; ++corner) {
-      const int dx = corner & 1, dy = (corner >> 1) & 1, dz = corner >> 2;
-      const double weight = (dx ? wx : 1 - wx) * (dy ? wy : 1 - wy) * (dz ? wz : 1 - wz);
-      // Nodes that hardly count are not computed (a receiver plane on a
-      // lattice plane would otherwise pull in the layer beyond it).
-      if (weight < 1e-3) continue;
+      const double weight = c.Weight(corner);
+      if (weight < kMinCornerWeight) continue;
       total += weight;
       float& cached = sc.corner_value[size_t(corner)];
       if (cached < 0.0f) {
-        const int64_t i = int64_t(bx) + dx, j = int64_t(by) + dy, k = int64_t(bz) + dz;
+        const int64_t i = c.I(corner), j = c.J(corner), k = c.K(corner);
         const uint64_t key = LatticeKey(i, j, k, cell);
         const size_t slot = LatticeMemo::Slot(key);
         if (sc.memo.key[slot] != key || sc.memo.value[slot] < 0.0f) {
@@ -633,16 +650,13 @@ class KappaPass {
   // reached only inside a sharp penumbra, straight from the level's table.
   float FineLatticeKappa(KappaLattice& lattice, double spacing, const Vec3f& x, uint32_t cell, ThreadScratch& sc,
                          size_t row, Spread* spread) {
-    const double fx = (x.x - shift_.x) / spacing, fy = (x.y - shift_.y) / spacing, fz = (x.z - shift_.z) / spacing;
-    const double bx = std::floor(fx), by = std::floor(fy), bz = std::floor(fz);
-    const double wx = fx - bx, wy = fy - by, wz = fz - bz;
+    const LatticeCell c = CellAt(x, spacing);
     double sum = 0.0, total = 0.0;
     for (int corner = 0; corner < 8; ++corner) {
-      const int dx = corner & 1, dy = (corner >> 1) & 1, dz = corner >> 2;
-      const double weight = (dx ? wx : 1 - wx) * (dy ? wy : 1 - wy) * (dz ? wz : 1 - wz);
-      if (weight < 1e-3) continue;
+      const double weight = c.Weight(corner);
+      if (weight < kMinCornerWeight) continue;
       total += weight;
-      const int64_t i = int64_t(bx) + dx, j = int64_t(by) + dy, k = int64_t(bz) + dz;
+      const int64_t i = c.I(corner), j = c.J(corner), k = c.K(corner);
       const float value = NodeKappa(lattice, LatticeKey(i, j, k, cell),
                                     Vec3f(Vec3(double(i), double(j), double(k)) * spacing), cell, sc, row);
       sum += weight * value;
