@@ -31,6 +31,7 @@ struct CellPlane {
 struct ThreadScratch {
   KappaScratch kappa;
   LatticeMemo memo;
+  std::array<LatticeMemo, kKappaFineLevels> fine_memo;  // the same for each fine level
   // The eight nodes around the last receiver (its lattice cell and normal
   // cell `corner_key`; value −1: not fetched yet): receivers a few pixels
   // apart mostly share one lattice cell, and then need no key or memo probe.
@@ -48,6 +49,7 @@ ThreadScratch& ScratchFor(uint64_t pass) {
   thread_local uint64_t scratch_pass = 0;
   if (scratch_pass != pass) {
     scratch.memo = LatticeMemo{};
+    scratch.fine_memo.fill(LatticeMemo{});
     scratch.corner_key = ~uint64_t(0);
     scratch.kappa.cw_light = nullptr;  // the lights may have changed
     scratch_pass = pass;
@@ -392,20 +394,27 @@ class KappaPass {
       cache_owner_->Clear();
       cache_owner_->key = std::move(key);
     }
-    ShiftLattice(dragged ? in_.drag->kappa_shift : Vec3{});
+    // While the lattice moves with a dragged object, the top level alone:
+    // the fine levels' nodes lie closer than the receivers' travel between
+    // frames, so each frame would compute them anew; a frame where nothing
+    // moved (and the one after the release) refines as a still one does.
+    const bool moved = ShiftLattice(dragged ? in_.drag->kappa_shift : Vec3{});
+    levels_ = dragged && moved ? 0 : kKappaFineLevels;
     cache_owner_->Publish();  // the last frame's nodes: read without locks this frame
     cache_ = cache_owner_.get();
   }
 
   // The lattice's nodes moved with the objects: the views passed whole and
   // the last layer no longer hold (the receivers sit elsewhere relative to
-  // the objects); the nodes themselves do.
-  void ShiftLattice(const Vec3& shift) {
+  // the objects); the nodes themselves do. Whether they moved since the
+  // last frame.
+  bool ShiftLattice(const Vec3& shift) {
     shift_ = shift;
-    if (cache_owner_->shift == shift) return;
+    if (cache_owner_->shift == shift) return false;
     cache_owner_->shift = shift;
     cache_owner_->explored.clear();
     cache_owner_->last_view.reset();
+    return true;
   }
 
   // A view already passed whole under this cache (receivers marched by the
@@ -555,7 +564,8 @@ class KappaPass {
   // penumbra (its corners disagree and the penumbra is narrower than the
   // cell) and the cell is wider than what one κ sample covers on screen
   // (finer nodes than samples would be computed anew as the camera moves).
-  // Every level's nodes are kept across frames.
+  // Every level's nodes are kept across frames; a dragged object's κ keeps to
+  // the top level (UseLattice).
   float ExactOrLatticeKappa(const Vec3f& x, const Vec3f& n, ThreadScratch& sc, size_t row) {
     if (cache_ == nullptr) return ExactKappa(x, n, sc, row);
     ++receivers_per_row_[row];
@@ -564,9 +574,9 @@ class KappaPass {
     for (size_t level = 0;; ++level, spacing *= 0.5) {
       Spread spread;
       const float k = level == 0 ? CoarseLatticeKappa(x, cell, sc, row, &spread)
-                                 : FineLatticeKappa(cache_->fine[level - 1], spacing, x, cell, sc, row, &spread);
-      if (level == kKappaFineLevels || spread.highest - spread.lowest <= delta_lattice_ ||
-          !PenumbraNarrowerThan(x, spacing) || !WiderThanAPixel(x, spacing))
+                                 : FineLatticeKappa(level - 1, spacing, x, cell, sc, row, &spread);
+      if (level == levels_ || spread.highest - spread.lowest <= delta_lattice_ || !PenumbraNarrowerThan(x, spacing) ||
+          !WiderThanAPixel(x, spacing))
         return k;
     }
   }
@@ -646,10 +656,12 @@ class KappaPass {
     return total > 0.0 ? static_cast<float>(std::clamp(sum / total, 0.0, 1.0)) : 1.0f;
   }
 
-  // Trilinear κ over a finer level's nodes (spacing `spacing`) around x:
-  // reached only inside a sharp penumbra, straight from the level's table.
-  float FineLatticeKappa(KappaLattice& lattice, double spacing, const Vec3f& x, uint32_t cell, ThreadScratch& sc,
-                         size_t row, Spread* spread) {
+  // Trilinear κ over fine level `fine`'s nodes (spacing `spacing`) around
+  // x, through this thread's memo of the level: reached only inside a sharp
+  // penumbra.
+  float FineLatticeKappa(size_t fine, double spacing, const Vec3f& x, uint32_t cell, ThreadScratch& sc, size_t row,
+                         Spread* spread) {
+    LatticeMemo& memo = sc.fine_memo[fine];
     const LatticeCell c = CellAt(x, spacing);
     double sum = 0.0, total = 0.0;
     for (int corner = 0; corner < 8; ++corner) {
@@ -657,8 +669,14 @@ class KappaPass {
       if (weight < kMinCornerWeight) continue;
       total += weight;
       const int64_t i = c.I(corner), j = c.J(corner), k = c.K(corner);
-      const float value = NodeKappa(lattice, LatticeKey(i, j, k, cell),
-                                    Vec3f(Vec3(double(i), double(j), double(k)) * spacing), cell, sc, row);
+      const uint64_t key = LatticeKey(i, j, k, cell);
+      const size_t slot = LatticeMemo::Slot(key);
+      if (memo.key[slot] != key || memo.value[slot] < 0.0f) {
+        memo.key[slot] = key;
+        memo.value[slot] =
+            NodeKappa(cache_->fine[fine], key, Vec3f(Vec3(double(i), double(j), double(k)) * spacing), cell, sc, row);
+      }
+      const float value = memo.value[slot];
       sum += weight * value;
       spread->Add(value);
     }
@@ -1136,12 +1154,13 @@ class KappaPass {
   PixelRect rect_;               // κ's pixels this frame
   KappaSpacing spacing_px_;
   float smallest_ = std::numeric_limits<float>::infinity();  // the smallest caster's radius
-  KappaCache* cache_ = nullptr;    // the lattice and last layer; nullptr: κ exact per receiver
-  double spacing_ = 0.0;           // the lattice's spacing, metres
-  Vec3 shift_;                     // the lattice's nodes lie at world point node + shift_ (KappaCache::shift)
-  double penumbra_per_metre_ = 1;  // the sharpest light's penumbra width per metre from the caster
-  float delta_lattice_ = 0;        // corners further apart than this are not interpolated (when sharp)
-  double sample_angle_ = 0;        // radians between κ samples on screen (kappa_step pixels)
+  KappaCache* cache_ = nullptr;       // the lattice and last layer; nullptr: κ exact per receiver
+  double spacing_ = 0.0;              // the lattice's spacing, metres
+  Vec3 shift_;                        // the lattice's nodes lie at world point node + shift_ (KappaCache::shift)
+  double penumbra_per_metre_ = 1;     // the sharpest light's penumbra width per metre from the caster
+  float delta_lattice_ = 0;           // corners further apart than this are not interpolated (when sharp)
+  double sample_angle_ = 0;           // radians between κ samples on screen (kappa_step pixels)
+  size_t levels_ = kKappaFineLevels;  // fine lattice levels used this frame
   ViewKey view_;
 
   // The grid: nodes at pixel columns xs_, rows ys_; coarse nodes cx_, cy_
