@@ -19,7 +19,6 @@
 #include "calib/core/exr.h"
 #include "calib/core/image_io.h"
 #include "calib/core/log.h"
-#include "calib/core/option_fields.h"
 #include "calib/core/parallel.h"
 #include "calib/dataset.h"
 #include "calib/object.h"
@@ -479,25 +478,12 @@ InsertOptions PresetWithOverrides(const char* preset) {
       ThrowInputError("NERFAR_BENCH_INSERT_OFF", "'" + item + "' (expected snap, skip_covered or both)");
     }
   }
-  // NERFAR_BENCH_INSERT_KNOBS="kappa_step=4,shadow_reach_radii=8,...": κ
-  // and shading knobs set over the preset (to attribute one preset's cost
-  // against another's), through the --set parser: an unknown name or a bad
-  // value stops the bench.
-  InsertOptions& o = insert_options;
-  const std::vector<OptionField> knobs = {FieldOf("kappa_step", &o.kappa_step),
-                                          FieldOf("kappa_coarse_factor", &o.kappa_coarse_factor),
-                                          FieldOf("kappa_refine_delta", &o.kappa_refine_delta),
-                                          FieldOf("shadow_reach_radii", &o.shadow_reach_radii),
-                                          FieldOf("shadow_epsilon", &o.shadow_epsilon),
-                                          FieldOf("kappa_cache_spacing_radii", &o.kappa_cache_spacing_radii),
-                                          FieldOf("occlusion_step", &o.occlusion_step),
-                                          FieldOf("parallax", &o.light.parallax),
-                                          FieldOf("shade_step", &o.shade_step),
-                                          FieldOf("shade_refine_delta", &o.shade_refine_delta),
-                                          FieldOf("shade_refine_angle_deg", &o.shade_refine_angle_deg),
-                                          FieldOf("shade_specular_on_grid", &o.shade_specular_on_grid)};
+  // NERFAR_BENCH_INSERT_KNOBS="kappa_step=4,shadow_reach_radii=8,...": any
+  // of `nerfar insert --set`'s keys set over the preset (to attribute one
+  // preset's cost against another's), through the same InsertOptions::Set:
+  // an unknown name or a bad value stops the bench.
   for (const std::string& item : SplitList(BenchVariable("NERFAR_BENCH_INSERT_KNOBS")))
-    SetOptionField(knobs, item, "NERFAR_BENCH_INSERT_KNOBS");
+    insert_options.Set(item, "NERFAR_BENCH_INSERT_KNOBS");
   return insert_options;
 }
 

@@ -24,7 +24,7 @@ const std::vector<BenchVariableInfo>& BenchVariables() {
       {"NERFAR_BENCH_ENV_TRADE_ONLY", "env", "1: only the pixels x rays cells"},
       {"NERFAR_BENCH_INSERT_PRESETS", "insert", "presets timed on the bench frame (none: none)"},
       {"NERFAR_BENCH_INSERT_GT", "insert", "0: skip the quality with ground-truth inputs"},
-      {"NERFAR_BENCH_INSERT_KNOBS", "insert", "name=value,...: kappa and shading knobs over the preset"},
+      {"NERFAR_BENCH_INSERT_KNOBS", "insert", "key=value,...: any `nerfar insert --set` key over the preset"},
       {"NERFAR_BENCH_INSERT_PARALLAX", "insert", "0: near-light parallax off"},
       {"NERFAR_BENCH_INSERT_OFF", "insert", "snap,skip_covered: those kappa savings off"},
       {"NERFAR_BENCH_INSERT_SUN", "insert, live", "sharpness: also a small, very bright sun in the light"},

@@ -22,6 +22,7 @@ namespace nerfar {
 int RunBake(const CommandArgs& args) {
   std::string object, material_path, output, preset = "balanced";
   int grid = -1, dirs = -1, components = -1, bisection = -1;
+  std::vector<std::string> sets;
   ArgParser parser("bake", "Bake the SSDF visibility field of a virtual object (its shadows and self-shadows).");
   parser.Positional("OBJECT", &object, "mesh (.obj .ply .gltf .glb) or object JSON naming its mesh");
   parser.Option("-o", &output, "FILE", "the field to write (.ssdf)");
@@ -32,13 +33,16 @@ int RunBake(const CommandArgs& args) {
   parser.Option("--dirs", &dirs, "R", "octahedral direction map resolution, R x R per point (balanced: 32)");
   parser.Option("--components", &components, "K", "PCA components kept (balanced: 32)");
   parser.Option("--bisection-steps", &bisection, "S", "silhouette refinement rays per crossing (balanced: 6)");
-  parser.Epilog(
-      "presets (measured in docs/BENCHMARKS.md, section ssdf):\n"
-      "  fast      grid 16, dirs 24, components 16, bisection 4\n"
-      "  balanced  grid 16, dirs 32, components 32, bisection 6\n"
-      "  accurate  grid 16, dirs 64, components 64, bisection 8\n"
-      "example:\n"
-      "  nerfar bake ../shared/scenes/objects/monkey_diffuse.json -o monkey.ssdf --preset fast\n");
+  parser.Option("--set", &sets, "KEY=VALUE",
+                "set one option of the list below (repeatable; applied after --preset and the named flags)");
+  parser.Epilog("Options (--set KEY=VALUE; the guide's bake table): " + SsdfBakeOptions::Preset("balanced").ToJson() +
+                "\n" +
+                "presets (measured in docs/BENCHMARKS.md, section ssdf):\n"
+                "  fast      grid 16, dirs 24, components 16, bisection 4\n"
+                "  balanced  grid 16, dirs 32, components 32, bisection 6\n"
+                "  accurate  grid 16, dirs 64, components 64, bisection 8\n"
+                "example:\n"
+                "  nerfar bake ../shared/scenes/objects/monkey_diffuse.json -o monkey.ssdf --preset fast\n");
   if (!parser.Parse(args)) return 0;
 
   SsdfBakeOptions options = SsdfBakeOptions::Preset(preset);
@@ -46,6 +50,7 @@ int RunBake(const CommandArgs& args) {
   if (dirs != -1) options.dirs = dirs;
   if (components != -1) options.components = components;
   if (bisection != -1) options.bisection_steps = bisection;
+  for (const std::string& item : sets) options.Set(item);
   if (const std::vector<std::string> problems = options.Validate(); !problems.empty()) {
     Problems list("nerfar bake");
     for (const std::string& p : problems) list.Add("", p);

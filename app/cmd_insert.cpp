@@ -1,5 +1,6 @@
 // nerfar insert --nerf scene.nerf --env env.json --object object.ssdf --pose pose.json
 //               --dataset DIR --split test -o OUT [--frames DIR] [--background images|nerf] [--preset P]
+//               [--set KEY=VALUE]...
 // Inserts one or more virtual objects (paper §4.4) into every view of a
 // dataset split: OUT/r_XXX.exr composites named like the dataset's images,
 // OUT/r_XXX.png tone-mapped, the layers OUT/r_XXX_object.exr, _alpha.exr and
@@ -123,6 +124,7 @@ struct InsertArgs {
   std::string nerf_path, env_path, dataset_dir, split = "test", output, frames_dir, background = "images";
   std::string preset = "balanced", light_source, truth_dir, light_probe, probe_distances;
   std::vector<std::string> object_paths, pose_paths, mesh_paths, material_paths;
+  std::vector<std::string> sets;  // --set KEY=VALUE, in the order given
   int light_directions = -1, sg_lobes = -1, kappa_step = -1, shade_step = -1, occlusion_step = -1;
   int kappa_sample_bins = -1, light_refine_rays = -1, seen_views = -1;
   double kappa_cache = -1, receiver_reuse = -1, kappa_refine_delta = -1, parallax_min_sharpness = -1;
@@ -175,6 +177,9 @@ void AddInputFlags(ArgParser& parser, InsertArgs& a) {
                 "camera frames named like the dataset's images (default: those images)");
   parser.Option("--background", &a.background, "B", "images (AR over the camera frames, default) or nerf");
   parser.Option("--preset", &a.preset, "P", "fast, balanced (default) or accurate; the knobs below override it");
+  parser.Option("--set", &a.sets, "KEY=VALUE",
+                "set one insertion option of the list at the end (repeatable; applied after --preset and the "
+                "named flags)");
 }
 
 // The stages' knobs (light, κ grid and cache, receivers); their help shows the presets' values.
@@ -300,6 +305,9 @@ void AddTruthFlags(ArgParser& parser, InsertArgs& a) {
   parser.Flag("--truth-geometry", &a.truth_geometry,
               "shadow receivers (and, without --nerf, occlusion) from the truth's depth maps instead of the NeRF");
   parser.Epilog(
+      "Options (--set KEY=VALUE; light_source takes full, near or env; the guide's insert knob table), balanced:\n" +
+      InsertOptions::Preset("balanced").ToJson() +
+      "\n"
       "outputs: OUT/<name>.exr and .png, OUT/<name>_object.exr, _alpha.exr, _kappa.exr, OUT/probe.exr\n"
       "(probe_<i>.exr for further objects), OUT/timings.json, OUT/options.json [, OUT/report.json]\n"
       "with --truth also OUT/probe_samples.exr (the light's rays before the SG fit), OUT/probe_opacity.exr\n"
@@ -410,6 +418,7 @@ InsertOptions InsertOptionsFrom(const InsertArgs& a) {
   if (a.sg_specular) options.prefiltered_specular = false;
   if (a.specular_parallax) options.specular_parallax = true;
   if (a.no_specular_parallax) options.specular_parallax = false;
+  for (const std::string& item : a.sets) options.Set(item);
   return options;
 }
 

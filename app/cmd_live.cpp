@@ -64,7 +64,7 @@ bool ParseVec3(const std::string& text, Vec3& out) {
 struct LiveArgs {
   std::string source_name, scene_dir, camera_path, board_path, output, preset = "fast", tracker_preset = "balanced";
   std::string response, views_text, anchor_text, video_path, sheet_path;
-  std::vector<std::string> object_paths;
+  std::vector<std::string> object_paths, sets;
   int frames = 0, render_divisor = 0;
   double scale = 1.0;
   bool headless = false, realtime = false, auto_place = false, no_hud = false, loop = false;
@@ -112,6 +112,9 @@ std::optional<LiveArgs> ParseLiveArgs(const CommandArgs& args) {
   parser.Option("-o", &a.output, "DIR", "session folder (default SCENE/sessions/<UTC time>)");
   parser.Option("--frames", &a.frames, "N", "stop after N frames (headless default 60; window: until closed)");
   parser.Option("--preset", &a.preset, "P", "insertion preset: fast (default) | balanced | accurate");
+  parser.Option("--set", &a.sets, "KEY=VALUE",
+                "set one insertion option over the preset, also the one switched to (repeatable; the keys: "
+                "`nerfar insert --help`)");
   // balanced by default: on noisy 640x480 frames the fast detector (decimated)
   // lost 8 of 60 frames of the demo stream where balanced lost none.
   parser.Option("--tracker-preset", &a.tracker_preset, "P",
@@ -160,6 +163,9 @@ std::optional<LiveArgs> ParseLiveArgs(const CommandArgs& args) {
     usage.Add("--preset", "'" + a.preset + "' (expected fast, balanced or accurate)");
   if (a.tracker_preset != "fast" && a.tracker_preset != "balanced" && a.tracker_preset != "accurate")
     usage.Add("--tracker-preset", "'" + a.tracker_preset + "' (expected fast, balanced or accurate)");
+  usage.ThrowIfAny();
+  // An unknown key or a bad value stops here (InputError); one out of range too.
+  for (const std::string& problem : LiveInsertOptions(a.preset, a.sets).Validate()) usage.Add("--set", problem);
   usage.ThrowIfAny();
   return a;
 }
@@ -283,6 +289,7 @@ int FinishSession(const LivePipeline& pipeline, const std::string& session_dir, 
 LiveOptions LiveOptionsFor(const LiveArgs& a, const CameraIntrinsics& camera, bool synthetic) {
   LiveOptions options;
   options.preset = a.preset;
+  options.insert_sets = a.sets;
   options.tracker = TrackerOptions::Preset(a.tracker_preset);
   options.response = !a.response.empty() ? a.response : (synthetic ? "display" : "srgb");
   options.hud = !a.no_hud;

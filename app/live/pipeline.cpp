@@ -145,6 +145,12 @@ Image8 ArBase(Image8 frame, int divisor) {
 
 }  // namespace
 
+InsertOptions LiveInsertOptions(const std::string& preset, const std::vector<std::string>& sets) {
+  InsertOptions options = InsertOptions::Preset(preset);
+  for (const std::string& item : sets) options.Set(item);
+  return options;
+}
+
 std::vector<std::string> LiveOptions::Validate() const {
   std::vector<std::string> p;
   if (preset != "fast" && preset != "balanced" && preset != "accurate")
@@ -189,7 +195,8 @@ LivePipeline::LivePipeline(FrameSource& source, const Board& board, const Camera
     problems.ThrowIfAny();
   }
   tracker_ = std::make_unique<Tracker>(board, camera_, options_.tracker);
-  inserter_ = std::make_unique<Inserter>(scene_, std::move(environment), InsertOptions::Preset(options_.preset));
+  inserter_ = std::make_unique<Inserter>(scene_, std::move(environment),
+                                         LiveInsertOptions(options_.preset, options_.insert_sets));
   preset_ = options_.preset;
   hud_on_.store(options_.hud);
   for (const LiveAsset& a : assets_) {
@@ -212,7 +219,7 @@ void LivePipeline::set_object(size_t i, const LiveObjectState& state) {
 }
 
 void LivePipeline::set_preset(const std::string& preset) {
-  (void)InsertOptions::Preset(preset);  // InputError for an unknown name
+  (void)LiveInsertOptions(preset, options_.insert_sets);  // InputError for an unknown name
   std::lock_guard<std::mutex> lock(edit_mutex_);
   if (preset != preset_) preset_changed_ = true;
   preset_ = preset;
@@ -571,7 +578,7 @@ LiveFrame LivePipeline::Process(Captured captured) {
     std::lock_guard<std::mutex> lock(edit_mutex_);
     states = states_;
     if (preset_changed_) {
-      inserter_->set_options(InsertOptions::Preset(preset_));
+      inserter_->set_options(LiveInsertOptions(preset_, options_.insert_sets));
       preset_changed_ = false;
     }
   }

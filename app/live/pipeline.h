@@ -70,6 +70,9 @@ struct LiveObjectState {
 
 struct LiveOptions {
   std::string preset = "fast";  // insertion preset (render/insert): fast | balanced | accurate
+  // `--set KEY=VALUE` items (InsertOptions::Set) over whichever preset is in
+  // use, the one switched to in the window included.
+  std::vector<std::string> insert_sets;
   TrackerOptions tracker = TrackerOptions::Preset("fast");
   // How 8-bit frames map to linear light: "display" (the synthetic camera's
   // sRGB of Reinhard x/(1+x), inverted) or "srgb" (a plain sRGB camera).
@@ -93,6 +96,10 @@ struct LiveOptions {
 
   std::vector<std::string> Validate() const;
 };
+
+// The insertion options of `preset` with the `sets` over them, in order;
+// InputError for an unknown preset, key or value.
+InsertOptions LiveInsertOptions(const std::string& preset, const std::vector<std::string>& sets);
 
 // Views (bit flags): the pipeline only renders what is shown.
 enum LiveView : int { kViewAr = 1, kViewAlongside = 2, kViewLayers = 4 };

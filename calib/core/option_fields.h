@@ -1,7 +1,8 @@
 // The one `--set key=value` parser: an options struct lists its fields
-// (name, kind, address) once, and every command that takes `--set`
-// (nerfar train, nerfar env) sets them and echoes them through these two
-// functions, so parsing, errors and the echo are the same everywhere.
+// (name, kind, address) once, and every command that takes `--set` (nerfar
+// train, env, bake, insert, live; NERFAR_BENCH_INSERT_KNOBS) sets them and
+// echoes them through these two functions, so parsing, errors and the echo
+// are the same everywhere.
 //
 // Values: kInt and kU64 take whole numbers in the type's range (1e3 is 1000;
 // kU64 none below 0), kDouble and kFloat any finite number, kBool true or

@@ -95,55 +95,76 @@ std::vector<std::string> InsertOptions::Validate() const {
   return problems;
 }
 
+std::vector<OptionField> InsertOptions::Fields() {
+  IncidentLightOptions& l = light;
+  SgFitOptions& fit = light.fit;
+  return {FieldOf("light_directions", &l.directions),
+          FieldOf("light_move_threshold_m", &l.move_threshold_m),
+          FieldOf("light_parallax", &l.parallax),
+          FieldOf("light_parallax_min_sharpness", &l.parallax_min_sharpness),
+          FieldOf("light_start_outside_object", &l.start_outside_object),
+          FieldOf("light_start_tolerance_m", &l.start_tolerance_m),
+          FieldOf("light_refine_rays", &l.refine_rays),
+          FieldOf("light_refine_contrast", &l.refine_contrast),
+          FieldOf("light_analytic_compact_lobes", &l.analytic_compact_lobes),
+          FieldOf("light_lobe_bundle_rays", &l.lobe_bundle_rays),
+          FieldOf("sg_lobes", &fit.lobes),
+          FieldOf("sg_cold_iterations", &fit.cold_iterations),
+          FieldOf("sg_warm_iterations", &fit.warm_iterations),
+          FieldOf("sg_hdr_floor", &fit.hdr_floor),
+          FieldOf("sg_min_sharpness", &fit.min_sharpness),
+          FieldOf("sg_max_sharpness", &fit.max_sharpness),
+          FieldOf("sg_tolerance", &fit.tolerance),
+          FieldOf("sg_adam_iterations", &fit.adam_iterations),
+          FieldOf("sg_adam_step", &fit.adam_step),
+          FieldOf("self_shadow", &self_shadow),
+          FieldOf("self_shadow_horizon", &self_shadow_horizon),
+          FieldOf("self_shadow_offset_radii", &self_shadow_offset_radii),
+          FieldOf("self_shadow_per_vertex", &self_shadow_per_vertex),
+          FieldOf("prefiltered_specular", &prefiltered_specular),
+          FieldOf("specular_levels", &specular_levels),
+          FieldOf("specular_parallax", &specular_parallax),
+          FieldOf("specular_parallax_iterations", &specular_parallax_iterations),
+          FieldOf("shade_step", &shade_step),
+          FieldOf("shade_refine_delta", &shade_refine_delta),
+          FieldOf("shade_refine_angle_deg", &shade_refine_angle_deg),
+          FieldOf("shade_specular_on_grid", &shade_specular_on_grid),
+          FieldOf("antialias_edges", &antialias_edges),
+          FieldOf("occlusion_step", &occlusion_step),
+          FieldOf("occlusion_clear_opacity", &occlusion_clear_opacity),
+          FieldOf("shadows", &shadows),
+          FieldOf("shadow_reach_radii", &shadow_reach_radii),
+          FieldOf("shadow_epsilon", &shadow_epsilon),
+          FieldOf("shadow_epsilon_snap", &shadow_epsilon_snap),
+          FieldOf("kappa_from_samples", &kappa_from_samples),
+          FieldOf("kappa_sample_bins", &kappa_sample_bins),
+          FieldOf("kappa_sample_min_radius", &kappa_sample_min_radius),
+          FieldOf("kappa_step", &kappa_step),
+          FieldOf("kappa_grid_width", &kappa_grid_width),
+          FieldOf("kappa_skip_covered", &kappa_skip_covered),
+          FieldOf("kappa_coarse_factor", &kappa_coarse_factor),
+          FieldOf("kappa_refine_delta", &kappa_refine_delta),
+          FieldOf("kappa_plane_upsampling", &kappa_plane_upsampling),
+          FieldOf("receiver_min_opacity", &receiver_min_opacity),
+          FieldOf("kappa_cache_spacing_radii", &kappa_cache_spacing_radii),
+          FieldOf("kappa_receiver_reuse", &kappa_receiver_reuse),
+          FieldOf("receiver_normal_per_cell", &receiver_normal_per_cell),
+          FieldOf("kappa_reuse_tolerance_radii", &kappa_reuse_tolerance_radii)};
+}
+
+void InsertOptions::Set(const std::string& key_value, const std::string& source) {
+  const size_t equals = key_value.find('=');
+  if (equals != std::string::npos && key_value.compare(0, equals, "light_source") == 0) {
+    light.source = ParseLightSource(key_value.substr(equals + 1));
+    return;
+  }
+  SetOptionField(Fields(), key_value, source);
+}
+
 std::string InsertOptions::ToJson() const {
-  nlohmann::json j;
-  j["light_directions"] = light.directions;
-  j["light_move_threshold_m"] = light.move_threshold_m;
+  InsertOptions copy = *this;
+  nlohmann::json j = nlohmann::json::parse(OptionFieldsJson(copy.Fields()));
   j["light_source"] = LightSourceName(light.source);
-  j["light_parallax"] = light.parallax;
-  j["light_parallax_min_sharpness"] = light.parallax_min_sharpness;
-  j["light_start_outside_object"] = light.start_outside_object;
-  j["light_start_tolerance_m"] = light.start_tolerance_m;
-  j["light_refine_rays"] = light.refine_rays;
-  j["light_refine_contrast"] = light.refine_contrast;
-  j["light_analytic_compact_lobes"] = light.analytic_compact_lobes;
-  j["light_lobe_bundle_rays"] = light.lobe_bundle_rays;
-  j["sg_lobes"] = light.fit.lobes;
-  j["sg_cold_iterations"] = light.fit.cold_iterations;
-  j["sg_warm_iterations"] = light.fit.warm_iterations;
-  j["self_shadow"] = self_shadow;
-  j["self_shadow_horizon"] = self_shadow_horizon;
-  j["self_shadow_offset_radii"] = self_shadow_offset_radii;
-  j["shadows"] = shadows;
-  j["shadow_reach_radii"] = shadow_reach_radii;
-  j["shadow_epsilon"] = shadow_epsilon;
-  j["shadow_epsilon_snap"] = shadow_epsilon_snap;
-  j["kappa_skip_covered"] = kappa_skip_covered;
-  j["self_shadow_per_vertex"] = self_shadow_per_vertex;
-  j["prefiltered_specular"] = prefiltered_specular;
-  j["specular_levels"] = specular_levels;
-  j["specular_parallax"] = specular_parallax;
-  j["specular_parallax_iterations"] = specular_parallax_iterations;
-  j["shade_step"] = shade_step;
-  j["shade_refine_delta"] = shade_refine_delta;
-  j["shade_refine_angle_deg"] = shade_refine_angle_deg;
-  j["shade_specular_on_grid"] = shade_specular_on_grid;
-  j["antialias_edges"] = antialias_edges;
-  j["kappa_from_samples"] = kappa_from_samples;
-  j["kappa_sample_bins"] = kappa_sample_bins;
-  j["kappa_sample_min_radius"] = kappa_sample_min_radius;
-  j["occlusion_step"] = occlusion_step;
-  j["occlusion_clear_opacity"] = occlusion_clear_opacity;
-  j["kappa_cache_spacing_radii"] = kappa_cache_spacing_radii;
-  j["kappa_plane_upsampling"] = kappa_plane_upsampling;
-  j["kappa_receiver_reuse"] = kappa_receiver_reuse;
-  j["receiver_normal_per_cell"] = receiver_normal_per_cell;
-  j["kappa_reuse_tolerance_radii"] = kappa_reuse_tolerance_radii;
-  j["kappa_step"] = kappa_step;
-  j["kappa_coarse_factor"] = kappa_coarse_factor;
-  j["kappa_grid_width"] = kappa_grid_width;
-  j["kappa_refine_delta"] = kappa_refine_delta;
-  j["receiver_min_opacity"] = receiver_min_opacity;
   return j.dump();
 }
 

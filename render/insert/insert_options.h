@@ -5,6 +5,7 @@
 #include <string>
 #include <vector>
 
+#include "calib/core/option_fields.h"
 #include "render/lighting/incident_light.h"
 
 namespace nerfar {
@@ -167,7 +168,17 @@ struct InsertOptions {
   static InsertOptions Preset(const std::string& name);
   // Every problem as "field: what is wrong (what was expected)".
   std::vector<std::string> Validate() const;
-  // The effective options as JSON text (logged by every job).
+  // Every field under the name `--set` and ToJson give it (the light's
+  // fields prefixed light_, its SG fit's sg_), but the two enums: the light
+  // source and the SG fit's method (named flags; ToJson writes the source).
+  std::vector<OptionField> Fields();
+  // Sets one field from "key=value" (`nerfar insert --set`, `nerfar live
+  // --set`, NERFAR_BENCH_INSERT_KNOBS: SOURCE names which): a key of Fields()
+  // or light_source=full|near|env; InputError naming the key when it is
+  // unknown or its value is not of the field's kind.
+  void Set(const std::string& key_value, const std::string& source = "--set");
+  // The effective options as one compact JSON object, keys in alphabetical
+  // order (logged by every job, OUT/options.json): Fields() and light_source.
   std::string ToJson() const;
 };
 

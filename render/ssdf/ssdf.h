@@ -24,6 +24,7 @@
 
 #include "calib/core/error.h"
 #include "calib/core/math.h"
+#include "calib/core/option_fields.h"
 #include "calib/object.h"
 #include "render/mesh/mesh.h"
 
@@ -59,7 +60,13 @@ struct SsdfBakeOptions {
   static SsdfBakeOptions Preset(const std::string& name);
   // Every problem, as "field: what is wrong (expected)"; empty when valid.
   std::vector<std::string> Validate() const;
-  // The effective options as a one-line JSON object (logged and stored in the file).
+  // Every field under its own name (`nerfar bake --set`).
+  std::vector<OptionField> Fields();
+  // Sets one field from "key=value" (`nerfar bake --set`); InputError naming
+  // the key when it is unknown or its value is not of the field's kind.
+  void Set(const std::string& key_value);
+  // The effective options as a one-line JSON object, keys in alphabetical
+  // order (logged and stored in the file).
   std::string ToJson() const;
 };
 

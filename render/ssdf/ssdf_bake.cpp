@@ -6,7 +6,6 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
-#include <nlohmann/json.hpp>
 #include <random>
 #include <sstream>
 
@@ -97,13 +96,16 @@ std::vector<std::string> SsdfBakeOptions::Validate() const {
   return problems;
 }
 
+std::vector<OptionField> SsdfBakeOptions::Fields() {
+  return {FieldOf("grid", &grid), FieldOf("dirs", &dirs), FieldOf("components", &components),
+          FieldOf("bisection_steps", &bisection_steps), FieldOf("grid_extent", &grid_extent)};
+}
+
+void SsdfBakeOptions::Set(const std::string& key_value) { SetOptionField(Fields(), key_value); }
+
 std::string SsdfBakeOptions::ToJson() const {
-  const nlohmann::json j = {{"grid", grid},
-                            {"dirs", dirs},
-                            {"components", components},
-                            {"bisection_steps", bisection_steps},
-                            {"grid_extent", grid_extent}};
-  return j.dump();
+  SsdfBakeOptions copy = *this;
+  return OptionFieldsJson(copy.Fields());
 }
 
 Vec3 SsdSamples::GridPoint(int ix, int iy, int iz) const {

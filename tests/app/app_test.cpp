@@ -160,13 +160,18 @@ TEST(App, LiveHeadlessWritesVideoSheetSessionAndReport) {
   const std::string session = dir.File("session");
   const Result r =
       RunNerfar("live --headless --threads 2 --source synthetic:lamps,size=640x480,spp=1,frames=40 --scene " +
-                dir.path() + " --object " + dir.File("cube.obj") + " -o " + session + " --frames 8");
+                dir.path() + " --object " + dir.File("cube.obj") + " -o " + session + " --frames 8" +
+                " --set kappa_step=3 --set light_source=near");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   for (const char* name : {"live.mp4", "contact_sheet.png", "session.json", "report.json", "report.png", "report.html",
                            "last_ar.png", "last_alongside.png", "last_layers.png"})
     EXPECT_TRUE(std::filesystem::is_regular_file(session + "/" + name)) << name << "\n" << r.output;
   const Json s = ReadJsonFile(session + "/session.json");
   ASSERT_EQ(s.at("frames").size(), 8u);
+  // --set holds over the fast preset (kappa_step 4, light source full).
+  EXPECT_EQ(s.at("insert_options").at("kappa_step"), 3);
+  EXPECT_EQ(s.at("insert_options").at("light_source"), "near");
+  EXPECT_EQ(s.at("insert_options").at("occlusion_step"), 4) << "the fast preset's, untouched";
   const Json report = ReadJsonFile(session + "/report.json");
   EXPECT_EQ(report.at("tracking").at("frames").get<int>(), 8);
   // The synthetic stream knows its poses: the report compares against them.

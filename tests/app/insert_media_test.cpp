@@ -255,6 +255,75 @@ TEST(InsertMedia, AnObjectJsonIsBakedInMemoryAsBakeWritesIt) {
   EXPECT_NE(r.output.find(dir.File("nomesh.json")), std::string::npos) << r.output;
 }
 
+// The text after "(expected one of: " in an unknown-key error: the keys a
+// command's --set knows.
+std::string KnownKeys(const std::string& output) {
+  const std::string marker = "(expected one of: ";
+  const size_t begin = output.find(marker);
+  if (begin == std::string::npos) return "";
+  const size_t end = output.find(')', begin);
+  return output.substr(begin + marker.size(), end - begin - marker.size());
+}
+
+// insert, live and bake take --set KEY=VALUE through the one parser: an
+// unknown key stops each with exit code 2 naming it before anything runs.
+TEST(Knobs, AnUnknownSetKeyExitsTwoNamingIt) {
+  testing::TempDir dir;
+  WriteScene(dir);
+  const std::string insert = "insert --object " + dir.File("box.ssdf") + " --pose " + dir.File("pose.json") +
+                             " --nerf " + dir.File("slab.nerf") + " --dataset " + dir.File("ds") + " -o " +
+                             dir.File("out");
+  for (const std::string& command : {insert, "live --source synthetic --scene " + dir.path() + " --headless --frames 1",
+                                     "bake " + dir.File("box.obj") + " -o " + dir.File("box.ssdf")}) {
+    const Result r = RunNerfar(command + " --set kapa_step=3");
+    EXPECT_EQ(r.exit_code, 2) << command << ": " << r.output;
+    EXPECT_NE(r.output.find("--set kapa_step=3: unknown option 'kapa_step'"), std::string::npos) << r.output;
+    EXPECT_FALSE(fs::exists(dir.File("box.ssdf"))) << "bake wrote its field: " << r.output;
+  }
+  const Result bad = RunNerfar(insert + " --set kappa_step=two");
+  EXPECT_EQ(bad.exit_code, 2) << bad.output;
+  EXPECT_NE(bad.output.find("'two' is not a valid value of kappa_step"), std::string::npos) << bad.output;
+}
+
+// The bench's NERFAR_BENCH_INSERT_KNOBS and insert's --set are one list: the
+// keys either names when refusing an unknown one are the same, and include
+// fields beyond the bench's former hand list of twelve.
+TEST(Knobs, BenchInsertKnobsAndInsertSetKnowTheSameKeys) {
+  const Result insert = RunNerfar("insert --object a.ssdf --pose p.json --nerf n.nerf --dataset d -o o --set x=1");
+  const Result bench =
+      testing::RunCommand("NERFAR_BENCH_INSERT_KNOBS=x=1 " + std::string(NERFAR_BINARY) + " bench insert --quick");
+  EXPECT_EQ(bench.exit_code, 2) << bench.output;
+  const std::string keys = KnownKeys(insert.output);
+  EXPECT_EQ(keys, KnownKeys(bench.output)) << insert.output << "\n" << bench.output;
+  for (const char* key : {"kappa_step", "light_parallax", "antialias_edges", "sg_lobes", "kappa_grid_width"})
+    EXPECT_NE(keys.find(key), std::string::npos) << key << " missing from " << keys;
+}
+
+// A key set changes the effective options, read back from what the command
+// writes: insert's OUT/options.json, bake's logged options. --set applies
+// after the named flag of the same field (both given: --set holds), and a
+// key no named flag has (light_source, kappa_grid_width) takes effect too.
+TEST(Knobs, SetChangesTheEffectiveOptionsAfterTheNamedFlags) {
+  testing::TempDir dir;
+  WriteScene(dir);
+  WriteMeshObj(dir.File("box.obj"), MakeBox({0.03, 0.03, 0.03}));
+  Result r = RunNerfar("bake " + dir.File("box.obj") + " -o " + dir.File("box.ssdf") +
+                       " --preset fast --grid 12 --set grid=9 --set components=8");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find(R"("components":8,)"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find(R"("grid":9,)"), std::string::npos) << r.output;
+  r = RunNerfar("insert --object " + dir.File("box.ssdf") + " --pose " + dir.File("pose.json") + " --nerf " +
+                dir.File("slab.nerf") + " --env " + dir.File("env.json") + " --dataset " + dir.File("ds") +
+                " --preset fast --threads 2 -o " + dir.File("out") +
+                " --kappa-step 5 --set kappa_step=3 --set light_source=near --set kappa_grid_width=0");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const nlohmann::json options = nlohmann::json::parse(testing::ReadText(dir.File("out/options.json")));
+  EXPECT_EQ(options.at("kappa_step"), 3);
+  EXPECT_EQ(options.at("light_source"), "near");
+  EXPECT_EQ(options.at("kappa_grid_width"), 0);
+  EXPECT_EQ(options.at("occlusion_step"), 4) << "the fast preset's, untouched";
+}
+
 TEST(CameraPath, AnOrbitCirclesItsCentreAtItsRadiusAndElevationLookingAtIt) {
   const Orbit orbit{{0.1, -0.2, 0.05}, 0.6, 30.0 * kPi / 180.0, 0.25, 8};
   const std::vector<Pose> poses = OrbitPoses(orbit);
