@@ -25,16 +25,14 @@
 #include "render/nerf/nerf_field.h"
 #include "render/nerf/nerf_file.h"
 #include "render/synth/scenes.h"
+#include "tests/support/nerfar_command.h"
 #include "tests/support/support.h"
 
 namespace nerfar {
 namespace {
 
 using Result = testing::CommandResult;
-
-Result RunNerfar(const std::string& arguments) {
-  return testing::RunCommand(std::string(NERFAR_BINARY) + " " + arguments);
-}
+using testing::RunNerfar;
 
 TEST(App, HelpListsTheCommands) {
   const Result result = RunNerfar("help");

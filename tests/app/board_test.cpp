@@ -17,6 +17,7 @@
 
 #include "calib/core/atomic_file.h"
 #include "calib/core/image_io.h"
+#include "tests/support/nerfar_command.h"
 #include "tests/support/support.h"
 #include "tracking/aruco_reference.h"
 
@@ -25,10 +26,7 @@ namespace {
 
 namespace fs = std::filesystem;
 using Result = testing::CommandResult;
-
-Result RunNerfar(const std::string& arguments) {
-  return testing::RunCommand(std::string(NERFAR_BINARY) + " " + arguments);
-}
+using testing::RunNerfar;
 
 // Corner localisation of aruco with sub-pixel refinement on a clean raster is
 // within half a pixel; the raster's own edges within half a pixel more. At

@@ -21,6 +21,7 @@
 #include "calib/dataset.h"
 #include "render/mesh/mesh.h"
 #include "render/synth/scenes.h"
+#include "tests/support/nerfar_command.h"
 #include "tests/support/support.h"
 
 namespace nerfar {
@@ -29,9 +30,8 @@ namespace {
 namespace fs = std::filesystem;
 using Result = testing::CommandResult;
 
-std::string Nerfar(const std::string& arguments) { return std::string(NERFAR_BINARY) + " " + arguments; }
-
-Result RunNerfar(const std::string& arguments) { return testing::RunCommand(Nerfar(arguments)); }
+using testing::Nerfar;
+using testing::RunNerfar;
 
 // Runs the command line and checks the refusal: exit 2, the output and the
 // input named as the command spells them (the input when given), the input

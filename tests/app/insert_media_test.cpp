@@ -27,6 +27,7 @@
 #include "render/mesh/mesh.h"
 #include "render/nerf/nerf_field.h"
 #include "render/nerf/nerf_file.h"
+#include "tests/support/nerfar_command.h"
 #include "tests/support/support.h"
 
 namespace nerfar {
@@ -34,10 +35,7 @@ namespace {
 
 namespace fs = std::filesystem;
 using Result = testing::CommandResult;
-
-Result RunNerfar(const std::string& arguments) {
-  return testing::RunCommand(std::string(NERFAR_BINARY) + " " + arguments);
-}
+using testing::RunNerfar;
 
 constexpr int kWidth = 64, kHeight = 48;
 constexpr double kHalfSide = 0.05;  // the textured quad's half side, metres
