@@ -45,7 +45,8 @@ Json PrintViewScores(const NerfEvaluation& eval) {
               reference ? std::to_string(eval.mean_psnr_reference).substr(0, 6).c_str() : "-",
               eval.depth_median_m >= 0 ? std::to_string(eval.depth_median_m * 1e3).substr(0, 6).c_str() : "-");
   if (reference)
-    std::printf("reference: %s/bg_XXX.exr (low-noise renders of the same cameras)\n", eval.reference_folder.c_str());
+    std::printf("reference: %s/bg_NNN.exr, NNN the view's index (low-noise renders of the same cameras)\n",
+                eval.reference_folder.c_str());
   return views;
 }
 

@@ -1,6 +1,6 @@
 // `nerfar insert` end to end against an independent renderer's ground truth:
 // `nerfar synth --scene sun` path-traces a table lit by a small bright sun, a
-// bulb and a sky, and renders each object inserted (insert/<object>/rgb_XXX,
+// bulb and a sky, and renders each object inserted (insert/<object>/rgb_000, ...,
 // mask, probe); `nerfar insert` composites the baked object over the same
 // background frames with the truth's light probe and depth maps standing in
 // for the NeRF. The test scores the composite with the metrics of DESIGN.md,
@@ -156,7 +156,7 @@ class InsertAgainstTruth : public ::testing::Test {
         testing::RunCommand(Nerfar() + " synth --scene sun -o " + Scene() +
                             " --res 160x120 --views 4 --test-views 2 --spp 4 --insert-spp 64 --probe-spp 8 --quiet");
     ASSERT_EQ(r.exit_code, 0) << r.output;
-    // The composites go over the truth's own background frames (bg_XXX), as
+    // The composites go over the truth's own background frames (bg_000, ...), as
     // ../shared/eval/e2e.sh does, so the shadow ratios share one background.
     fs::create_directories(Frames());
     for (const auto& entry : fs::directory_iterator(Scene() + "/insert")) {
