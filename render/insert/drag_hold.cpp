@@ -1,10 +1,7 @@
 #include "render/insert/drag_hold.h"
 
 #include <algorithm>
-#include <cstdint>
 #include <limits>
-
-#include "render/insert/cache_keys.h"
 
 namespace nerfar {
 
@@ -15,29 +12,6 @@ namespace {
 // resolves (the finest NeRF voxel is millimetres), and far above the
 // rounding of poses composed in double precision.
 constexpr double kSameShiftM = 1e-6;
-
-// What a translation leaves unchanged: each object's mesh and field (its
-// size; the posed field itself is made anew per pose), rotation, scale and
-// any light given for it (with its samples).
-std::vector<double> ShapeKey(const std::vector<InsertObject>& objects) {
-  std::vector<double> key = {double(objects.size())};
-  for (const InsertObject& o : objects) {
-    key.push_back(double(reinterpret_cast<uintptr_t>(o.mesh)));
-    key.push_back(o.visibility ? o.visibility->Radius() : -1.0);
-    for (int r = 0; r < 3; ++r)
-      for (int c = 0; c < 3; ++c) key.push_back(o.T_world_object.rotation(r, c));
-    key.push_back(o.scale);
-    if (o.light_override)
-      AppendLightKey(*o.light_override, key);
-    else
-      key.push_back(-1.0);
-    for (const void* given :
-         {static_cast<const void*>(o.light_distances), static_cast<const void*>(o.light_samples),
-          static_cast<const void*>(o.light_compact), static_cast<const void*>(o.light_sample_distances)})
-      key.push_back(double(reinterpret_cast<uintptr_t>(given)));
-  }
-  return key;
-}
 
 std::vector<Vec3> Positions(const std::vector<InsertObject>& objects) {
   std::vector<Vec3> p;
@@ -61,7 +35,7 @@ bool CommonShift(const std::vector<Vec3>& from, const std::vector<Vec3>& to, Vec
 DragFrame DragHold::Begin(const std::vector<InsertObject>& objects, const std::vector<WorldSphere>& spheres,
                           bool kappa_through_retakes) {
   const bool dragged = std::any_of(objects.begin(), objects.end(), [](const InsertObject& o) { return o.dragged; });
-  std::vector<double> shape = dragged ? ShapeKey(objects) : std::vector<double>{};
+  std::vector<ObjectShapeKey> shape = dragged ? ObjectShapeKeysOf(objects) : std::vector<ObjectShapeKey>{};
   if (!dragged || shape != shape_) light_.valid = kappa_.valid = false;
   if (!dragged) return {};
   const std::vector<Vec3> positions = Positions(objects);
@@ -72,11 +46,11 @@ DragFrame DragHold::Begin(const std::vector<InsertObject>& objects, const std::v
     frame.phase = DragPhase::kHeld;
   } else {
     // The light is taken anew here: the objects as they stand key the hold.
-    frame = {DragPhase::kStart, Vec3{}, nullptr};
+    frame = {};
+    frame.phase = DragPhase::kStart;
     light_.valid = false;  // until Take
     light_.positions = positions;
-    light_.key = shape;
-    for (const Vec3& p : positions) light_.key.insert(light_.key.end(), {p.x, p.y, p.z});
+    light_.key = {shape, positions};
   }
   frame.key = &light_.key;
   shape_ = std::move(shape);

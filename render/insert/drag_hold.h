@@ -20,6 +20,7 @@
 
 #include <vector>
 
+#include "render/insert/cache_keys.h"
 #include "render/insert/insert_common.h"
 #include "render/insert/inserter.h"
 #include "render/lighting/incident_light.h"
@@ -36,16 +37,15 @@ enum class DragPhase {
 struct DragFrame {
   DragPhase phase = DragPhase::kNone;
   Vec3 shift;  // the objects' translation since the light was taken (kHeld; 0 at kStart)
-  // The objects as the light was taken (meshes, fields' sizes, rotations,
-  // scales, positions then): stands for their pose keys in the caches kept
-  // in their frame (γ per vertex, κ's lattice) while phase != kNone.
-  const std::vector<double>* key = nullptr;
+  // The objects as the light was taken: stands for their own keys in the
+  // caches kept in their frame (γ per vertex, κ's lattice) while phase != kNone.
+  const DragObjectsKey* key = nullptr;
   // κ's light, held from the drag's start through the light's retakes: the
   // objects' translation since then and their key then (the same as shift
   // and key until the first retake); kappa_apart: κ's light is no longer
   // this frame's (DragHold::kappa_light).
   Vec3 kappa_shift;
-  const std::vector<double>* kappa_key = nullptr;
+  const DragObjectsKey* kappa_key = nullptr;
   bool kappa_apart = false;
   bool dragged() const { return phase != DragPhase::kNone; }
 };
@@ -74,12 +74,12 @@ class DragHold {
   struct Hold {
     bool valid = false;
     std::vector<Vec3> positions;
-    std::vector<double> key;  // DragFrame::key
+    DragObjectsKey key;  // DragFrame::key
     std::vector<SgMixture> lights;
     std::vector<LightParallax> parallax;
     LightParallax Parallax(size_t i, const Vec3& shift) const;
   };
-  std::vector<double> shape_;  // the objects without their positions (ShapeKey), as both holds took them
+  std::vector<ObjectShapeKey> shape_;  // the objects without their positions, as both holds took them
   Hold light_, kappa_;
   bool kappa_is_light_ = false;  // κ's hold was taken with the current light's
 };

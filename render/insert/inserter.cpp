@@ -18,7 +18,7 @@ namespace nerfar {
 
 // The objects' prepared lights and what they were prepared for.
 struct LightPrepCache {
-  std::vector<double> key;
+  std::vector<LightPrepKey> key;  // per object
   std::vector<LightPrep> preps;
   std::vector<PrefilteredRadiance> specular;  // per object (InsertOptions::prefiltered_specular), same key
   std::vector<ShadowSources> shadow_sources;  // per object (InsertOptions::kappa_from_samples), same key
@@ -202,14 +202,13 @@ std::vector<LightPrep>& Inserter::PrepareLights(const std::vector<InsertObject>&
   // too), prepared again only when a light, its parallax or an object (its
   // field's queries are posed) changed.
   {
-    std::vector<double> key = {double(n_objects)};
-    for (size_t o = 0; o < n_objects; ++o) {
-      AppendObjectKey(objects[o], key);
-      AppendLightKey(used_lights_[o], key);
-      const Vec3& c = parallax[o].center;
-      key.insert(key.end(), {c.x, c.y, c.z, parallax[o].min_sharpness, double(parallax[o].distance.size())});
-      key.insert(key.end(), parallax[o].distance.begin(), parallax[o].distance.end());
-    }
+    std::vector<LightPrepKey> key;
+    key.reserve(n_objects);
+    for (size_t o = 0; o < n_objects; ++o)
+      key.push_back({.object = ObjectKeyOf(objects[o]),
+                     .light = used_lights_[o],
+                     .parallax_center = parallax[o].center,
+                     .lobes = ReaimedLobesKeyOf(parallax[o])});
     if (!preps_) preps_ = std::make_unique<LightPrepCache>();
     if (key != preps_->key) {
       // A held light keeps its samples, so their prefiltered map holds.

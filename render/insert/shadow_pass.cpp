@@ -364,31 +364,26 @@ class KappaPass {
   // The world lattice of κ, dropped when a caster or a light changed.
   void UseLattice() {
     spacing_ = options_.kappa_cache_spacing_radii * smallest_;
-    // Also what shapes the κ layer kept for an unchanged camera.
-    std::vector<double> key = {spacing_,
-                               options_.shadow_reach_radii,
-                               options_.shadow_epsilon,
-                               double(spacing_px_.step),
-                               double(spacing_px_.factor),
-                               options_.kappa_refine_delta,
-                               options_.kappa_plane_upsampling ? 1.0 : 0.0,
-                               options_.shadow_epsilon_snap ? 1.0 : 0.0,
-                               options_.kappa_skip_covered ? 1.0 : 0.0};
-    const std::vector<float> rule = ReceiverRule(in_);
-    key.insert(key.end(), rule.begin(), rule.end());
     // Through a drag, the objects as κ's held light was taken: κ relative
     // to them does not change with their common translation.
     const bool dragged = in_.drag != nullptr && in_.drag->dragged();
-    if (dragged)
-      key.insert(key.end(), in_.drag->kappa_key->begin(), in_.drag->kappa_key->end());
-    else
-      for (size_t j : casters_) AppendObjectKey(in_.objects[j], key);
-    for (const SgMixture& light : in_.lights) AppendLightKey(light, key);
     // Near lobes re-aimed at each receiver change κ as much as the light does.
-    for (const LightPrep& prep : preps_) {
-      key.push_back(prep.parallax.min_sharpness);
-      key.insert(key.end(), prep.parallax.distance.begin(), prep.parallax.distance.end());
-    }
+    std::vector<ReaimedLobesKey> reaimed;
+    for (const LightPrep& prep : preps_) reaimed.push_back(ReaimedLobesKeyOf(prep.parallax));
+    // Also what shapes the κ layer kept for an unchanged camera.
+    KappaKey key{.spacing_m = spacing_,
+                 .reach_radii = options_.shadow_reach_radii,
+                 .epsilon = options_.shadow_epsilon,
+                 .step_px = spacing_px_.step,
+                 .coarse_factor = spacing_px_.factor,
+                 .refine_delta = options_.kappa_refine_delta,
+                 .plane_upsampling = options_.kappa_plane_upsampling,
+                 .epsilon_snap = options_.shadow_epsilon_snap,
+                 .skip_covered = options_.kappa_skip_covered,
+                 .receiver_rule = ReceiverRule(in_),
+                 .casters = ObjectsKeyOf(in_.objects, dragged ? in_.drag->kappa_key : nullptr, &casters_),
+                 .lights = in_.lights,
+                 .reaimed = std::move(reaimed)};
     if (!cache_owner_) cache_owner_ = std::make_unique<KappaCache>();
     if (key != cache_owner_->key || cache_owner_->Size() > kKappaCacheMaxNodes) {
       cache_owner_->Clear();

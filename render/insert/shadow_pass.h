@@ -9,6 +9,7 @@
 #include <optional>
 #include <vector>
 
+#include "render/insert/cache_keys.h"
 #include "render/insert/insert_common.h"
 #include "render/insert/inserter.h"
 #include "render/insert/kappa_lattice.h"
@@ -27,10 +28,9 @@ struct ViewKey {
 };
 
 // What the shadow pass keeps between frames; `key` says which objects,
-// lights and options the lattice and the last layer hold (a list of numbers
-// compared exactly as a whole: its length varies with the objects and lobes).
+// lights and options the lattice and the last layer hold.
 struct KappaCache {
-  std::vector<double> key;
+  KappaKey key;
   // The lattice's nodes (and its shadow box) lie at world point node +
   // shift: 0, but through a drag (DragFrame::kappa_shift) the lattice is
   // kept in the objects' frame as κ's held light was taken.

@@ -1,11 +1,9 @@
 #include "render/insert/vertex_gamma.h"
 
 #include <algorithm>
-#include <cstdint>
 #include <limits>
 
 #include "calib/core/parallel.h"
-#include "render/insert/cache_keys.h"
 #include "render/insert/shadow_terms.h"
 
 namespace nerfar {
@@ -36,7 +34,7 @@ std::vector<Vec3f> WorldVertexNormals(const TriangleMesh& mesh, const Pose& T_wo
 bool UpdateVertexGamma(const std::vector<InsertObject>& objects, const std::vector<WorldSphere>& spheres,
                        const std::vector<SgMixture>& lights, const std::vector<LightPrep>& preps,
                        const InsertOptions& options, std::vector<VertexGamma>& cache,
-                       std::vector<std::vector<Vec3f>>& vertex_normals, const std::vector<double>* objects_key) {
+                       std::vector<std::vector<Vec3f>>& vertex_normals, const DragObjectsKey* held) {
   const size_t n_objects = objects.size();
   cache.resize(n_objects);
   vertex_normals.assign(n_objects, {});
@@ -45,13 +43,11 @@ bool UpdateVertexGamma(const std::vector<InsertObject>& objects, const std::vect
     if (!preps[o].shader || objects[o].mesh == nullptr) continue;
     const TriangleMesh& mesh = *objects[o].mesh;
     vertex_normals[o] = WorldVertexNormals(mesh, objects[o].T_world_object);
-    std::vector<double> key = {double(reinterpret_cast<uintptr_t>(&mesh)), options.self_shadow_offset_radii,
-                               options.self_shadow_horizon ? 1.0 : 0.0};
-    AppendLightKey(lights[o], key);
-    if (objects_key)
-      key.insert(key.end(), objects_key->begin(), objects_key->end());
-    else
-      for (size_t j = 0; j < n_objects; ++j) AppendObjectKey(objects[j], key);
+    VertexGammaKey key{.mesh = &mesh,
+                       .offset_radii = options.self_shadow_offset_radii,
+                       .horizon = options.self_shadow_horizon,
+                       .light = lights[o],
+                       .objects = ObjectsKeyOf(objects, held)};
     VertexGamma& vg = cache[o];
     if (key == vg.key) continue;
     rebuilt = true;

@@ -6,6 +6,7 @@
 
 #include <vector>
 
+#include "render/insert/cache_keys.h"
 #include "render/insert/insert_common.h"
 #include "render/insert/light_prep.h"
 
@@ -13,7 +14,7 @@ namespace nerfar {
 
 // γ of one object's vertices, with what it was computed for.
 struct VertexGamma {
-  std::vector<double> key;
+  VertexGammaKey key;
   std::vector<float> gamma;  // vertex-major, lobes per vertex
 };
 
@@ -24,13 +25,12 @@ std::vector<Vec3f> WorldVertexNormals(const TriangleMesh& mesh, const Pose& T_wo
 // its world vertex normals into vertex_normals[o], and cache[o] rebuilt when
 // what it depends on changed (SSD of every field at the vertices pushed off
 // along the normal by self_shadow_offset_radii, γ from their minimum).
-// Returns true when any object's γ was rebuilt. `objects_key` (optional)
-// stands for the objects' own keys (a drag: DragFrame::key, the objects as
-// its light was taken; γ does not change with their common translation).
+// Returns true when any object's γ was rebuilt. `held` (optional) stands
+// for the objects' own keys (a drag: DragFrame::key, the objects as its
+// light was taken; γ does not change with their common translation).
 bool UpdateVertexGamma(const std::vector<InsertObject>& objects, const std::vector<WorldSphere>& spheres,
                        const std::vector<SgMixture>& lights, const std::vector<LightPrep>& preps,
                        const InsertOptions& options, std::vector<VertexGamma>& cache,
-                       std::vector<std::vector<Vec3f>>& vertex_normals,
-                       const std::vector<double>* objects_key = nullptr);
+                       std::vector<std::vector<Vec3f>>& vertex_normals, const DragObjectsKey* held = nullptr);
 
 }  // namespace nerfar

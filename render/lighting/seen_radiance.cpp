@@ -69,47 +69,27 @@ Vec3f AveragedGradientNormal(const NerfField& field, const Vec3f& p) {
 
 namespace {
 
-// What a cache's answers depend on: the field (its arrays and layout) and
-// every option the views use.
-std::vector<double> SeenRadianceKey(const NerfField& field, const SeenRadianceOptions& options,
-                                    const NerfRenderOptions& render) {
-  const auto address = [](const void* p) { return static_cast<double>(reinterpret_cast<uintptr_t>(p)); };
-  return {address(&field),
-          address(field.density.data()),
-          double(field.density.size()),
-          address(field.color.data()),
-          double(field.color.size()),
-          address(field.occupancy.data()),
-          double(field.occupancy.size()),
-          double(field.RenderCopyCurrent()),
-          address(field.render_copy.bytes.data()),
-          field.voxel_m,
-          field.origin.x,
-          field.origin.y,
-          field.origin.z,
-          field.aabb.min.x,
-          field.aabb.min.y,
-          field.aabb.min.z,
-          field.aabb.max.x,
-          field.aabb.max.y,
-          field.aabb.max.z,
-          options.min_elevation_deg,
-          options.max_elevation_deg,
-          double(options.views),
-          options.reach_m,
-          options.min_opacity,
-          double(options.see_through),
-          options.see_through_min_opacity,
-          options.see_through_reach_m,
-          options.group_m,
-          double(options.face_views),
-          options.face_min_cosine,
-          options.face_reach_m,
-          options.agree_fraction,
-          render.step_voxels,
-          render.min_transmittance,
-          render.min_alpha,
-          double(render.use_render_copy)};
+// What a cache's answers depend on (SeenRadianceCache::Key).
+SeenRadianceCache::Key SeenRadianceKey(const NerfField& field, const SeenRadianceOptions& options,
+                                       const NerfRenderOptions& render) {
+  return {.field = &field,
+          .density = field.density.data(),
+          .density_size = field.density.size(),
+          .color = field.color.data(),
+          .color_size = field.color.size(),
+          .occupancy = field.occupancy.data(),
+          .occupancy_size = field.occupancy.size(),
+          .render_copy_current = field.RenderCopyCurrent(),
+          .render_copy = field.render_copy.bytes.data(),
+          .voxel_m = field.voxel_m,
+          .origin = field.origin,
+          .aabb_min = field.aabb.min,
+          .aabb_max = field.aabb.max,
+          .options = options,
+          .step_voxels = render.step_voxels,
+          .min_transmittance = render.min_transmittance,
+          .min_alpha = render.min_alpha,
+          .use_render_copy = render.use_render_copy};
 }
 
 // The rays to treat, grouped by the cell (group_m, or one voxel) of their
@@ -321,7 +301,7 @@ size_t ApplySeenRadiance(const NerfField& field, const std::vector<NerfRay>& ray
                          SeenRadianceCache* cache) {
   NERFAR_CHECK_EQ(rays.size(), results.size());
   if (cache) {
-    std::vector<double> key = SeenRadianceKey(field, options, render);
+    SeenRadianceCache::Key key = SeenRadianceKey(field, options, render);
     if (cache->key != key) {
       cache->Clear();
       cache->key = std::move(key);

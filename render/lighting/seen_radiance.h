@@ -110,6 +110,7 @@ struct SeenRadianceOptions {
   // it (a lamp's dark frame or backing, a pole), and would drag the mean of
   // an emitter down. 0: the plain mean of every view that sees the point.
   double agree_fraction = 0.5;
+  bool operator==(const SeenRadianceOptions&) const = default;
 };
 
 // The seen radiance of a point from the radiances (per unit opacity) of
@@ -142,14 +143,36 @@ struct SeenCellAnswer {
 // the options; `key` below). Code that edits a field's values in place calls
 // Clear(), as for NerfField::UpdateRenderCopy.
 struct SeenRadianceCache {
-  std::vector<double> key;  // what the answers depend on (ApplySeenRadiance sets it)
+  // What the answers depend on (ApplySeenRadiance sets it): the field (its
+  // address, its arrays' addresses and sizes, whether its render copy is
+  // current and where, its grid and box), every option of the views and the
+  // render options that change what a view's march finds.
+  struct Key {
+    const NerfField* field = nullptr;
+    const float* density = nullptr;
+    size_t density_size = 0;
+    const float* color = nullptr;
+    size_t color_size = 0;
+    const uint64_t* occupancy = nullptr;
+    size_t occupancy_size = 0;
+    bool render_copy_current = false;
+    const uint8_t* render_copy = nullptr;
+    float voxel_m = 0;
+    Vec3f origin;
+    Vec3 aabb_min, aabb_max;
+    SeenRadianceOptions options;
+    float step_voxels = 0, min_transmittance = 0, min_alpha = 0;  // NerfRenderOptions
+    bool use_render_copy = false;                                 // NerfRenderOptions
+    bool operator==(const Key&) const = default;
+  };
+  Key key;
   std::unordered_map<int64_t, SeenCellAnswer> cells;
   // Emptied before a call's new cells would grow it past this many (a long
   // drag through a big scene; ~40 bytes a cell); that call's cells are kept.
   size_t max_cells = size_t(1) << 20;
   uint64_t hits = 0, misses = 0;  // cells answered from the cache / by new views, since construction
   void Clear() {
-    key.clear();
+    key = {};
     cells.clear();
   }
 };

@@ -12,9 +12,10 @@
 namespace nerfar {
 
 struct Sg {
-  Vec3 axis{0, 0, 1};       // p: unit direction the lobe peaks at (world frame)
-  double sharpness = 1.0;   // λ ≥ 0: angular width ~ 1/sqrt(λ) rad
-  Vec3 amplitude{0, 0, 0};  // μ ≥ 0: value at the axis, linear RGB
+  Vec3 axis{0, 0, 1};                          // p: unit direction the lobe peaks at (world frame)
+  double sharpness = 1.0;                      // λ ≥ 0: angular width ~ 1/sqrt(λ) rad
+  Vec3 amplitude{0, 0, 0};                     // μ ≥ 0: value at the axis, linear RGB
+  bool operator==(const Sg&) const = default;  // every field exactly (a cache's key)
 };
 
 // A light or a BRDF as a sum of lobes (paper eq. 2); at most kMaxSgLobes for
