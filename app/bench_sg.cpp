@@ -121,14 +121,11 @@ SgMixture AddFitTimes(const RadianceSamples& samples, const std::string& conditi
 // The optimisers side by side (docs/SG.md): time and result of a cold fit.
 void AddOptimisers(const RadianceSamples& samples, const ImageF& pano, const std::string& condition,
                    const Timing& timing, std::vector<BenchFigure>& figures) {
-  struct Method {
-    const char* name;
-    SgFitMethod method;
-  };
-  for (const Method& m : {Method{"block", SgFitMethod::kAlternatingBlock},
-                          Method{"dense", SgFitMethod::kAlternatingDense}, Method{"adam", SgFitMethod::kAdam}}) {
+  const std::vector<const char*>& names = SgFitMethodNames();
+  for (size_t method = 0; method < names.size(); ++method) {
     SgFitOptions o;
-    o.method = m.method;
+    o.method = static_cast<SgFitMethod>(method);
+    const std::string name = names[method];
     if (timing.quick) {
       o.cold_iterations = 3;
       o.adam_iterations = 20;
@@ -137,10 +134,10 @@ void AddOptimisers(const RadianceSamples& samples, const ImageF& pano, const std
     SgMixture fit;
     const double ms = MedianMilliseconds([&] { fit = FitSg(samples, o, nullptr, &report); }, 1, 0.0);
     const LightError error = ErrorOf(fit, pano);
-    const std::string note = std::string(m.name) + ", " + condition + ", 32 lobes";
-    figures.push_back({std::string("fit_cold_ms_") + m.name, ms, "ms", note});
-    figures.push_back({std::string("fit_loss_") + m.name, report.final_loss, "", note});
-    figures.push_back({std::string("fit_irradiance_rel_rms_") + m.name, error.irradiance_rel_rms, "", note});
+    const std::string note = name + ", " + condition + ", 32 lobes";
+    figures.push_back({"fit_cold_ms_" + name, ms, "ms", note});
+    figures.push_back({"fit_loss_" + name, report.final_loss, "", note});
+    figures.push_back({"fit_irradiance_rel_rms_" + name, error.irradiance_rel_rms, "", note});
   }
 }
 

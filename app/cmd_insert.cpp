@@ -10,6 +10,7 @@
 // With --orbit or --camera-path the views are a camera path's instead, over
 // the NeRF's rendering: OUT/frame_NNNN.png and OUT/video.mp4.
 #include <algorithm>
+#include <charconv>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -126,10 +127,11 @@ struct InsertArgs {
   std::vector<std::string> object_paths, pose_paths, mesh_paths, material_paths;
   std::vector<std::string> sets;  // --set KEY=VALUE, in the order given
   int light_directions = -1, sg_lobes = -1, kappa_step = -1, shade_step = -1, occlusion_step = -1;
-  int kappa_sample_bins = -1, light_refine_rays = -1, seen_views = -1;
+  int kappa_sample_bins = -1, light_refine_rays = -1;
   double kappa_cache = -1, receiver_reuse = -1, kappa_refine_delta = -1, parallax_min_sharpness = -1;
   double shadow_reach = -1, self_shadow_offset = -1, receiver_min_opacity = -1;
-  double seen_group_cm = -1, seen_agree = -1, normal_probe_voxels = -1;
+  double seen_group_cm = -1;
+  std::string seen_views, seen_agree, normal_probe_voxels;  // set through their fields as given (InsertKnobs)
   bool no_cell_normals = false, no_parallax = false, no_kappa_snap = false, kappa_under_objects = false;
   bool kappa_samples = false, gamma_per_pixel = false, sampled_lobes = false, sg_specular = false;
   bool no_self_shadow = false, no_shadows = false, paper_gamma = false, truth_geometry = false;
@@ -144,6 +146,30 @@ struct InsertArgs {
   // Derived: ground-truth geometry and a light probe stand in for the NeRF.
   bool without_nerf = false;
   bool video = false;  // --orbit or --camera-path
+};
+
+// Every knob of an insert job, each under its `--set` name: the insertion's
+// (InsertOptions), the NeRF scene's (NerfSceneOptions) and whether κ
+// receivers that end on the tag board's plane are taken onto it.
+struct InsertKnobs {
+  InsertOptions insert;
+  NerfSceneOptions nerf;
+  bool support_plane = true;  // where the dataset has a board.json
+
+  static InsertKnobs Preset(const std::string& name) {
+    return {InsertOptions::Preset(name), NerfSceneOptions::Preset(name)};
+  }
+  std::vector<OptionField> Fields() {
+    std::vector<OptionField> fields = insert.Fields();
+    for (const OptionField& f : nerf.Fields()) fields.push_back(f);
+    fields.push_back(FieldOf("support_plane", &support_plane));
+    return fields;
+  }
+  // Every knob as one compact JSON object (OUT/options.json).
+  std::string ToJson() const {
+    InsertKnobs copy = *this;
+    return OptionFieldsJson(copy.Fields());
+  }
 };
 
 // A preset's value as the help shows it.
@@ -178,8 +204,8 @@ void AddInputFlags(ArgParser& parser, InsertArgs& a) {
   parser.Option("--background", &a.background, "B", "images (AR over the camera frames, default) or nerf");
   parser.Option("--preset", &a.preset, "P", "fast, balanced (default) or accurate; the knobs below override it");
   parser.Option("--set", &a.sets, "KEY=VALUE",
-                "set one insertion option of the list at the end (repeatable; applied after --preset and the "
-                "named flags)");
+                "set one knob of the list at the end, the insertion's or the NeRF scene's (repeatable; applied "
+                "after --preset and the named flags, which set the same fields)");
 }
 
 // The stages' knobs (light, κ grid and cache, receivers); their help shows the presets' values.
@@ -305,8 +331,9 @@ void AddTruthFlags(ArgParser& parser, InsertArgs& a) {
   parser.Flag("--truth-geometry", &a.truth_geometry,
               "shadow receivers (and, without --nerf, occlusion) from the truth's depth maps instead of the NeRF");
   parser.Epilog(
-      "Options (--set KEY=VALUE; light_source takes full, near or env; the guide's insert knob table), balanced:\n" +
-      InsertOptions::Preset("balanced").ToJson() +
+      "Options (--set KEY=VALUE; light_source takes full, near or env, sg_method block, dense or adam; the guide's "
+      "insert knob tables), balanced:\n" +
+      InsertKnobs::Preset("balanced").ToJson() +
       "\n"
       "outputs: OUT/<name>.exr and .png, OUT/<name>_object.exr, _alpha.exr, _kappa.exr, OUT/probe.exr\n"
       "(probe_<i>.exr for further objects), OUT/timings.json, OUT/options.json [, OUT/report.json]\n"
@@ -384,7 +411,7 @@ bool ParseInsertArgs(const CommandArgs& args, InsertArgs& a) {
   return true;
 }
 
-// The preset's insertion options with the flags given over them.
+// The preset's insertion options with the named flags given over them.
 InsertOptions InsertOptionsFrom(const InsertArgs& a) {
   InsertOptions options = InsertOptions::Preset(a.preset);
   if (a.light_directions != -1) options.light.directions = a.light_directions;
@@ -411,30 +438,43 @@ InsertOptions InsertOptionsFrom(const InsertArgs& a) {
   if (a.shadow_reach != -1) options.shadow_reach_radii = a.shadow_reach;
   if (a.self_shadow_offset != -1) options.self_shadow_offset_radii = a.self_shadow_offset;
   if (a.receiver_min_opacity != -1) options.receiver_min_opacity = a.receiver_min_opacity;
-  if (!a.light_source.empty()) options.light.source = ParseLightSource(a.light_source);
   if (a.no_self_shadow) options.self_shadow = false;
   if (a.no_shadows) options.shadows = false;
   if (a.paper_gamma) options.self_shadow_horizon = false;
   if (a.sg_specular) options.prefiltered_specular = false;
   if (a.specular_parallax) options.specular_parallax = true;
   if (a.no_specular_parallax) options.specular_parallax = false;
-  for (const std::string& item : a.sets) options.Set(item);
   return options;
 }
 
-// The preset's NeRF scene options with the flags given over them.
-NerfSceneOptions NerfOptionsFrom(const InsertArgs& a) {
-  NerfSceneOptions nerf_options = NerfSceneOptions::Preset(a.preset);
-  if (a.seen_views != -1) nerf_options.seen.views = a.seen_views;  // validated
-  if (a.seen_group_cm != -1) nerf_options.seen.group_m = a.seen_group_cm / 100.0;
-  if (a.seen_agree != -1) nerf_options.seen.agree_fraction = a.seen_agree;  // validated
-  if (a.no_seen_radiance) nerf_options.light_seen_radiance = false;
-  if (a.no_see_through) nerf_options.seen.see_through = false;
-  if (a.seen_whole_band) nerf_options.seen.face_views = false;
-  if (a.no_views_cache) nerf_options.cache_views = false;
-  if (a.expected_depth) nerf_options.surface_depth = false;
-  if (a.normal_probe_voxels != -1) nerf_options.normal_probe_voxels = a.normal_probe_voxels;
-  return nerf_options;
+// The shortest text that reads back as `value` exactly.
+std::string ExactText(double value) {
+  char text[32];
+  return std::string(text, std::to_chars(text, text + sizeof text, value).ptr);
+}
+
+// The preset's knobs with the named flags given over them, then --set in
+// the order given. The light source's and the NeRF scene's named flags set
+// their fields as --set does (the flag named in an error).
+InsertKnobs KnobsFrom(const InsertArgs& a) {
+  InsertKnobs knobs{InsertOptionsFrom(a), NerfSceneOptions::Preset(a.preset)};
+  const std::vector<OptionField> fields = knobs.Fields();
+  const auto set = [&fields](const std::string& flag, const std::string& key, const std::string& value) {
+    SetOptionField(fields, key + "=" + value, flag);
+  };
+  if (!a.light_source.empty()) set("--light-source", "light_source", a.light_source);
+  if (!a.seen_views.empty()) set("--seen-views", "seen_views", a.seen_views);
+  if (a.seen_group_cm != -1) set("--seen-group-cm", "seen_group_m", ExactText(a.seen_group_cm / 100.0));
+  if (!a.seen_agree.empty()) set("--seen-agree", "seen_agree_fraction", a.seen_agree);
+  if (a.no_seen_radiance) set("--no-seen-radiance", "light_seen_radiance", "false");
+  if (a.no_see_through) set("--no-see-through", "seen_see_through", "false");
+  if (a.seen_whole_band) set("--seen-whole-band", "seen_face_views", "false");
+  if (a.no_views_cache) set("--no-views-cache", "seen_cache_views", "false");
+  if (a.expected_depth) set("--expected-depth", "surface_depth", "false");
+  if (!a.normal_probe_voxels.empty()) set("--normal-probe-voxels", "normal_probe_voxels", a.normal_probe_voxels);
+  if (a.no_support_plane) set("--no-support-plane", "support_plane", "false");
+  for (const std::string& item : a.sets) SetOptionField(fields, item);
+  return knobs;
 }
 
 void ValidateOptions(const InsertOptions& options, const NerfSceneOptions& nerf_options) {
@@ -895,8 +935,9 @@ void WriteVideo(const InsertArgs& a, const Dataset& views, double path_fps) {
 int RunInsert(const CommandArgs& args) {
   InsertArgs a;
   if (!ParseInsertArgs(args, a)) return 0;
-  const InsertOptions options = InsertOptionsFrom(a);
-  const NerfSceneOptions nerf_options = NerfOptionsFrom(a);
+  const InsertKnobs knobs = KnobsFrom(a);
+  const InsertOptions& options = knobs.insert;
+  const NerfSceneOptions& nerf_options = knobs.nerf;
   ValidateOptions(options, nerf_options);
 
   // Inputs.
@@ -933,7 +974,7 @@ int RunInsert(const CommandArgs& args) {
   const ProbeLight probe = a.light_probe.empty() ? ProbeLight{} : FitProbe(a.light_probe, options);
   const ProbeDistances distances = ProbeDistancesFrom(a.probe_distances, probe.light, loaded, options, nerf_options);
   MakeDirectories(a.output);
-  const std::string options_json = options.ToJson();
+  const std::string options_json = knobs.ToJson();
   LogInfo("insert: options " + options_json + ", threads " + std::to_string(ThreadCount()) +
           (a.without_nerf ? std::string()
                           : std::string(", nerf depth ") + (nerf_options.surface_depth ? "surface" : "expected") +
@@ -944,7 +985,7 @@ int RunInsert(const CommandArgs& args) {
 
   Inserter inserter(scene, environment.lobes, options);
   const fs::path board_path = fs::path(a.dataset_dir) / "board.json";
-  if (!a.no_support_plane && !a.truth_geometry && fs::exists(board_path) && !dataset.frames.empty()) {
+  if (knobs.support_plane && !a.truth_geometry && fs::exists(board_path) && !dataset.frames.empty()) {
     const SupportPlane plane =
         PlaneOfBoard(ReadBoard(board_path.string()), dataset.frames.front().T_world_camera.translation);
     inserter.set_support_plane(plane);

@@ -113,8 +113,8 @@ std::optional<LiveArgs> ParseLiveArgs(const CommandArgs& args) {
   parser.Option("--frames", &a.frames, "N", "stop after N frames (headless default 60; window: until closed)");
   parser.Option("--preset", &a.preset, "P", "insertion preset: fast (default) | balanced | accurate");
   parser.Option("--set", &a.sets, "KEY=VALUE",
-                "set one insertion option over the preset, also the one switched to (repeatable; the keys: "
-                "`nerfar insert --help`)");
+                "set one insertion option over the preset, also the one switched to (repeatable; the keys: the "
+                "insertion knobs of `nerfar insert --help`, not the NeRF scene's)");
   // balanced by default: on noisy 640x480 frames the fast detector (decimated)
   // lost 8 of 60 frames of the demo stream where balanced lost none.
   parser.Option("--tracker-preset", &a.tracker_preset, "P",

@@ -675,5 +675,40 @@ TEST(OptionFields, EchoWritesValuesAsWritten) {
   EXPECT_NE(OptionFieldsJson(t.Fields()).find(R"("step":0.3,)"), std::string::npos) << OptionFieldsJson(t.Fields());
 }
 
+// A named choice (kChoice): an enum set and echoed by its values' names.
+enum class Shape { kBox, kBall, kCone };
+struct ChoiceTarget {
+  Shape shape = Shape::kBall;
+  int count = 1;
+  std::vector<OptionField> Fields() {
+    return {FieldOf("shape", &shape, {"box", "ball", "cone"}), FieldOf("count", &count)};
+  }
+};
+
+TEST(OptionFields, ANamedChoiceIsSetAndEchoedByName) {
+  ChoiceTarget t;
+  EXPECT_EQ(OptionFieldsJson(t.Fields()), R"({"count":1,"shape":"ball"})");
+  SetOptionField(t.Fields(), "shape=cone");
+  EXPECT_EQ(t.shape, Shape::kCone);
+  SetOptionField(t.Fields(), "shape=box");
+  EXPECT_EQ(t.shape, Shape::kBox);
+  EXPECT_EQ(OptionFieldsJson(t.Fields()), R"({"count":1,"shape":"box"})");
+}
+
+TEST(OptionFields, AnUnknownChoiceIsRefusedNamingTheAllowedOnes) {
+  ChoiceTarget t;
+  for (const char* bad : {"shape=cube", "shape=Box", "shape=", "shape=1", "shape=box "}) {
+    std::string m;
+    try {
+      SetOptionField(t.Fields(), bad, "--shape");
+    } catch (const InputError& e) {
+      m = e.what();
+    }
+    EXPECT_NE(m.find(std::string("--shape ") + bad), std::string::npos) << m;
+    EXPECT_NE(m.find("(expected box, ball or cone)"), std::string::npos) << bad << ": " << m;
+    EXPECT_EQ(t.shape, Shape::kBall) << "a refused name leaves the field as it was";
+  }
+}
+
 }  // namespace
 }  // namespace nerfar

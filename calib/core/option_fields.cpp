@@ -27,14 +27,25 @@ bool ParseWhole(const std::string& text, double low, double high, double* value)
   return ParseNumber(text, value) && *value == std::floor(*value) && *value >= low && *value <= high;
 }
 
-const char* KindName(OptionField::Kind kind) {
-  switch (kind) {
+// "a, b or c".
+std::string ChoiceList(const std::vector<const char*>& names) {
+  std::string list;
+  for (size_t i = 0; i < names.size(); ++i)
+    list += (i == 0 ? "" : i + 1 == names.size() ? " or " : ", ") + std::string(names[i]);
+  return list;
+}
+
+// What a field's values are, as an error names them.
+std::string Expected(const OptionField& f) {
+  switch (f.kind) {
     case OptionField::kInt:
       return "a whole number";
     case OptionField::kU64:
       return "a whole number >= 0";
     case OptionField::kBool:
       return "true or false";
+    case OptionField::kChoice:
+      return ChoiceList(f.choices);
     default:
       return "a number";
   }
@@ -72,6 +83,13 @@ bool SetField(const OptionField& f, const std::string& text) {
       if (text != "true" && text != "false") return false;
       *static_cast<bool*>(f.ptr) = text == "true";
       return true;
+    case OptionField::kChoice:
+      for (size_t i = 0; i < f.choices.size(); ++i) {
+        if (text != f.choices[i]) continue;
+        f.set_choice(f.ptr, static_cast<int>(i));
+        return true;
+      }
+      return false;
   }
   return false;
 }
@@ -95,7 +113,7 @@ void SetOptionField(const std::vector<OptionField>& fields, const std::string& k
     if (key != f.name) continue;
     if (!SetField(f, value))
       ThrowInputError(source + " " + key_value,
-                      "'" + value + "' is not a valid value of " + key + " (expected " + KindName(f.kind) + ")");
+                      "'" + value + "' is not a valid value of " + key + " (expected " + Expected(f) + ")");
     return;
   }
   std::string known;
@@ -121,6 +139,9 @@ std::string OptionFieldsJson(const std::vector<OptionField>& fields) {
         break;
       case OptionField::kU64:
         doc[f.name] = *static_cast<const uint64_t*>(f.ptr);
+        break;
+      case OptionField::kChoice:
+        doc[f.name] = f.choices.at(f.get_choice(f.ptr));
         break;
     }
   }

@@ -1,7 +1,6 @@
 #include "render/insert/insert_options.h"
 
 #include <cmath>
-#include <nlohmann/json.hpp>
 
 #include "calib/core/error.h"
 
@@ -98,7 +97,8 @@ std::vector<std::string> InsertOptions::Validate() const {
 std::vector<OptionField> InsertOptions::Fields() {
   IncidentLightOptions& l = light;
   SgFitOptions& fit = light.fit;
-  return {FieldOf("light_directions", &l.directions),
+  return {FieldOf("light_source", &l.source, LightSourceNames()),
+          FieldOf("light_directions", &l.directions),
           FieldOf("light_move_threshold_m", &l.move_threshold_m),
           FieldOf("light_parallax", &l.parallax),
           FieldOf("light_parallax_min_sharpness", &l.parallax_min_sharpness),
@@ -117,6 +117,7 @@ std::vector<OptionField> InsertOptions::Fields() {
           FieldOf("sg_tolerance", &fit.tolerance),
           FieldOf("sg_adam_iterations", &fit.adam_iterations),
           FieldOf("sg_adam_step", &fit.adam_step),
+          FieldOf("sg_method", &fit.method, SgFitMethodNames()),
           FieldOf("self_shadow", &self_shadow),
           FieldOf("self_shadow_horizon", &self_shadow_horizon),
           FieldOf("self_shadow_offset_radii", &self_shadow_offset_radii),
@@ -153,19 +154,12 @@ std::vector<OptionField> InsertOptions::Fields() {
 }
 
 void InsertOptions::Set(const std::string& key_value, const std::string& source) {
-  const size_t equals = key_value.find('=');
-  if (equals != std::string::npos && key_value.compare(0, equals, "light_source") == 0) {
-    light.source = ParseLightSource(key_value.substr(equals + 1));
-    return;
-  }
   SetOptionField(Fields(), key_value, source);
 }
 
 std::string InsertOptions::ToJson() const {
   InsertOptions copy = *this;
-  nlohmann::json j = nlohmann::json::parse(OptionFieldsJson(copy.Fields()));
-  j["light_source"] = LightSourceName(light.source);
-  return j.dump();
+  return OptionFieldsJson(copy.Fields());
 }
 
 }  // namespace nerfar

@@ -169,16 +169,15 @@ struct InsertOptions {
   // Every problem as "field: what is wrong (what was expected)".
   std::vector<std::string> Validate() const;
   // Every field under the name `--set` and ToJson give it (the light's
-  // fields prefixed light_, its SG fit's sg_), but the two enums: the light
-  // source and the SG fit's method (named flags; ToJson writes the source).
+  // fields prefixed light_, its SG fit's sg_); the two enums as named
+  // choices: light_source full|near|env, sg_method block|dense|adam.
   std::vector<OptionField> Fields();
   // Sets one field from "key=value" (`nerfar insert --set`, `nerfar live
-  // --set`, NERFAR_BENCH_INSERT_KNOBS: SOURCE names which): a key of Fields()
-  // or light_source=full|near|env; InputError naming the key when it is
-  // unknown or its value is not of the field's kind.
+  // --set`, NERFAR_BENCH_INSERT_KNOBS: SOURCE names which); InputError naming
+  // the key when it is unknown or its value is not of the field's kind.
   void Set(const std::string& key_value, const std::string& source = "--set");
   // The effective options as one compact JSON object, keys in alphabetical
-  // order (logged by every job, OUT/options.json): Fields() and light_source.
+  // order (logged by every job, OUT/options.json): Fields().
   std::string ToJson() const;
 };
 

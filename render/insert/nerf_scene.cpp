@@ -21,38 +21,62 @@ NerfSceneOptions NerfSceneOptions::Preset(const std::string& name) {
   return o;
 }
 
+std::vector<OptionField> NerfSceneOptions::Fields() {
+  return {FieldOf("nerf_step_voxels", &render.step_voxels),
+          FieldOf("nerf_min_transmittance", &render.min_transmittance),
+          FieldOf("light_render_step_voxels", &light_render.step_voxels),
+          FieldOf("light_render_min_transmittance", &light_render.min_transmittance),
+          FieldOf("surface_depth", &surface_depth),
+          FieldOf("normal_probe_voxels", &normal_probe_voxels),
+          FieldOf("light_seen_radiance", &light_seen_radiance),
+          FieldOf("seen_min_elevation_deg", &seen.min_elevation_deg),
+          FieldOf("seen_max_elevation_deg", &seen.max_elevation_deg),
+          FieldOf("seen_views", &seen.views),
+          FieldOf("seen_reach_m", &seen.reach_m),
+          FieldOf("seen_min_opacity", &seen.min_opacity),
+          FieldOf("seen_see_through", &seen.see_through),
+          FieldOf("seen_see_through_min_opacity", &seen.see_through_min_opacity),
+          FieldOf("seen_see_through_reach_m", &seen.see_through_reach_m),
+          FieldOf("seen_group_m", &seen.group_m),
+          FieldOf("seen_face_views", &seen.face_views),
+          FieldOf("seen_face_min_cosine", &seen.face_min_cosine),
+          FieldOf("seen_face_reach_m", &seen.face_reach_m),
+          FieldOf("seen_agree_fraction", &seen.agree_fraction),
+          FieldOf("seen_cache_views", &cache_views)};
+}
+
 std::vector<std::string> NerfSceneOptions::Validate() const {
   std::vector<std::string> problems;
   const auto check = [&](bool ok, const std::string& what) {
     if (!ok) problems.push_back(what);
   };
   check(render.step_voxels > 0.0f && std::isfinite(render.step_voxels),
-        "nerf.step_voxels: must be a finite number > 0");
+        "nerf_step_voxels: must be a finite number > 0");
   check(render.min_transmittance >= 0.0f && render.min_transmittance < 1.0f,
-        "nerf.min_transmittance: must be in [0, 1)");
+        "nerf_min_transmittance: must be in [0, 1)");
   check(light_render.step_voxels > 0.0f && std::isfinite(light_render.step_voxels),
-        "light_render.step_voxels: must be a finite number > 0");
+        "light_render_step_voxels: must be a finite number > 0");
   check(light_render.min_transmittance >= 0.0f && light_render.min_transmittance < 1.0f,
-        "light_render.min_transmittance: must be in [0, 1)");
+        "light_render_min_transmittance: must be in [0, 1)");
   check(normal_probe_voxels >= 0.0 && normal_probe_voxels <= 64.0,
         "normal_probe_voxels: out of range (expected 0 to 64)");
   if (light_seen_radiance) {
     check(seen.min_elevation_deg >= -90.0 && seen.min_elevation_deg < seen.max_elevation_deg &&
               seen.max_elevation_deg <= 90.0,
-          "seen.elevation: expected -90 <= min < max <= 90 degrees");
-    check(seen.views >= 1 && seen.views <= 1024, "seen.views: out of range (expected 1 to 1024)");
-    check(seen.reach_m > 0.0 && std::isfinite(seen.reach_m), "seen.reach_m: must be a finite number > 0");
-    check(seen.min_opacity >= 0.0 && seen.min_opacity <= 1.0, "seen.min_opacity: must be in [0, 1]");
+          "seen_min_elevation_deg, seen_max_elevation_deg: expected -90 <= min < max <= 90 degrees");
+    check(seen.views >= 1 && seen.views <= 1024, "seen_views: out of range (expected 1 to 1024)");
+    check(seen.reach_m > 0.0 && std::isfinite(seen.reach_m), "seen_reach_m: must be a finite number > 0");
+    check(seen.min_opacity >= 0.0 && seen.min_opacity <= 1.0, "seen_min_opacity: must be in [0, 1]");
     check(seen.see_through_min_opacity >= 0.0 && seen.see_through_min_opacity <= 1.0,
-          "seen.see_through_min_opacity: must be in [0, 1]");
+          "seen_see_through_min_opacity: must be in [0, 1]");
     check(seen.see_through_reach_m > 0.0 && std::isfinite(seen.see_through_reach_m),
-          "seen.see_through_reach_m: must be a finite number > 0");
-    check(seen.group_m >= 0.0 && seen.group_m <= 1.0, "seen.group_m: out of range (expected 0 to 1 metre)");
+          "seen_see_through_reach_m: must be a finite number > 0");
+    check(seen.group_m >= 0.0 && seen.group_m <= 1.0, "seen_group_m: out of range (expected 0 to 1 metre)");
     check(seen.agree_fraction >= 0.0 && seen.agree_fraction <= 1.0,
-          "seen.agree_fraction: out of range (expected 0 to 1)");
-    check(seen.face_min_cosine >= -1.0 && seen.face_min_cosine <= 1.0, "seen.face_min_cosine: must be in [-1, 1]");
+          "seen_agree_fraction: out of range (expected 0 to 1)");
+    check(seen.face_min_cosine >= -1.0 && seen.face_min_cosine <= 1.0, "seen_face_min_cosine: must be in [-1, 1]");
     check(seen.face_reach_m > 0.0 && std::isfinite(seen.face_reach_m),
-          "seen.face_reach_m: must be a finite number > 0");
+          "seen_face_reach_m: must be a finite number > 0");
   }
   return problems;
 }

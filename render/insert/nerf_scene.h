@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "calib/core/option_fields.h"
 #include "render/lighting/scene_field.h"
 #include "render/lighting/seen_radiance.h"
 #include "render/nerf/nerf_field.h"
@@ -73,8 +74,14 @@ struct NerfSceneOptions {
   // and the views are the light's largest cost. Fewer views per point leave
   // the brightest view of an emitter to chance. Any other name: InputError.
   static NerfSceneOptions Preset(const std::string& name);
-  // Every problem as "field: what is wrong (what was expected)".
+  // Every problem as "field: what is wrong (what was expected)", the field
+  // under its Fields() name.
   std::vector<std::string> Validate() const;
+  // The knobs under the names `nerfar insert --set` gives them: the marches'
+  // step and early stop (nerf_, light_render_), the seen radiance's (seen_),
+  // surface_depth, normal_probe_voxels, light_seen_radiance and
+  // seen_cache_views (cache_views).
+  std::vector<OptionField> Fields();
 };
 
 class NerfScene final : public SceneField {

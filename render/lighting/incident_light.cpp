@@ -17,24 +17,12 @@ double MillisecondsSince(std::chrono::steady_clock::time_point t0) {
 }
 }  // namespace
 
-const char* LightSourceName(LightSource source) {
-  switch (source) {
-    case LightSource::kFull:
-      return "full";
-    case LightSource::kNearFieldOnly:
-      return "near";
-    case LightSource::kEnvironmentOnly:
-      return "env";
-  }
-  return "?";
+const std::vector<const char*>& LightSourceNames() {
+  static const std::vector<const char*> kNames = {"full", "near", "env"};
+  return kNames;
 }
 
-LightSource ParseLightSource(const std::string& name) {
-  if (name == "full") return LightSource::kFull;
-  if (name == "near") return LightSource::kNearFieldOnly;
-  if (name == "env") return LightSource::kEnvironmentOnly;
-  ThrowInputError("light source", "unknown value '" + name + "' (expected full, near or env)");
-}
+const char* LightSourceName(LightSource source) { return LightSourceNames().at(static_cast<size_t>(source)); }
 
 std::vector<std::string> IncidentLightOptions::Validate() const {
   std::vector<std::string> problems;

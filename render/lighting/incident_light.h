@@ -29,9 +29,10 @@ enum class LightSource {
   kNearFieldOnly,    // Ĉ only (no environment light)
   kEnvironmentOnly,  // the environment SGs only (no NeRF rays, no fit)
 };
+// The sources' names in the enum's order ("full", "near", "env"): `--set
+// light_source=NAME` (InsertOptions::Fields) and the reports.
+const std::vector<const char*>& LightSourceNames();
 const char* LightSourceName(LightSource source);
-// "full", "near", "env"; InputError otherwise.
-LightSource ParseLightSource(const std::string& name);
 
 struct IncidentLightOptions {
   int directions = 1024;           // N rays from the centre: more is smoother and slower (linear cost)

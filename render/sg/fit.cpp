@@ -575,6 +575,11 @@ void ValidateSamples(const RadianceSamples& s) {
 
 }  // namespace
 
+const std::vector<const char*>& SgFitMethodNames() {
+  static const std::vector<const char*> kNames = {"block", "dense", "adam"};
+  return kNames;
+}
+
 std::vector<std::string> SgFitOptions::Validate() const {
   std::vector<std::string> p;
   if (lobes < 1 || lobes > kMaxSgLobes) p.push_back("lobes: " + std::to_string(lobes) + " (expected 1..64)");

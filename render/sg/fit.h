@@ -24,6 +24,9 @@ enum class SgFitMethod {
   kAlternatingDense,  // NNLS + LM on all axes and sharpness jointly (3M×3M)
   kAdam,              // first-order, all parameters (μ through a softplus)
 };
+// The methods' names in the enum's order ("block", "dense", "adam"): `--set
+// sg_method=NAME` (InsertOptions::Fields) and the SG bench's labels.
+const std::vector<const char*>& SgFitMethodNames();
 
 struct SgFitOptions {
   int lobes = 32;            // M, 1..64: more lobes, sharper detail, more time

@@ -263,14 +263,18 @@ std::string KnownKeys(const std::string& output) {
   return output.substr(begin + marker.size(), end - begin - marker.size());
 }
 
+// insert with WriteScene's object, NeRF and dataset, into DIR/out.
+std::string InsertOf(const testing::TempDir& dir) {
+  return "insert --object " + dir.File("box.ssdf") + " --pose " + dir.File("pose.json") + " --nerf " +
+         dir.File("slab.nerf") + " --dataset " + dir.File("ds") + " -o " + dir.File("out");
+}
+
 // insert, live and bake take --set KEY=VALUE through the one parser: an
 // unknown key stops each with exit code 2 naming it before anything runs.
 TEST(Knobs, AnUnknownSetKeyExitsTwoNamingIt) {
   testing::TempDir dir;
   WriteScene(dir);
-  const std::string insert = "insert --object " + dir.File("box.ssdf") + " --pose " + dir.File("pose.json") +
-                             " --nerf " + dir.File("slab.nerf") + " --dataset " + dir.File("ds") + " -o " +
-                             dir.File("out");
+  const std::string insert = InsertOf(dir);
   for (const std::string& command : {insert, "live --source synthetic --scene " + dir.path() + " --headless --frames 1",
                                      "bake " + dir.File("box.obj") + " -o " + dir.File("box.ssdf")}) {
     const Result r = RunNerfar(command + " --set kapa_step=3");
@@ -283,24 +287,58 @@ TEST(Knobs, AnUnknownSetKeyExitsTwoNamingIt) {
   EXPECT_NE(bad.output.find("'two' is not a valid value of kappa_step"), std::string::npos) << bad.output;
 }
 
-// The bench's NERFAR_BENCH_INSERT_KNOBS and insert's --set are one list: the
-// keys either names when refusing an unknown one are the same, and include
-// fields beyond the bench's former hand list of twelve.
-TEST(Knobs, BenchInsertKnobsAndInsertSetKnowTheSameKeys) {
+// The bench's NERFAR_BENCH_INSERT_KNOBS and insert's --set are one list of
+// insertion knobs: the keys the bench names when refusing an unknown one are
+// the first insert names, which include fields beyond the bench's former
+// hand list of twelve and both named choices; insert's list goes on with the
+// NeRF scene's knobs (its synthetic scene has no NeRF for the bench to set).
+TEST(Knobs, BenchInsertKnobsAreInsertSetsInsertionKnobs) {
   const Result insert = RunNerfar("insert --object a.ssdf --pose p.json --nerf n.nerf --dataset d -o o --set x=1");
   const Result bench =
       testing::RunCommand("NERFAR_BENCH_INSERT_KNOBS=x=1 " + std::string(NERFAR_BINARY) + " bench insert --quick");
   EXPECT_EQ(bench.exit_code, 2) << bench.output;
-  const std::string keys = KnownKeys(insert.output);
-  EXPECT_EQ(keys, KnownKeys(bench.output)) << insert.output << "\n" << bench.output;
-  for (const char* key : {"kappa_step", "light_parallax", "antialias_edges", "sg_lobes", "kappa_grid_width"})
-    EXPECT_NE(keys.find(key), std::string::npos) << key << " missing from " << keys;
+  const std::string keys = KnownKeys(insert.output), bench_keys = KnownKeys(bench.output);
+  ASSERT_FALSE(bench_keys.empty()) << bench.output;
+  EXPECT_EQ(keys.substr(0, bench_keys.size() + 2), bench_keys + ", ") << insert.output << "\n" << bench.output;
+  for (const char* key :
+       {"kappa_step", "light_parallax", "antialias_edges", "sg_lobes", "kappa_grid_width", "light_source", "sg_method"})
+    EXPECT_NE(bench_keys.find(key), std::string::npos) << key << " missing from " << bench_keys;
+  for (const char* key : {"seen_views", "seen_group_m", "surface_depth", "normal_probe_voxels", "support_plane"}) {
+    EXPECT_NE(keys.find(key, bench_keys.size()), std::string::npos) << key << " missing from " << keys;
+    EXPECT_EQ(bench_keys.find(key), std::string::npos) << key << " in the bench's " << bench_keys;
+  }
+}
+
+// A named choice refuses any other name, naming the allowed ones, whether
+// given by --set (insert, live) or by its named flag.
+TEST(Knobs, ABadChoiceIsRefusedNamingTheAllowedOnes) {
+  testing::TempDir dir;
+  WriteScene(dir);
+  const std::string insert = InsertOf(dir);
+  struct Case {
+    std::string command, expected;
+  };
+  for (const Case& c :
+       {Case{insert + " --set sg_method=newton",
+             "--set sg_method=newton: 'newton' is not a valid value of sg_method "
+             "(expected block, dense or adam)"},
+        Case{insert + " --light-source sun",
+             "--light-source light_source=sun: 'sun' is not a valid value of "
+             "light_source (expected full, near or env)"},
+        Case{"live --source synthetic --scene " + dir.path() + " --headless --frames 1 --set light_source=sun",
+             "(expected full, near or env)"}}) {
+    const Result r = RunNerfar(c.command);
+    EXPECT_EQ(r.exit_code, 2) << c.command << ": " << r.output;
+    EXPECT_NE(r.output.find(c.expected), std::string::npos) << c.command << ": " << r.output;
+  }
+  EXPECT_FALSE(fs::exists(dir.File("out/options.json"))) << "refused before anything ran";
 }
 
 // A key set changes the effective options, read back from what the command
 // writes: insert's OUT/options.json, bake's logged options. --set applies
-// after the named flag of the same field (both given: --set holds), and a
-// key no named flag has (light_source, kappa_grid_width) takes effect too.
+// after the named flag of the same field (both given: --set holds), a key no
+// named flag has (kappa_grid_width) takes effect too, and so do the NeRF
+// scene's knobs, by --set or by their named flags (the same fields).
 TEST(Knobs, SetChangesTheEffectiveOptionsAfterTheNamedFlags) {
   testing::TempDir dir;
   WriteScene(dir);
@@ -310,16 +348,24 @@ TEST(Knobs, SetChangesTheEffectiveOptionsAfterTheNamedFlags) {
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_NE(r.output.find(R"("components":8,)"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find(R"("grid":9,)"), std::string::npos) << r.output;
-  r = RunNerfar("insert --object " + dir.File("box.ssdf") + " --pose " + dir.File("pose.json") + " --nerf " +
-                dir.File("slab.nerf") + " --env " + dir.File("env.json") + " --dataset " + dir.File("ds") +
-                " --preset fast --threads 2 -o " + dir.File("out") +
-                " --kappa-step 5 --set kappa_step=3 --set light_source=near --set kappa_grid_width=0");
+  r = RunNerfar(
+      "insert --object " + dir.File("box.ssdf") + " --pose " + dir.File("pose.json") + " --nerf " +
+      dir.File("slab.nerf") + " --env " + dir.File("env.json") + " --dataset " + dir.File("ds") +
+      " --preset fast --threads 2 -o " + dir.File("out") +
+      " --kappa-step 5 --set kappa_step=3 --set light_source=near --set kappa_grid_width=0" +
+      " --seen-views 5 --set seen_views=7 --seen-group-cm 3 --set normal_probe_voxels=1.5 --no-support-plane");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   const nlohmann::json options = nlohmann::json::parse(testing::ReadText(dir.File("out/options.json")));
   EXPECT_EQ(options.at("kappa_step"), 3);
   EXPECT_EQ(options.at("light_source"), "near");
   EXPECT_EQ(options.at("kappa_grid_width"), 0);
   EXPECT_EQ(options.at("occlusion_step"), 4) << "the fast preset's, untouched";
+  EXPECT_EQ(options.at("seen_views"), 7);
+  EXPECT_EQ(options.at("seen_group_m"), 0.03) << "--seen-group-cm 3 in metres, exactly 3 / 100";
+  EXPECT_EQ(options.at("normal_probe_voxels"), 1.5);
+  EXPECT_EQ(options.at("support_plane"), false);
+  EXPECT_EQ(options.at("seen_cache_views"), true) << "the fast preset's, untouched";
+  EXPECT_EQ(options.at("sg_method"), "block") << "the presets' method";
 }
 
 TEST(CameraPath, AnOrbitCirclesItsCentreAtItsRadiusAndElevationLookingAtIt) {
