@@ -12,6 +12,7 @@
 #include <memory>
 #include <vector>
 
+#include "render/insert/cache_keys.h"
 #include "render/insert/inserter.h"
 #include "render/insert/object_visibility.h"
 #include "tests/insert/insert_fixtures.h"
@@ -208,6 +209,46 @@ TEST(DragHold, OneOfTwoObjectsDraggedIsNotHeld) {
     const DragScene::Frame h = s.Render(held, s.cam, {a.At({-0.04 + 0.004 * f, 0.1, 0.04}, &s.light, true), still});
     EXPECT_EQ(h.times.lights_held, 0) << "frame " << f;
   }
+}
+
+// What keys the caches kept in the objects' frame (cache_keys.h): a
+// translation changes an object's own key (its posed field moves) but not
+// its shape key (a drag's hold); a rotation, a scale, another field or a
+// light given with other lobes changes both. Lights are compared by value,
+// not by address.
+TEST(CacheKeys, ATranslationChangesTheObjectKeyButNotItsShape) {
+  const TriangleMesh mesh = MakeBox({0.05, 0.05, 0.05});
+  const SphereVisibility field({0, 0, 0.05}, 0.05), other_field({0, 0, 0.05}, 0.06);
+  const SgMixture light = {Sg{{0, 0, 1}, 10.0, {1, 1, 1}}}, same_light = light;
+  InsertObject a;
+  a.mesh = &mesh;
+  a.visibility = &field;
+  a.light_override = &light;
+  const auto both_keys = [](const InsertObject& o) { return std::make_pair(ObjectKeyOf(o), ObjectShapeKeysOf({o})); };
+  const auto [object_key, shape_key] = both_keys(a);
+  InsertObject b = a;
+  b.light_override = &same_light;
+  EXPECT_TRUE(both_keys(b) == std::make_pair(object_key, shape_key)) << "an equal light at another address";
+  b.T_world_object.translation = {0.01, 0, 0};
+  EXPECT_FALSE(ObjectKeyOf(b) == object_key);
+  EXPECT_TRUE(ObjectShapeKeysOf({b}) == shape_key);
+  const auto changes_both = [&](const InsertObject& changed, const char* what) {
+    EXPECT_FALSE(ObjectKeyOf(changed) == object_key) << what;
+    EXPECT_FALSE(ObjectShapeKeysOf({changed}) == shape_key) << what;
+  };
+  b = a;
+  b.T_world_object.rotation = RotationFromAxisAngle({0, 0, 1}, 0.1);
+  changes_both(b, "rotation");
+  b = a;
+  b.scale = 1.5;
+  changes_both(b, "scale");
+  b = a;
+  b.visibility = &other_field;
+  changes_both(b, "field");
+  const SgMixture brighter = {Sg{{0, 0, 1}, 10.0, {2, 1, 1}}};
+  b = a;
+  b.light_override = &brighter;
+  EXPECT_FALSE(ObjectShapeKeysOf({b}) == shape_key) << "a light given with another amplitude";
 }
 
 }  // namespace
