@@ -1,5 +1,7 @@
 #include "render/insert/cache_keys.h"
 
+#include "render/insert/inserter.h"
+
 namespace nerfar {
 
 ObjectKey ObjectKeyOf(const InsertObject& object) {

@@ -13,10 +13,18 @@
 #include <vector>
 
 #include "calib/core/math.h"
-#include "render/insert/inserter.h"
 #include "render/sg/sg.h"
 
 namespace nerfar {
+
+// The keys hold these by address or take them as arguments (inserter.h,
+// object_visibility.h, mesh.h, sphere.h, prefiltered.h, incident_light.h).
+struct InsertObject;
+class ObjectVisibility;
+struct TriangleMesh;
+struct RadianceSamples;
+class DistanceMap;
+struct LightParallax;
 
 // A pose's rotation (row-major) and translation, with the object's scale.
 struct PoseKey {
