@@ -32,11 +32,10 @@ struct ThreadScratch {
   KappaScratch kappa;
   LatticeMemo memo;
   std::array<LatticeMemo, kKappaFineLevels> fine_memo;  // the same for each fine level
-  // The eight nodes around the last receiver (its lattice cell and normal
-  // cell `corner_key`; value −1: not fetched yet): receivers a few pixels
-  // apart mostly share one lattice cell, and then need no key or memo probe.
-  uint64_t corner_key = ~uint64_t(0);
-  std::array<float, 8> corner_value{};
+  // The eight nodes around the receivers of the top level's cells read
+  // last: receivers a few pixels apart mostly share one lattice cell, and
+  // then need no node key or memo probe.
+  LatticeCellMemo cells;
 };
 
 // This thread's scratch for pass `pass` (a number new for every κ pass of
@@ -48,9 +47,9 @@ ThreadScratch& ScratchFor(uint64_t pass) {
   thread_local ThreadScratch scratch;
   thread_local uint64_t scratch_pass = 0;
   if (scratch_pass != pass) {
-    scratch.memo = LatticeMemo{};
-    scratch.fine_memo.fill(LatticeMemo{});
-    scratch.corner_key = ~uint64_t(0);
+    scratch.memo.Clear();
+    for (LatticeMemo& level : scratch.fine_memo) level.Clear();
+    scratch.cells.Clear();
     scratch.kappa.cw_light = nullptr;  // the lights may have changed
     scratch_pass = pass;
   }
@@ -625,31 +624,19 @@ class KappaPass {
   static constexpr double kMinCornerWeight = 1e-3;
 
   // Trilinear κ over the top level's nodes around x for x's normal cell,
-  // through this thread's corner values and memo.
+  // through this thread's cell memo and node memo.
   float CoarseLatticeKappa(const Vec3f& x, uint32_t cell, ThreadScratch& sc, size_t row, Spread* spread) {
     const LatticeCell c = CellAt(x, spacing_);
-    const uint64_t corner_key = LatticeKey(c.i, c.j, c.k, cell);
-    if (corner_key != sc.corner_key) {
-      sc.corner_key = corner_key;
-      sc.corner_value.fill(-1.0f);
-    }
+    std::array<float, 8>& corners = sc.cells.Corners(LatticeKey(c.i, c.j, c.k, cell));
+    const CornerKeys keys = NodeKeys(c, cell, sc.memo, cache_->lattice, &corners);
     double sum = 0.0, total = 0.0;
     for (int corner = 0; corner < 8; ++corner) {
-      const double weight = c.Weight(corner);
+      const double weight = keys.weight[size_t(corner)];
       if (weight < kMinCornerWeight) continue;
       total += weight;
-      float& cached = sc.corner_value[size_t(corner)];
-      if (cached < 0.0f) {
-        const int64_t i = c.I(corner), j = c.J(corner), k = c.K(corner);
-        const uint64_t key = LatticeKey(i, j, k, cell);
-        const size_t slot = LatticeMemo::Slot(key);
-        if (sc.memo.key[slot] != key || sc.memo.value[slot] < 0.0f) {
-          sc.memo.key[slot] = key;
-          sc.memo.value[slot] =
-              NodeKappa(cache_->lattice, key, Vec3f(Vec3(double(i), double(j), double(k)) * spacing_), cell, sc, row);
-        }
-        cached = sc.memo.value[slot];
-      }
+      float& cached = corners[size_t(corner)];
+      if (cached < 0.0f)
+        cached = MemoKappa(sc.memo, cache_->lattice, keys.key[size_t(corner)], c, corner, spacing_, cell, sc, row);
       sum += weight * cached;
       spread->Add(cached);
     }
@@ -662,25 +649,54 @@ class KappaPass {
   float FineLatticeKappa(size_t fine, double spacing, const Vec3f& x, uint32_t cell, ThreadScratch& sc, size_t row,
                          Spread* spread) {
     LatticeMemo& memo = sc.fine_memo[fine];
+    KappaLattice& lattice = cache_->fine[fine];
     const LatticeCell c = CellAt(x, spacing);
+    const CornerKeys keys = NodeKeys(c, cell, memo, lattice, nullptr);
     double sum = 0.0, total = 0.0;
     for (int corner = 0; corner < 8; ++corner) {
-      const double weight = c.Weight(corner);
+      const double weight = keys.weight[size_t(corner)];
       if (weight < kMinCornerWeight) continue;
       total += weight;
-      const int64_t i = c.I(corner), j = c.J(corner), k = c.K(corner);
-      const uint64_t key = LatticeKey(i, j, k, cell);
-      const size_t slot = LatticeMemo::Slot(key);
-      if (memo.key[slot] != key || memo.value[slot] < 0.0f) {
-        memo.key[slot] = key;
-        memo.value[slot] =
-            NodeKappa(cache_->fine[fine], key, Vec3f(Vec3(double(i), double(j), double(k)) * spacing), cell, sc, row);
-      }
-      const float value = memo.value[slot];
+      const float value = MemoKappa(memo, lattice, keys.key[size_t(corner)], c, corner, spacing, cell, sc, row);
       sum += weight * value;
       spread->Add(value);
     }
     return total > 0.0 ? static_cast<float>(std::clamp(sum / total, 0.0, 1.0)) : 1.0f;
+  }
+
+  // A cell's corners: trilinear weights and node keys.
+  struct CornerKeys {
+    std::array<double, 8> weight;
+    std::array<uint64_t, 8> key;
+  };
+  // The weights and keys of c's corners (normal cell `cell`); the snapshot
+  // slots of the corners that will be looked up (weight not negligible, not
+  // in `known` when given, not in the memo) prefetched, so that their cache
+  // misses overlap.
+  static CornerKeys NodeKeys(const LatticeCell& c, uint32_t cell, const LatticeMemo& memo, const KappaLattice& lattice,
+                             const std::array<float, 8>* known) {
+    CornerKeys keys;
+    for (int corner = 0; corner < 8; ++corner) {
+      keys.weight[size_t(corner)] = c.Weight(corner);
+      keys.key[size_t(corner)] = LatticeKey(c.I(corner), c.J(corner), c.K(corner), cell);
+      if (keys.weight[size_t(corner)] < kMinCornerWeight || (known != nullptr && (*known)[size_t(corner)] >= 0.0f))
+        continue;
+      if (!memo.Holds(keys.key[size_t(corner)])) lattice.Prefetch(keys.key[size_t(corner)]);
+    }
+    return keys;
+  }
+
+  // Corner `corner` of c (a lattice of `spacing`) through `memo`: looked up
+  // in `lattice` (computed there on a miss) when the memo lacks it.
+  float MemoKappa(LatticeMemo& memo, KappaLattice& lattice, uint64_t key, const LatticeCell& c, int corner,
+                  double spacing, uint32_t cell, ThreadScratch& sc, size_t row) {
+    LatticeMemo::Entry& e = memo.At(key);
+    if (e.key != key || e.value < 0.0f) {
+      e.key = key;
+      const Vec3 node = Vec3(double(c.I(corner)), double(c.J(corner)), double(c.K(corner))) * spacing;
+      e.value = NodeKappa(lattice, key, Vec3f(node), cell, sc, row);
+    }
+    return e.value;
   }
 
   float ExactKappa(const Vec3f& x, const Vec3f& n, ThreadScratch& sc, size_t row) {
