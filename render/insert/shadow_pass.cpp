@@ -39,23 +39,29 @@ struct ThreadScratch {
 };
 
 // This thread's scratch for pass `pass` (a number new for every κ pass of
-// any inserter): kept across the pass's rows, so that the memo holds the
-// nodes of the rows this thread did before (neighbouring rows share most
-// of their lattice cells), and emptied for a new pass (its lattice may
-// hold other values).
-ThreadScratch& ScratchFor(uint64_t pass) {
+// any inserter) over the lattice of generation `lattice`
+// (KappaCache::generation): its memos are kept across passes and frames
+// while the lattice stays (its nodes, once computed, keep their values, so
+// that a frame much like the last finds most of its nodes in them) and
+// emptied for another lattice; the light's scratch is new for each pass
+// (the lights may have changed).
+ThreadScratch& ScratchFor(uint64_t pass, uint64_t lattice) {
   thread_local ThreadScratch scratch;
-  thread_local uint64_t scratch_pass = 0;
-  if (scratch_pass != pass) {
+  thread_local uint64_t scratch_pass = 0, scratch_lattice = 0;
+  if (scratch_lattice != lattice) {
     scratch.memo.Clear();
     for (LatticeMemo& level : scratch.fine_memo) level.Clear();
     scratch.cells.Clear();
-    scratch.kappa.cw_light = nullptr;  // the lights may have changed
+    scratch_lattice = lattice;
+  }
+  if (scratch_pass != pass) {
+    scratch.kappa.cw_light = nullptr;
     scratch_pass = pass;
   }
   return scratch;
 }
 std::atomic<uint64_t> g_kappa_passes{0};
+std::atomic<uint64_t> g_kappa_generations{0};
 
 // rgb[3i + c] *= k[i] for i < n (the same products as one pixel at a time).
 void MultiplyRgb(float* rgb, const float* k, int n) {
@@ -256,6 +262,8 @@ std::vector<float> ReceiverRule(const ShadowPassInputs& in) {
 }
 
 }  // namespace
+
+uint64_t NewKappaGeneration() { return ++g_kappa_generations; }
 
 KappaSpacing KappaSpacingFor(const InsertOptions& options, int width) {
   const int factor = std::max(1, options.kappa_coarse_factor);
@@ -527,6 +535,7 @@ class KappaPass {
         one_minus_eps_, in_.sources};
     SharpestPenumbra();
     pass_ = ++g_kappa_passes;
+    generation_ = cache_ != nullptr ? cache_->generation : 0;
     node_point_.assign(nx_ * ny_, Vec3f{});
     node_normal_.assign(nx_ * ny_, Vec3f{});
     node_valid_.assign(nx_ * ny_, 0);
@@ -852,7 +861,7 @@ class KappaPass {
 
   // κ at the receivers FindRow found in this row (cols as there).
   void KappaRow(size_t row, const std::vector<size_t>& cols) {
-    ThreadScratch& scratch = ScratchFor(pass_);
+    ThreadScratch& scratch = ScratchFor(pass_, generation_);
     for (size_t q : cols) {
       const size_t node = row * nx_ + q;
       if (node_state_[node] != 1) continue;
@@ -1036,7 +1045,7 @@ class KappaPass {
         rows.size(),
         [&](size_t k) {
           const size_t r = rows[k];
-          ThreadScratch& scratch = ScratchFor(pass_);
+          ThreadScratch& scratch = ScratchFor(pass_, generation_);
           for (const PlaneNode& p : plane_nodes_[r])
             kappa_grid_[r * nx_ + p.q] =
                 ReceiverKappa(p.point, cell_normals_ ? node_normal_[r * nx_ + p.q] : p.plane->normal, scratch, r);
@@ -1197,7 +1206,8 @@ class KappaPass {
   bool cell_normals_ = false;     // one normal per world cell (InsertOptions::receiver_normal_per_cell)
   float reuse_tolerance_ = 0;     // metres
   KappaContext context_;
-  uint64_t pass_ = 0;  // this pass's number (ScratchFor)
+  uint64_t pass_ = 0;        // this pass's number (ScratchFor)
+  uint64_t generation_ = 0;  // the lattice's generation (KappaCache::generation; 0: no lattice)
 
   // What the receiver search found at each node (for the upsampling):
   // state 0 not found, 1 surface, 2 no surface (as ReceiverFrame).
