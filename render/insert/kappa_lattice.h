@@ -55,14 +55,14 @@ struct LatticeMemo {
   }
 };
 
-// The top level's lattice cells one thread read last, with their corner
+// The lattice cells (of one level) one thread read last, with their corner
 // values (direct-mapped by the key of the cell's lowest node and normal
 // cell; key ~0: empty; value -1: that corner not fetched yet). A cell's
-// receivers (a lattice cell spans some ten κ samples each way) read its
-// corners here instead of probing the node memo and the shared lattice once
-// per corner: the lattice's frozen table, larger than the caches, costs a
-// cache miss a probe. Holds exactly the lattice's values.
-// On the heap (160 kB).
+// receivers (a top-level cell spans some ten κ samples each way, a finer
+// one fewer) read its corners here instead of probing the node memo, and
+// through it the shared lattice, once per corner: the lattice's frozen
+// table, larger than the caches, costs a cache miss a probe. Holds exactly
+// the lattice's values. On the heap (160 kB).
 struct LatticeCellMemo {
   static constexpr size_t kCells = 4096;
   static constexpr uint64_t kEmpty = ~uint64_t(0);

@@ -27,15 +27,18 @@ struct CellPlane {
   float t_min = 0, t_max = 0;  // range of the corners' ray distances
 };
 
+// One thread's memos of one lattice level: its nodes, and the corners of
+// its cells read last (receivers a few pixels apart mostly share a cell,
+// and then need no node key or memo probe).
+struct LevelMemo {
+  LatticeMemo nodes;
+  LatticeCellMemo cells;
+};
+
 // Per-thread scratch of the κ pass.
 struct ThreadScratch {
   KappaScratch kappa;
-  LatticeMemo memo;
-  std::array<LatticeMemo, kKappaFineLevels> fine_memo;  // the same for each fine level
-  // The eight nodes around the receivers of the top level's cells read
-  // last: receivers a few pixels apart mostly share one lattice cell, and
-  // then need no node key or memo probe.
-  LatticeCellMemo cells;
+  std::array<LevelMemo, 1 + kKappaFineLevels> levels;  // the top level, then the fine ones
 };
 
 // This thread's scratch for pass `pass` (a number new for every κ pass of
@@ -49,9 +52,10 @@ ThreadScratch& ScratchFor(uint64_t pass, uint64_t lattice) {
   thread_local ThreadScratch scratch;
   thread_local uint64_t scratch_pass = 0, scratch_lattice = 0;
   if (scratch_lattice != lattice) {
-    scratch.memo.Clear();
-    for (LatticeMemo& level : scratch.fine_memo) level.Clear();
-    scratch.cells.Clear();
+    for (LevelMemo& level : scratch.levels) {
+      level.nodes.Clear();
+      level.cells.Clear();
+    }
     scratch_lattice = lattice;
   }
   if (scratch_pass != pass) {
@@ -581,8 +585,8 @@ class KappaPass {
     double spacing = spacing_;
     for (size_t level = 0;; ++level, spacing *= 0.5) {
       Spread spread;
-      const float k = level == 0 ? CoarseLatticeKappa(x, cell, sc, row, &spread)
-                                 : FineLatticeKappa(level - 1, spacing, x, cell, sc, row, &spread);
+      KappaLattice& lattice = level == 0 ? cache_->lattice : cache_->fine[level - 1];
+      const float k = LevelKappa(lattice, sc.levels[level], spacing, x, cell, sc, row, &spread);
       if (level == levels_ || spread.highest - spread.lowest <= delta_lattice_ || !PenumbraNarrowerThan(x, spacing) ||
           !WiderThanAPixel(x, spacing))
         return k;
@@ -632,12 +636,13 @@ class KappaPass {
   // plane would otherwise pull in the layer beyond it).
   static constexpr double kMinCornerWeight = 1e-3;
 
-  // Trilinear κ over the top level's nodes around x for x's normal cell,
-  // through this thread's cell memo and node memo.
-  float CoarseLatticeKappa(const Vec3f& x, uint32_t cell, ThreadScratch& sc, size_t row, Spread* spread) {
-    const LatticeCell c = CellAt(x, spacing_);
-    std::array<float, 8>& corners = sc.cells.Corners(LatticeKey(c.i, c.j, c.k, cell));
-    const CornerKeys keys = NodeKeys(c, cell, sc.memo, cache_->lattice, &corners);
+  // Trilinear κ over the nodes of `lattice` (a level of spacing `spacing`)
+  // around x for x's normal cell, through this thread's memos of the level.
+  float LevelKappa(KappaLattice& lattice, LevelMemo& memo, double spacing, const Vec3f& x, uint32_t cell,
+                   ThreadScratch& sc, size_t row, Spread* spread) {
+    const LatticeCell c = CellAt(x, spacing);
+    std::array<float, 8>& corners = memo.cells.Corners(LatticeKey(c.i, c.j, c.k, cell));
+    const CornerKeys keys = NodeKeys(c, cell, memo.nodes, lattice, corners);
     double sum = 0.0, total = 0.0;
     for (int corner = 0; corner < 8; ++corner) {
       const double weight = keys.weight[size_t(corner)];
@@ -645,30 +650,9 @@ class KappaPass {
       total += weight;
       float& cached = corners[size_t(corner)];
       if (cached < 0.0f)
-        cached = MemoKappa(sc.memo, cache_->lattice, keys.key[size_t(corner)], c, corner, spacing_, cell, sc, row);
+        cached = MemoKappa(memo.nodes, lattice, keys.key[size_t(corner)], c, corner, spacing, cell, sc, row);
       sum += weight * cached;
       spread->Add(cached);
-    }
-    return total > 0.0 ? static_cast<float>(std::clamp(sum / total, 0.0, 1.0)) : 1.0f;
-  }
-
-  // Trilinear κ over fine level `fine`'s nodes (spacing `spacing`) around
-  // x, through this thread's memo of the level: reached only inside a sharp
-  // penumbra.
-  float FineLatticeKappa(size_t fine, double spacing, const Vec3f& x, uint32_t cell, ThreadScratch& sc, size_t row,
-                         Spread* spread) {
-    LatticeMemo& memo = sc.fine_memo[fine];
-    KappaLattice& lattice = cache_->fine[fine];
-    const LatticeCell c = CellAt(x, spacing);
-    const CornerKeys keys = NodeKeys(c, cell, memo, lattice, nullptr);
-    double sum = 0.0, total = 0.0;
-    for (int corner = 0; corner < 8; ++corner) {
-      const double weight = keys.weight[size_t(corner)];
-      if (weight < kMinCornerWeight) continue;
-      total += weight;
-      const float value = MemoKappa(memo, lattice, keys.key[size_t(corner)], c, corner, spacing, cell, sc, row);
-      sum += weight * value;
-      spread->Add(value);
     }
     return total > 0.0 ? static_cast<float>(std::clamp(sum / total, 0.0, 1.0)) : 1.0f;
   }
@@ -680,16 +664,15 @@ class KappaPass {
   };
   // The weights and keys of c's corners (normal cell `cell`); the snapshot
   // slots of the corners that will be looked up (weight not negligible, not
-  // in `known` when given, not in the memo) prefetched, so that their cache
-  // misses overlap.
+  // `known` yet, not in the memo) prefetched, so that their cache misses
+  // overlap.
   static CornerKeys NodeKeys(const LatticeCell& c, uint32_t cell, const LatticeMemo& memo, const KappaLattice& lattice,
-                             const std::array<float, 8>* known) {
+                             const std::array<float, 8>& known) {
     CornerKeys keys;
     for (int corner = 0; corner < 8; ++corner) {
       keys.weight[size_t(corner)] = c.Weight(corner);
       keys.key[size_t(corner)] = LatticeKey(c.I(corner), c.J(corner), c.K(corner), cell);
-      if (keys.weight[size_t(corner)] < kMinCornerWeight || (known != nullptr && (*known)[size_t(corner)] >= 0.0f))
-        continue;
+      if (keys.weight[size_t(corner)] < kMinCornerWeight || known[size_t(corner)] >= 0.0f) continue;
       if (!memo.Holds(keys.key[size_t(corner)])) lattice.Prefetch(keys.key[size_t(corner)]);
     }
     return keys;
