@@ -642,40 +642,38 @@ class KappaPass {
                    ThreadScratch& sc, size_t row, Spread* spread) {
     const LatticeCell c = CellAt(x, spacing);
     std::array<float, 8>& corners = memo.cells.Corners(LatticeKey(c.i, c.j, c.k, cell));
-    const CornerKeys keys = NodeKeys(c, cell, memo.nodes, lattice, corners);
+    std::array<double, 8> weight;
+    for (int corner = 0; corner < 8; ++corner) weight[size_t(corner)] = c.Weight(corner);
+    FetchCorners(c, spacing, cell, weight, memo.nodes, lattice, corners, sc, row);
     double sum = 0.0, total = 0.0;
-    for (int corner = 0; corner < 8; ++corner) {
-      const double weight = keys.weight[size_t(corner)];
-      if (weight < kMinCornerWeight) continue;
-      total += weight;
-      float& cached = corners[size_t(corner)];
-      if (cached < 0.0f)
-        cached = MemoKappa(memo.nodes, lattice, keys.key[size_t(corner)], c, corner, spacing, cell, sc, row);
-      sum += weight * cached;
-      spread->Add(cached);
+    for (size_t corner = 0; corner < 8; ++corner) {
+      if (weight[corner] < kMinCornerWeight) continue;
+      total += weight[corner];
+      sum += weight[corner] * corners[corner];
+      spread->Add(corners[corner]);
     }
     return total > 0.0 ? static_cast<float>(std::clamp(sum / total, 0.0, 1.0)) : 1.0f;
   }
 
-  // A cell's corners: trilinear weights and node keys.
-  struct CornerKeys {
-    std::array<double, 8> weight;
+  // The corners of c (a cell of `spacing`, normal cell `cell`) that count
+  // (`weight` not negligible) and are not in `corners` yet, through the node
+  // memo: first the snapshot slots of those the memo lacks prefetched, so
+  // that their cache misses overlap, then each looked up in corner order.
+  void FetchCorners(const LatticeCell& c, double spacing, uint32_t cell, const std::array<double, 8>& weight,
+                    LatticeMemo& memo, KappaLattice& lattice, std::array<float, 8>& corners, ThreadScratch& sc,
+                    size_t row) {
     std::array<uint64_t, 8> key;
-  };
-  // The weights and keys of c's corners (normal cell `cell`); the snapshot
-  // slots of the corners that will be looked up (weight not negligible, not
-  // `known` yet, not in the memo) prefetched, so that their cache misses
-  // overlap.
-  static CornerKeys NodeKeys(const LatticeCell& c, uint32_t cell, const LatticeMemo& memo, const KappaLattice& lattice,
-                             const std::array<float, 8>& known) {
-    CornerKeys keys;
+    bool missing = false;
     for (int corner = 0; corner < 8; ++corner) {
-      keys.weight[size_t(corner)] = c.Weight(corner);
-      keys.key[size_t(corner)] = LatticeKey(c.I(corner), c.J(corner), c.K(corner), cell);
-      if (keys.weight[size_t(corner)] < kMinCornerWeight || known[size_t(corner)] >= 0.0f) continue;
-      if (!memo.Holds(keys.key[size_t(corner)])) lattice.Prefetch(keys.key[size_t(corner)]);
+      if (weight[size_t(corner)] < kMinCornerWeight || corners[size_t(corner)] >= 0.0f) continue;
+      key[size_t(corner)] = LatticeKey(c.I(corner), c.J(corner), c.K(corner), cell);
+      if (!memo.Holds(key[size_t(corner)])) lattice.Prefetch(key[size_t(corner)]);
+      missing = true;
     }
-    return keys;
+    if (!missing) return;
+    for (int corner = 0; corner < 8; ++corner)
+      if (weight[size_t(corner)] >= kMinCornerWeight && corners[size_t(corner)] < 0.0f)
+        corners[size_t(corner)] = MemoKappa(memo, lattice, key[size_t(corner)], c, corner, spacing, cell, sc, row);
   }
 
   // Corner `corner` of c (a lattice of `spacing`) through `memo`: looked up
