@@ -36,18 +36,20 @@ constexpr size_t kKappaFineLevels = 4;
 // The lattice nodes one thread looked up last (direct-mapped by key; value
 // -1: empty): neighbouring receivers share most of their 8 nodes, and the
 // shared lattice's hash look-up (a cache miss or two) is what dominates κ
-// on a frame. Sized to hold a frame's nodes of one level (a few thousand
-// over a 1280x720 frame) with few collisions; on the heap (too large for a
+// on a frame. Sized for the nodes of one level that a 1280-pixel-wide frame
+// of the balanced grid reads (kept across frames while the lattice stays,
+// so that the next frame finds most of them); on the heap (too large for a
 // thread's static storage). Holds exactly the lattice's values.
 struct LatticeMemo {
-  static constexpr size_t kMemo = 8192;
+  static constexpr int kBits = 13;
+  static constexpr size_t kMemo = size_t(1) << kBits;
   struct Entry {
     uint64_t key = ~uint64_t(0);
     float value = -1.0f;
   };
   std::vector<Entry> entry = std::vector<Entry>(kMemo);
   void Clear() { std::fill(entry.begin(), entry.end(), Entry{}); }
-  static size_t Slot(uint64_t key) { return (key * 0x9E3779B97F4A7C15ull) >> 51; }
+  static size_t Slot(uint64_t key) { return (key * 0x9E3779B97F4A7C15ull) >> (64 - kBits); }
   Entry& At(uint64_t key) { return entry[Slot(key)]; }
   bool Holds(uint64_t key) const {
     const Entry& e = entry[Slot(key)];
@@ -58,18 +60,19 @@ struct LatticeMemo {
 // The lattice cells (of one level) one thread read last, with their corner
 // values (direct-mapped by the key of the cell's lowest node and normal
 // cell; key ~0: empty; value -1: that corner not fetched yet). A cell's
-// receivers (a top-level cell spans some ten κ samples each way, a finer
-// one fewer) read its corners here instead of probing the node memo, and
-// through it the shared lattice, once per corner: the lattice's frozen
-// table, larger than the caches, costs a cache miss a probe. Holds exactly
-// the lattice's values. On the heap (160 kB).
+// receivers (a top-level cell spans several κ samples each way at the
+// presets' spacing, a finer one fewer) read its corners here instead of
+// probing the node memo, and through it the shared lattice, once per
+// corner: the lattice's frozen table, larger than the caches, costs a cache
+// miss a probe. Holds exactly the lattice's values. On the heap (160 kB).
 struct LatticeCellMemo {
-  static constexpr size_t kCells = 4096;
+  static constexpr int kBits = 12;
+  static constexpr size_t kCells = size_t(1) << kBits;
   static constexpr uint64_t kEmpty = ~uint64_t(0);
   std::vector<uint64_t> key = std::vector<uint64_t>(kCells, kEmpty);
   std::vector<std::array<float, 8>> value = std::vector<std::array<float, 8>>(kCells);
   void Clear() { std::fill(key.begin(), key.end(), kEmpty); }
-  static size_t Slot(uint64_t key) { return (key * 0x9E3779B97F4A7C15ull) >> 52; }
+  static size_t Slot(uint64_t key) { return (key * 0x9E3779B97F4A7C15ull) >> (64 - kBits); }
   // The corner values of the cell with key `cell_key` (all −1 when new).
   std::array<float, 8>& Corners(uint64_t cell_key) {
     const size_t slot = Slot(cell_key);
