@@ -153,6 +153,19 @@ std::vector<LiveFrameRecord> RunOnce(const RunSetup& r, LiveCounters* counters, 
   return records;
 }
 
+// One frame's κ parts and counts (--verbose; for profilers).
+void LogKappaCounts(const std::string& label, const LiveFrameRecord& f) {
+  const InsertTimings& t = f.times.insert;
+  char line[320];
+  std::snprintf(line, sizeof line,
+                "bench live: %s frame %lld: kappa %.2f ms (receivers %.2f, look-up %.2f, multiply %.2f); "
+                "receivers %zu, look-ups %zu, computed %zu, marched %zu, reused %zu, hidden %zu, multiplied %zu px",
+                label.c_str(), static_cast<long long>(f.index), t.kappa_ms, t.kappa_receivers_ms, t.kappa_lookup_ms,
+                t.kappa_multiply_ms, t.kappa_receivers, t.kappa_lookups, t.kappa_evaluated, t.kappa_marched,
+                t.kappa_reused, t.kappa_hidden, t.kappa_multiplied);
+  LogVerbose(line);
+}
+
 void AddRunFigures(const std::string& label, const std::string& note, const std::vector<LiveFrameRecord>& records,
                    int frames, int warmup, std::vector<BenchFigure>& figures) {
   std::vector<double> latency, track, expose, insert, light, shade, kappa, display, process, rewritten, nodes;
@@ -170,6 +183,7 @@ void AddRunFigures(const std::string& label, const std::string& note, const std:
     process.push_back(f.times.process_ms);
     rewritten.push_back(static_cast<double>(f.pixels_rewritten));
     nodes.push_back(static_cast<double>(f.times.insert.kappa_evaluated));
+    LogKappaCounts(label, f);
     if (f.latency_ms >= 0) {
       latency.push_back(f.latency_ms);
       ++displayed;
@@ -252,6 +266,9 @@ std::vector<BenchFigure> BenchLive(const BenchOptions& options) {
   const int frames = options.quick ? 8 : std::clamp(frames_env ? std::atoi(frames_env) : 90, 20, 3000);
   const int width = options.quick ? 640 : 1280, height = options.quick ? 360 : 720;
   const int warmup = options.quick ? 2 : 15;
+  // NERFAR_BENCH_LIVE_RUNS=TEXT: only the runs whose label holds TEXT.
+  const char* runs_env = BenchVariable("NERFAR_BENCH_LIVE_RUNS");
+  const std::string only = runs_env ? runs_env : "";
   double t = NowSeconds();
   const Sequence still = RenderSequence(width, height, frames, false);
   const Sequence hand_held = RenderSequence(width, height, frames, true);
@@ -287,12 +304,13 @@ std::vector<BenchFigure> BenchLive(const BenchOptions& options) {
   for (const int threads : thread_counts)
     for (const std::string& preset : presets)
       for (const Motion& m : motions) {
+        const std::string label = std::string(m.name) + "_" + preset + "_t" + std::to_string(threads);
+        if (label.find(only) == std::string::npos) continue;
         SetThreadCount(threads);
         RunSetup r{m.sequence, &scene, &environment, &mesh, &field, preset, m.drag, m.drag_hold, warmup};
         LiveCounters counters;
         double coverage = 0;
         const std::vector<LiveFrameRecord> records = RunOnce(r, &counters, &coverage);
-        const std::string label = std::string(m.name) + "_" + preset + "_t" + std::to_string(threads);
         char note[160];
         std::snprintf(note, sizeof note, "%dx%d, %s, object %.0f %% of the frame, %d threads", width, height,
                       mesh_name.c_str(), coverage * 100, threads);

@@ -45,6 +45,8 @@ const std::vector<BenchVariableInfo>& BenchVariables() {
       {"NERFAR_BENCH_INSERT_DRAG_FRAMES", "insert", "frames of the drag (at least 2)"},
       {"NERFAR_BENCH_INSERT_DRAG_MM", "insert", "millimetres the object moves a frame"},
       {"NERFAR_BENCH_LIVE_FRAMES", "live", "frames of each run (20-3000)"},
+      {"NERFAR_BENCH_LIVE_RUNS", "live",
+       "TEXT: only the runs whose label holds TEXT, e.g. still_balanced_t1 (profiling)"},
   };
   return list;
 }

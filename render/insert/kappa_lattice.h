@@ -3,6 +3,7 @@
 // by the threads of a frame (InsertOptions::kappa_cache_spacing_radii).
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cstddef>
 #include <cstdint>
@@ -33,19 +34,54 @@ constexpr size_t kKappaCacheMaxNodes = size_t(1) << 22;  // ~4 M nodes (~100 MB)
 constexpr size_t kKappaFineLevels = 4;
 
 // The lattice nodes one thread looked up last (direct-mapped by key; value
-// -1: empty): neighbouring receivers of a row share most of their 8 nodes,
-// and the shared lattice's hash look-up (a cache miss or two) is what
-// dominates κ on a hand-held frame. Holds exactly the lattice's values.
+// -1: empty): neighbouring receivers share most of their 8 nodes, and the
+// shared lattice's hash look-up (a cache miss or two) is what dominates κ
+// on a frame. Sized for the nodes of one level that a 1280-pixel-wide frame
+// of the balanced grid reads (kept across frames while the lattice stays,
+// so that the next frame finds most of them); on the heap (too large for a
+// thread's static storage). Holds exactly the lattice's values.
 struct LatticeMemo {
-  static constexpr size_t kMemo = 1024;
-  std::array<uint64_t, kMemo> key{};
-  std::array<float, kMemo> value = Empty();
-  static std::array<float, kMemo> Empty() {
-    std::array<float, kMemo> v;
-    v.fill(-1.0f);
-    return v;
+  static constexpr int kBits = 13;
+  static constexpr size_t kMemo = size_t(1) << kBits;
+  struct Entry {
+    uint64_t key = ~uint64_t(0);
+    float value = -1.0f;
+  };
+  std::vector<Entry> entry = std::vector<Entry>(kMemo);
+  void Clear() { std::fill(entry.begin(), entry.end(), Entry{}); }
+  static size_t Slot(uint64_t key) { return (key * 0x9E3779B97F4A7C15ull) >> (64 - kBits); }
+  Entry& At(uint64_t key) { return entry[Slot(key)]; }
+  bool Holds(uint64_t key) const {
+    const Entry& e = entry[Slot(key)];
+    return e.key == key && !(e.value < 0.0f);
   }
-  static size_t Slot(uint64_t key) { return (key * 0x9E3779B97F4A7C15ull) >> 54; }
+};
+
+// The lattice cells (of one level) one thread read last, with their corner
+// values (direct-mapped by the key of the cell's lowest node and normal
+// cell; key ~0: empty; value -1: that corner not fetched yet). A cell's
+// receivers (a top-level cell spans several κ samples each way at the
+// presets' spacing, a finer one fewer) read its corners here instead of
+// probing the node memo, and through it the shared lattice, once per
+// corner: the lattice's frozen table, larger than the caches, costs a cache
+// miss a probe. Holds exactly the lattice's values. On the heap (160 kB).
+struct LatticeCellMemo {
+  static constexpr int kBits = 12;
+  static constexpr size_t kCells = size_t(1) << kBits;
+  static constexpr uint64_t kEmpty = ~uint64_t(0);
+  std::vector<uint64_t> key = std::vector<uint64_t>(kCells, kEmpty);
+  std::vector<std::array<float, 8>> value = std::vector<std::array<float, 8>>(kCells);
+  void Clear() { std::fill(key.begin(), key.end(), kEmpty); }
+  static size_t Slot(uint64_t key) { return (key * 0x9E3779B97F4A7C15ull) >> (64 - kBits); }
+  // The corner values of the cell with key `cell_key` (all −1 when new).
+  std::array<float, 8>& Corners(uint64_t cell_key) {
+    const size_t slot = Slot(cell_key);
+    if (key[slot] != cell_key) {
+      key[slot] = cell_key;
+      value[slot].fill(-1.0f);
+    }
+    return value[slot];
+  }
 };
 
 // The shared lattice. The nodes of earlier frames are a read-only snapshot
@@ -71,6 +107,11 @@ class KappaLattice {
       }
     }
     return FindFresh(node, value);
+  }
+  // Starts loading `node`'s slot of the snapshot into the cache, so that
+  // the misses of several nodes looked up next overlap instead of queueing.
+  void Prefetch(uint64_t node) const {
+    if (!frozen_.empty()) __builtin_prefetch(&frozen_[FrozenSlot(node)]);
   }
   void Insert(uint64_t node, float value);
   void Publish();  // single-threaded, between frames

@@ -27,36 +27,45 @@ struct CellPlane {
   float t_min = 0, t_max = 0;  // range of the corners' ray distances
 };
 
+// One thread's memos of one lattice level: its nodes, and the corners of
+// its cells read last (receivers a few pixels apart mostly share a cell,
+// and then need no node key or memo probe).
+struct LevelMemo {
+  LatticeMemo nodes;
+  LatticeCellMemo cells;
+};
+
 // Per-thread scratch of the κ pass.
 struct ThreadScratch {
   KappaScratch kappa;
-  LatticeMemo memo;
-  std::array<LatticeMemo, kKappaFineLevels> fine_memo;  // the same for each fine level
-  // The eight nodes around the last receiver (its lattice cell and normal
-  // cell `corner_key`; value −1: not fetched yet): receivers a few pixels
-  // apart mostly share one lattice cell, and then need no key or memo probe.
-  uint64_t corner_key = ~uint64_t(0);
-  std::array<float, 8> corner_value{};
+  std::array<LevelMemo, 1 + kKappaFineLevels> levels;  // the top level, then the fine ones
 };
 
 // This thread's scratch for pass `pass` (a number new for every κ pass of
-// any inserter): kept across the pass's rows, so that the memo holds the
-// nodes of the rows this thread did before (neighbouring rows share most
-// of their lattice cells), and emptied for a new pass (its lattice may
-// hold other values).
-ThreadScratch& ScratchFor(uint64_t pass) {
+// any inserter) over the lattice of generation `lattice`
+// (KappaCache::generation): its memos are kept across passes and frames
+// while the lattice stays (its nodes, once computed, keep their values, so
+// that a frame much like the last finds most of its nodes in them) and
+// emptied for another lattice; the light's scratch is new for each pass
+// (the lights may have changed).
+ThreadScratch& ScratchFor(uint64_t pass, uint64_t lattice) {
   thread_local ThreadScratch scratch;
-  thread_local uint64_t scratch_pass = 0;
+  thread_local uint64_t scratch_pass = 0, scratch_lattice = 0;
+  if (scratch_lattice != lattice) {
+    for (LevelMemo& level : scratch.levels) {
+      level.nodes.Clear();
+      level.cells.Clear();
+    }
+    scratch_lattice = lattice;
+  }
   if (scratch_pass != pass) {
-    scratch.memo = LatticeMemo{};
-    scratch.fine_memo.fill(LatticeMemo{});
-    scratch.corner_key = ~uint64_t(0);
-    scratch.kappa.cw_light = nullptr;  // the lights may have changed
+    scratch.kappa.cw_light = nullptr;
     scratch_pass = pass;
   }
   return scratch;
 }
 std::atomic<uint64_t> g_kappa_passes{0};
+std::atomic<uint64_t> g_kappa_generations{0};
 
 // rgb[3i + c] *= k[i] for i < n (the same products as one pixel at a time).
 void MultiplyRgb(float* rgb, const float* k, int n) {
@@ -257,6 +266,8 @@ std::vector<float> ReceiverRule(const ShadowPassInputs& in) {
 }
 
 }  // namespace
+
+uint64_t NewKappaGeneration() { return ++g_kappa_generations; }
 
 KappaSpacing KappaSpacingFor(const InsertOptions& options, int width) {
   const int factor = std::max(1, options.kappa_coarse_factor);
@@ -523,6 +534,7 @@ class KappaPass {
         one_minus_eps_, in_.sources};
     SharpestPenumbra();
     pass_ = ++g_kappa_passes;
+    generation_ = cache_ != nullptr ? cache_->generation : 0;
     node_point_.assign(nx_ * ny_, Vec3f{});
     node_normal_.assign(nx_ * ny_, Vec3f{});
     node_valid_.assign(nx_ * ny_, 0);
@@ -568,8 +580,8 @@ class KappaPass {
     double spacing = spacing_;
     for (size_t level = 0;; ++level, spacing *= 0.5) {
       Spread spread;
-      const float k = level == 0 ? CoarseLatticeKappa(x, cell, sc, row, &spread)
-                                 : FineLatticeKappa(level - 1, spacing, x, cell, sc, row, &spread);
+      KappaLattice& lattice = level == 0 ? cache_->lattice : cache_->fine[level - 1];
+      const float k = LevelKappa(lattice, sc.levels[level], spacing, x, cell, sc, row, &spread);
       if (level == levels_ || spread.highest - spread.lowest <= delta_lattice_ || !PenumbraNarrowerThan(x, spacing) ||
           !WiderThanAPixel(x, spacing))
         return k;
@@ -619,63 +631,57 @@ class KappaPass {
   // plane would otherwise pull in the layer beyond it).
   static constexpr double kMinCornerWeight = 1e-3;
 
-  // Trilinear κ over the top level's nodes around x for x's normal cell,
-  // through this thread's corner values and memo.
-  float CoarseLatticeKappa(const Vec3f& x, uint32_t cell, ThreadScratch& sc, size_t row, Spread* spread) {
-    const LatticeCell c = CellAt(x, spacing_);
-    const uint64_t corner_key = LatticeKey(c.i, c.j, c.k, cell);
-    if (corner_key != sc.corner_key) {
-      sc.corner_key = corner_key;
-      sc.corner_value.fill(-1.0f);
-    }
+  // Trilinear κ over the nodes of `lattice` (a level of spacing `spacing`)
+  // around x for x's normal cell, through this thread's memos of the level.
+  float LevelKappa(KappaLattice& lattice, LevelMemo& memo, double spacing, const Vec3f& x, uint32_t cell,
+                   ThreadScratch& sc, size_t row, Spread* spread) {
+    const LatticeCell c = CellAt(x, spacing);
+    std::array<float, 8>& corners = memo.cells.Corners(LatticeKey(c.i, c.j, c.k, cell));
+    std::array<double, 8> weight;
+    for (int corner = 0; corner < 8; ++corner) weight[size_t(corner)] = c.Weight(corner);
+    FetchCorners(c, spacing, cell, weight, memo.nodes, lattice, corners, sc, row);
     double sum = 0.0, total = 0.0;
-    for (int corner = 0; corner < 8; ++corner) {
-      const double weight = c.Weight(corner);
-      if (weight < kMinCornerWeight) continue;
-      total += weight;
-      float& cached = sc.corner_value[size_t(corner)];
-      if (cached < 0.0f) {
-        const int64_t i = c.I(corner), j = c.J(corner), k = c.K(corner);
-        const uint64_t key = LatticeKey(i, j, k, cell);
-        const size_t slot = LatticeMemo::Slot(key);
-        if (sc.memo.key[slot] != key || sc.memo.value[slot] < 0.0f) {
-          sc.memo.key[slot] = key;
-          sc.memo.value[slot] =
-              NodeKappa(cache_->lattice, key, Vec3f(Vec3(double(i), double(j), double(k)) * spacing_), cell, sc, row);
-        }
-        cached = sc.memo.value[slot];
-      }
-      sum += weight * cached;
-      spread->Add(cached);
+    for (size_t corner = 0; corner < 8; ++corner) {
+      if (weight[corner] < kMinCornerWeight) continue;
+      total += weight[corner];
+      sum += weight[corner] * corners[corner];
+      spread->Add(corners[corner]);
     }
     return total > 0.0 ? static_cast<float>(std::clamp(sum / total, 0.0, 1.0)) : 1.0f;
   }
 
-  // Trilinear κ over fine level `fine`'s nodes (spacing `spacing`) around
-  // x, through this thread's memo of the level: reached only inside a sharp
-  // penumbra.
-  float FineLatticeKappa(size_t fine, double spacing, const Vec3f& x, uint32_t cell, ThreadScratch& sc, size_t row,
-                         Spread* spread) {
-    LatticeMemo& memo = sc.fine_memo[fine];
-    const LatticeCell c = CellAt(x, spacing);
-    double sum = 0.0, total = 0.0;
+  // The corners of c (a cell of `spacing`, normal cell `cell`) that count
+  // (`weight` not negligible) and are not in `corners` yet, through the node
+  // memo: first the snapshot slots of those the memo lacks prefetched, so
+  // that their cache misses overlap, then each looked up in corner order.
+  void FetchCorners(const LatticeCell& c, double spacing, uint32_t cell, const std::array<double, 8>& weight,
+                    LatticeMemo& memo, KappaLattice& lattice, std::array<float, 8>& corners, ThreadScratch& sc,
+                    size_t row) {
+    std::array<uint64_t, 8> key;
+    bool missing = false;
     for (int corner = 0; corner < 8; ++corner) {
-      const double weight = c.Weight(corner);
-      if (weight < kMinCornerWeight) continue;
-      total += weight;
-      const int64_t i = c.I(corner), j = c.J(corner), k = c.K(corner);
-      const uint64_t key = LatticeKey(i, j, k, cell);
-      const size_t slot = LatticeMemo::Slot(key);
-      if (memo.key[slot] != key || memo.value[slot] < 0.0f) {
-        memo.key[slot] = key;
-        memo.value[slot] =
-            NodeKappa(cache_->fine[fine], key, Vec3f(Vec3(double(i), double(j), double(k)) * spacing), cell, sc, row);
-      }
-      const float value = memo.value[slot];
-      sum += weight * value;
-      spread->Add(value);
+      if (weight[size_t(corner)] < kMinCornerWeight || corners[size_t(corner)] >= 0.0f) continue;
+      key[size_t(corner)] = LatticeKey(c.I(corner), c.J(corner), c.K(corner), cell);
+      if (!memo.Holds(key[size_t(corner)])) lattice.Prefetch(key[size_t(corner)]);
+      missing = true;
     }
-    return total > 0.0 ? static_cast<float>(std::clamp(sum / total, 0.0, 1.0)) : 1.0f;
+    if (!missing) return;
+    for (int corner = 0; corner < 8; ++corner)
+      if (weight[size_t(corner)] >= kMinCornerWeight && corners[size_t(corner)] < 0.0f)
+        corners[size_t(corner)] = MemoKappa(memo, lattice, key[size_t(corner)], c, corner, spacing, cell, sc, row);
+  }
+
+  // Corner `corner` of c (a lattice of `spacing`) through `memo`: looked up
+  // in `lattice` (computed there on a miss) when the memo lacks it.
+  float MemoKappa(LatticeMemo& memo, KappaLattice& lattice, uint64_t key, const LatticeCell& c, int corner,
+                  double spacing, uint32_t cell, ThreadScratch& sc, size_t row) {
+    LatticeMemo::Entry& e = memo.At(key);
+    if (e.key != key || e.value < 0.0f) {
+      e.key = key;
+      const Vec3 node = Vec3(double(c.I(corner)), double(c.J(corner)), double(c.K(corner))) * spacing;
+      e.value = NodeKappa(lattice, key, Vec3f(node), cell, sc, row);
+    }
+    return e.value;
   }
 
   float ExactKappa(const Vec3f& x, const Vec3f& n, ThreadScratch& sc, size_t row) {
@@ -831,7 +837,7 @@ class KappaPass {
 
   // κ at the receivers FindRow found in this row (cols as there).
   void KappaRow(size_t row, const std::vector<size_t>& cols) {
-    ThreadScratch& scratch = ScratchFor(pass_);
+    ThreadScratch& scratch = ScratchFor(pass_, generation_);
     for (size_t q : cols) {
       const size_t node = row * nx_ + q;
       if (node_state_[node] != 1) continue;
@@ -1015,7 +1021,7 @@ class KappaPass {
         rows.size(),
         [&](size_t k) {
           const size_t r = rows[k];
-          ThreadScratch& scratch = ScratchFor(pass_);
+          ThreadScratch& scratch = ScratchFor(pass_, generation_);
           for (const PlaneNode& p : plane_nodes_[r])
             kappa_grid_[r * nx_ + p.q] =
                 ReceiverKappa(p.point, cell_normals_ ? node_normal_[r * nx_ + p.q] : p.plane->normal, scratch, r);
@@ -1176,7 +1182,8 @@ class KappaPass {
   bool cell_normals_ = false;     // one normal per world cell (InsertOptions::receiver_normal_per_cell)
   float reuse_tolerance_ = 0;     // metres
   KappaContext context_;
-  uint64_t pass_ = 0;  // this pass's number (ScratchFor)
+  uint64_t pass_ = 0;        // this pass's number (ScratchFor)
+  uint64_t generation_ = 0;  // the lattice's generation (KappaCache::generation; 0: no lattice)
 
   // What the receiver search found at each node (for the upsampling):
   // state 0 not found, 1 surface, 2 no surface (as ReceiverFrame).

@@ -27,10 +27,16 @@ struct ViewKey {
   bool operator==(const ViewKey&) const = default;
 };
 
+// A number no other lattice of this process has held (KappaCache::generation).
+uint64_t NewKappaGeneration();
+
 // What the shadow pass keeps between frames; `key` says which objects,
 // lights and options the lattice and the last layer hold.
 struct KappaCache {
   KappaKey key;
+  // Which lattice the levels hold: new at every Clear (the threads' memos
+  // of the lattice's values hold while it stays).
+  uint64_t generation = NewKappaGeneration();
   // The lattice's nodes (and its shadow box) lie at world point node +
   // shift: 0, but through a drag (DragFrame::kappa_shift) the lattice is
   // kept in the objects' frame as κ's held light was taken.
@@ -57,6 +63,7 @@ struct KappaCache {
 
   // Drops the lattice, the explored views and the last layer.
   void Clear() {
+    generation = NewKappaGeneration();
     lattice.Clear();
     for (KappaLattice& level : fine) level.Clear();
     explored.clear();

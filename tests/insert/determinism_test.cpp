@@ -4,7 +4,9 @@
 // thread and on two must give the same κ layers and composites, bit for bit.
 // The scene's normals are scattered by ~10° as a NeRF's are (the bench
 // grid's scatter by more than 10° between neighbours), so that which
-// receiver gives a cell its normal changes κ.
+// receiver gives a cell its normal changes κ. Two inserters taking turns on
+// one thread must each give what it gives alone (the threads' memos of the
+// κ lattice are kept across frames).
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -57,24 +59,37 @@ struct Sequence {
   std::vector<PixelRect> rects;
 };
 
-Sequence RenderHandHeld(const SceneField& scene, const InsertOptions& options, int threads) {
-  const int saved = ThreadCount();
-  SetThreadCount(threads);
+constexpr int kHandHeldFrames = 5;
+
+// A sharp slanted lobe (its direction `axis`) and a broad sky.
+SgMixture HandHeldLight(const Vec3& axis) {
+  SgMixture light = OneLobe(axis, 40.0, 5.0);
+  light.push_back(OneLobe({0, 0, 1}, 1.0, 0.3)[0]);
+  return light;
+}
+
+// Frame f of the hand-held sequence (the camera 2 mm further each frame)
+// through `inserter`, into s.
+void RenderHandHeldFrame(Inserter& inserter, const SgMixture& light, int f, Sequence& s) {
   const SphereObject object({-0.04, 0.1, 0.05}, 0.04);
   const CameraIntrinsics camera = testing::TestCamera(240, 180);
-  SgMixture light = OneLobe({0.8, -0.1, 1.0}, 40.0, 5.0);
-  light.push_back(OneLobe({0, 0, 1}, 1.0, 0.3)[0]);
+  const Pose cam = LookAt({0.22 + 0.002 * f, -0.3 + 0.001 * f, 0.35}, {-0.1, 0.1, 0.02});
+  ImageF frame(camera.width, camera.height, 3, 1.0f);
+  InsertLayers layers;
+  inserter.Render(camera, cam, {object.Object(&light)}, frame, &layers);
+  s.kappa.push_back(layers.kappa);
+  s.rects.push_back(layers.kappa_rect);
+  s.frames.push_back(frame);
+}
+
+Sequence RenderHandHeld(const SceneField& scene, const InsertOptions& options, int threads,
+                        const Vec3& axis = {0.8, -0.1, 1.0}) {
+  const int saved = ThreadCount();
+  SetThreadCount(threads);
+  const SgMixture light = HandHeldLight(axis);
   Inserter inserter(scene, {}, options);
   Sequence s;
-  for (int f = 0; f < 5; ++f) {
-    const Pose cam = LookAt({0.22 + 0.002 * f, -0.3 + 0.001 * f, 0.35}, {-0.1, 0.1, 0.02});
-    ImageF frame(camera.width, camera.height, 3, 1.0f);
-    InsertLayers layers;
-    inserter.Render(camera, cam, {object.Object(&light)}, frame, &layers);
-    s.kappa.push_back(layers.kappa);
-    s.rects.push_back(layers.kappa_rect);
-    s.frames.push_back(frame);
-  }
+  for (int f = 0; f < kHandHeldFrames; ++f) RenderHandHeldFrame(inserter, light, f, s);
   SetThreadCount(saved);
   return s;
 }
@@ -111,6 +126,38 @@ TEST(Determinism, HandHeldKappaIsTheSameOnOneAndTwoThreads) {
     const Sequence two = RenderHandHeld(scene, options, 2);
     ExpectIdentical(one, two, preset);
   }
+}
+
+// Each thread keeps memos of the κ lattice's values across frames while the
+// lattice stays. Two inserters lit differently (the same object, so their
+// lattices have the same nodes with other values), frame by frame in turn
+// on one thread, must each give what it gives alone, bit for bit: a memo
+// must never hand one lattice's value to the other.
+TEST(Determinism, InsertersInTurnOnOneThreadKeepTheirOwnKappa) {
+  const testing::AnalyticScene exact(PlainTable());
+  const ScatteredNormals scene(exact);
+  const InsertOptions options = InsertOptions::Preset("balanced");
+  const Vec3 axis_a{0.8, -0.1, 1.0}, axis_b{-0.3, 0.7, 1.0};
+  const Sequence alone_a = RenderHandHeld(scene, options, 1, axis_a);
+  const Sequence alone_b = RenderHandHeld(scene, options, 1, axis_b);
+  const int saved = ThreadCount();
+  SetThreadCount(1);
+  const SgMixture light_a = HandHeldLight(axis_a), light_b = HandHeldLight(axis_b);
+  Inserter a(scene, {}, options), b(scene, {}, options);
+  Sequence turn_a, turn_b;
+  for (int f = 0; f < kHandHeldFrames; ++f) {
+    RenderHandHeldFrame(a, light_a, f, turn_a);
+    RenderHandHeldFrame(b, light_b, f, turn_b);
+  }
+  SetThreadCount(saved);
+  ExpectIdentical(alone_a, turn_a, "light a");
+  ExpectIdentical(alone_b, turn_b, "light b");
+  // The two lights' shadows must differ, or a mixed-up memo would not show.
+  const std::vector<float>& ka = alone_a.frames.back().pixels;
+  const std::vector<float>& kb = alone_b.frames.back().pixels;
+  size_t differ = 0;
+  for (size_t i = 0; i < ka.size(); ++i) differ += std::abs(ka[i] - kb[i]) > 1e-2f;
+  EXPECT_GT(differ, 300u) << "the two lights must cast different shadows";
 }
 
 // The κ kept between frames belongs to the options it was made with: turning
