@@ -62,6 +62,49 @@ void RemoveLobe(FitState& st, Eigen::Index k) {
   st.lobes.coloured.erase(st.lobes.coloured.begin() + k);
 }
 
+// The model trained for `steps` on the samples of half the albedo cells
+// (`fold`: those of index parity fold; the others weighted 0), then its light
+// held while every cell's albedo is re-solved for it, as a fit that had not
+// seen the other half would give their albedos.
+FitState TrainedOnFold(FitState m, int fold, int steps) {
+  const std::vector<double> balance = m.balance;
+  for (size_t i = 0; i < m.balance.size(); ++i)
+    if (m.cell[i] % 2 != fold) m.balance[i] = 0;
+  Loss(m, Shading(m), true, &m);
+  int step = 0;
+  Iterate(m, steps, &step, 0, nullptr);
+  m.balance = balance;
+  for (int k = 0; k < steps; ++k) {
+    Loss(m, Shading(m), true, &m);
+    SolveAlbedo(m, Shading(m));
+  }
+  return m;
+}
+
+// The log-likelihood gain of lobe k's colour on the albedo cells it was not
+// fitted to, summed over the two folds (two-fold cross-validation over the
+// cells): a colour that explains one surface's own material within its cells
+// (leaves facing up, sharing a cell with a sand table, under a "green"
+// zenith) does not carry to other cells, a coloured light does (a blue sky in
+// the shadows all over the table).
+double HeldOutChromaGain(const FitState& st, Eigen::Index k, int steps) {
+  double gain = 0;
+  for (int fold = 0; fold < 2; ++fold) {
+    FitState coloured_start = st;
+    coloured_start.lobes.coloured[k] = true;
+    const FitState grey = TrainedOnFold(st, fold, steps);
+    const FitState coloured = TrainedOnFold(std::move(coloured_start), fold, steps);
+    std::vector<bool> skip = st.emitter;
+    for (size_t i = 0; i < skip.size(); ++i) skip[i] = skip[i] || st.cell[i] % 2 == fold;
+    const double n = static_cast<double>(st.s->size()), s2 = st.robust_scale * st.robust_scale;
+    gain +=
+        n *
+        (Loss(grey, Shading(grey), false, nullptr, &skip) - Loss(coloured, Shading(coloured), false, nullptr, &skip)) /
+        s2;
+  }
+  return gain;
+}
+
 }  // namespace
 
 // Sharp sources, one at a time: the search's best light is added as a lobe
@@ -135,7 +178,8 @@ int KeepSupportedSources(FitState& st, const EnvEstimateOptions& o) {
 // Per-lobe chroma, one lobe at a time: the lobe is given an RGB amplitude
 // (from grey) and the model re-solved for a few steps, as is the model
 // without the change; it keeps its colour when the log-likelihood gain
-// exceeds BIC's penalty for the chroma's two parameters. Albedo and light
+// exceeds BIC's penalty for the chroma's two parameters and the colour also
+// explains albedo cells it was not fitted to (HeldOutChromaGain). Albedo and light
 // trade colour freely, so a neutral scene gives no lobe the evidence (its
 // light stays grey) while a coloured source beside another (a blue sky beside
 // a white sun: the shadows bluer than the lit table) does. Only the lights'
@@ -155,6 +199,10 @@ int FreeChroma(FitState& st, const EnvEstimateOptions& o) {
   for (Eigen::Index k : order) {
     FitState trial = st;
     trial.lobes.coloured[k] = true;
+    const double held_out = HeldOutChromaGain(st, k, o.chroma_steps);
+    LogVerbose("env fit: lobe " + std::to_string(k) + "'s colour, gain on the cells it was not fitted to " +
+               std::to_string(held_out));
+    if (!(held_out > 0)) continue;
     if (!(GainAfterSteps(st, trial, o.chroma_steps) > penalty)) continue;
     st = std::move(trial);
     ++coloured;
