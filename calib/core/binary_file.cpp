@@ -15,6 +15,7 @@ constexpr size_t kTableEntryBytes = kTagBytes + 8;  // tag, u64 size
 constexpr size_t kCrcBytes = 4, kLegacyChecksumBytes = 8;
 // More sections than any format has: a corrupt count is refused before the table is read.
 constexpr uint32_t kMaxSections = 64;
+constexpr uint64_t kMaxSectionBytes = uint64_t{1} << 48;
 
 template <typename T>
 T LoadLittleEndian(std::string_view bytes, size_t at) {
@@ -175,11 +176,12 @@ BinaryFile OpenBinaryFile(std::string_view bytes, const std::string& source, con
     if (crc_matches) ThrowCorrupt(source, format, std::to_string(count) + " sections (expected at most 64)");
     ThrowCorrupt(source, format, "crc32 mismatch");
   }
-  // The length the table states, summed so that no size can wrap it around.
+  // The length the table states, each size capped far above any file (64 of them cannot wrap a
+  // u64 around).
   uint64_t stated = kHeader + uint64_t(count) * kTableEntryBytes + kCrcBytes;
   for (uint32_t i = 0; i < count && kHeader + (i + 1) * kTableEntryBytes <= bytes.size(); ++i) {
     const uint64_t size = LoadLittleEndian<uint64_t>(bytes, kHeader + i * kTableEntryBytes + kTagBytes);
-    stated += std::min<uint64_t>(size, bytes.size() + 1);
+    stated += std::min<uint64_t>(size, kMaxSectionBytes);
   }
   if (!crc_matches) {
     if (stated > bytes.size())
