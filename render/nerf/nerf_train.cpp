@@ -1103,6 +1103,7 @@ void NerfTrainer::LoadCheckpoint(const std::string& path) {
                     "checkpoint was made with other training options (use the same preset and --set, or delete it)");
   if (GetString(iden, "dataset") != s.data.source + " " + std::to_string(s.data.train.size()))
     ThrowInputError(path, "checkpoint was made from another dataset (delete it to start over)");
+  if (!flat) iden.ExpectEnd("the identity");
   ByteReader r = flat ? iden : file.Section("TRAN");
   const int step = r.Get<int32_t>("step"), level = r.Get<int32_t>("level"), adam_t = r.Get<int32_t>("Adam step");
   const double elapsed = r.Get<double>("seconds trained");
