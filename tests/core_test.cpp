@@ -66,23 +66,13 @@ extern "C" int rename(const char* from, const char* to) {
 namespace nerfar {
 namespace {
 
+using testing::InputErrorOf;
 using testing::TempDir;
 
 ImageF Ramp(int w, int h, int c) {
   ImageF image(w, h, c);
   for (size_t i = 0; i < image.pixels.size(); ++i) image.pixels[i] = 1e-3f * std::pow(1.02f, float(i % 700));
   return image;
-}
-
-// Message of the InputError thrown by body, or "" if none was thrown.
-template <typename Body>
-std::string InputErrorOf(Body body) {
-  try {
-    body();
-  } catch (const InputError& e) {
-    return e.what();
-  }
-  return "";
 }
 
 TEST(Exr, FloatRoundTripIsExact) {
@@ -530,56 +520,128 @@ TEST(Log, DurationsReadNaturally) {
 
 // ---- the binary container (calib/core/binary_file.h)
 
-constexpr BinaryFormat kTestFormat{"test file", "NERFTEST", true, 2, 3, "make it again"};
+// Versions 1 and 2 flat, 3 sectioned.
+constexpr BinaryFormat kTestFormat{"test file", "NERFTEST", true, 1, 3, 3, "make it again"};
 
-TEST(BinaryFile, ChecksumIsFnv1aFromTheFormatsBasis) {
-  // FNV-1a: h = (h ^ byte) · 1099511628211 per byte, from the formats' basis (binary_file.h).
-  constexpr uint64_t kBasis = 1469598103934665603ull, kPrime = 1099511628211ull;
-  EXPECT_EQ(BinaryChecksum(""), kBasis);
-  EXPECT_EQ(BinaryChecksum("a"), (kBasis ^ 0x61) * kPrime);
-  EXPECT_EQ(BinaryChecksum("ab"), (((kBasis ^ 0x61) * kPrime) ^ 0x62) * kPrime);
-  EXPECT_NE(BinaryChecksum("ab"), BinaryChecksum("ba"));
-}
+std::string LittleEndian32(uint32_t v) { return std::string(reinterpret_cast<const char*>(&v), 4); }
+std::string LittleEndian64(uint64_t v) { return std::string(reinterpret_cast<const char*>(&v), 8); }
 
-TEST(BinaryFile, WriterLaysOutMagicVersionFieldsChecksum) {
+// A version-3 test file: section AAAA holds u16 0x0201 and 1.0f, ZZZZ the byte 7.
+std::string TwoSectionFile() {
   BinaryFileWriter w(kTestFormat, 3);
-  w.Put(uint16_t{0x0201});
-  w.PutArray(std::vector<float>{1.0f});
-  const std::string bytes = std::move(w).Seal();
-  const std::string body = std::string("NERFTEST") + std::string("\x03\x00\x00\x00", 4) + "\x01\x02" +
-                           std::string("\x00\x00\x80\x3f", 4);  // 1.0f, little-endian
-  ASSERT_EQ(bytes.size(), body.size() + 8);
-  EXPECT_EQ(bytes.substr(0, body.size()), body);
-  uint64_t sum;
-  std::memcpy(&sum, bytes.data() + body.size(), 8);
-  EXPECT_EQ(sum, BinaryChecksum(body));
+  ByteWriter& a = w.Section("AAAA");
+  a.Put(uint16_t{0x0201});
+  a.PutArray(std::vector<float>{1.0f});
+  w.Section("ZZZZ").Put(uint8_t{7});
+  return std::move(w).Seal();
 }
 
-TEST(BinaryFile, OpenChecksMagicVersionAndChecksumInThatOrder) {
-  BinaryFileWriter w(kTestFormat, 2);
-  w.Put(uint32_t{7});
-  const std::string good = std::move(w).Seal();
-  BinaryFile file = OpenBinaryFile(good, "t.bin", kTestFormat);
-  EXPECT_EQ(file.version, 2u);
-  EXPECT_EQ(file.fields.remaining(), 4u) << "the fields end before the checksum";
-  EXPECT_EQ(file.fields.Get<uint32_t>("seven"), 7u);
+TEST(BinaryFile, LegacyChecksumIsFnv1aFromTheFormatsBasis) {
+  // FNV-1a: h = (h ^ byte) · 1099511628211 per byte, from the flat formats' basis (binary_file.h).
+  constexpr uint64_t kBasis = 1469598103934665603ull, kPrime = 1099511628211ull;
+  EXPECT_EQ(LegacyFnv1aChecksum(""), kBasis);
+  EXPECT_EQ(LegacyFnv1aChecksum("a"), (kBasis ^ 0x61) * kPrime);
+  EXPECT_EQ(LegacyFnv1aChecksum("ab"), (((kBasis ^ 0x61) * kPrime) ^ 0x62) * kPrime);
+  EXPECT_NE(LegacyFnv1aChecksum("ab"), LegacyFnv1aChecksum("ba"));
+}
 
+TEST(BinaryFile, Crc32IsTheStandardOne) {
+  // The published check value of CRC-32 (ISO-HDLC, zlib's): "123456789" -> 0xCBF43926.
+  EXPECT_EQ(BinaryCrc32("123456789"), 0xCBF43926u);
+  EXPECT_EQ(BinaryCrc32(""), 0u);
+}
+
+TEST(BinaryFile, WriterLaysOutHeaderTableSectionsCrc) {
+  const std::string bytes = TwoSectionFile();
+  const std::string a = std::string("\x01\x02", 2) + std::string("\x00\x00\x80\x3f", 4);  // 1.0f, little-endian
+  const std::string body = std::string("NERFTEST") + LittleEndian32(3) + LittleEndian32(2) + "AAAA" +
+                           LittleEndian64(6) + "ZZZZ" + LittleEndian64(1) + a + "\x07";
+  ASSERT_EQ(bytes.size(), body.size() + 4);
+  EXPECT_EQ(bytes.substr(0, body.size()), body);
+  EXPECT_EQ(bytes.substr(body.size()), LittleEndian32(BinaryCrc32(body)));
+}
+
+TEST(BinaryFile, SectionsReadByTagUnknownOnesSkippedMissingOnesNamed) {
+  const std::string bytes = TwoSectionFile();
+  const BinaryFile file = OpenBinaryFile(bytes, "t.bin", kTestFormat);
+  EXPECT_EQ(file.version, 3u);
+  EXPECT_TRUE(file.sectioned());
+  EXPECT_EQ(file.fields.remaining(), 0u) << "a sectioned file has no flat fields";
+  ByteReader a = file.Section("AAAA");  // ZZZZ is never asked for: skipped
+  EXPECT_EQ(a.remaining(), 6u) << "exactly the section's bytes";
+  EXPECT_EQ(a.Get<uint16_t>("u16"), 0x0201u);
+  EXPECT_EQ(a.Get<float>("f32"), 1.0f);
+  // Past its end, even though the file goes on (ZZZZ, the crc): named with the byte in the file,
+  // 16 header + 24 table + 6.
+  const std::string past = InputErrorOf([&] { a.Get<uint8_t>("more"); });
+  EXPECT_NE(past.find("t.bin: file is truncated while reading more at byte 46"), std::string::npos) << past;
+  EXPECT_TRUE(file.HasSection("ZZZZ"));
+  EXPECT_FALSE(file.HasSection("BBBB"));
+  const std::string missing = InputErrorOf([&] { file.Section("BBBB"); });
+  EXPECT_NE(missing.find("t.bin: no 'BBBB' section"), std::string::npos) << missing;
+}
+
+TEST(BinaryFile, OpenNamesAWrongMagicANewerVersionCorruptionAndTruncation) {
+  const std::string good = TwoSectionFile();
   std::string magic = good;
   magic[3] = 'X';
   EXPECT_NE(InputErrorOf([&] { OpenBinaryFile(magic, "t.bin", kTestFormat); }).find("not a test file"),
             std::string::npos);
-  EXPECT_NE(InputErrorOf([&] { OpenBinaryFile(good.substr(0, 15), "t.bin", kTestFormat); }).find("truncated"),
-            std::string::npos);
   std::string newer = good;
-  newer[8] = 4;  // the checksum no longer matches either: the version is named first
-  EXPECT_NE(InputErrorOf([&] { OpenBinaryFile(newer, "t.bin", kTestFormat); }).find("version 4 (expected 2 to 3; "),
+  newer[8] = 4;  // the crc no longer matches either: the version is named first
+  const std::string newer_message = InputErrorOf([&] { OpenBinaryFile(newer, "t.bin", kTestFormat); });
+  EXPECT_NE(newer_message.find("version 4 (expected 1 to 3; written by a newer nerfar?)"), std::string::npos)
+      << newer_message;
+  // A flipped byte anywhere (header, table, a section, the crc itself) is corruption, by the crc.
+  for (size_t at : {size_t{13}, size_t{16}, size_t{42}, good.size() - 1}) {
+    std::string flipped = good;
+    flipped[at] ^= 0x10;
+    const std::string message = InputErrorOf([&] { OpenBinaryFile(flipped, "t.bin", kTestFormat); });
+    EXPECT_NE(message.find("t.bin: crc32 mismatch (the file is corrupt; make it again)"), std::string::npos)
+        << "byte " << at << ": " << message;
+  }
+  // Cut anywhere after the version: truncated, with the length the table needs where it was read.
+  for (size_t cut : {size_t{12}, size_t{20}, size_t{40}, good.size() - 1}) {
+    const std::string message = InputErrorOf([&] { OpenBinaryFile(good.substr(0, cut), "t.bin", kTestFormat); });
+    EXPECT_NE(message.find("t.bin: file is truncated: " + std::to_string(cut) + " bytes"), std::string::npos)
+        << "cut at " << cut << ": " << message;
+  }
+  EXPECT_NE(InputErrorOf([&] {
+              OpenBinaryFile(good.substr(0, 48), "t.bin", kTestFormat);
+            }).find("48 bytes where its section table needs " + std::to_string(good.size())),
             std::string::npos);
-  std::string flipped = good;
+  // A flipped size in the table cannot be told from a cut (the crc lies where the table says):
+  // both are named.
+  std::string size_flipped = good;
+  size_flipped[20] ^= 0x10;
+  EXPECT_NE(InputErrorOf([&] { OpenBinaryFile(size_flipped, "t.bin", kTestFormat); }).find("(or the table is corrupt)"),
+            std::string::npos);
+  // A whole file (crc right) whose table disagrees with its length was written wrong: corrupt.
+  std::string body = good.substr(0, good.size() - 4);
+  body[20] = 5;  // AAAA's size 6 -> 5
+  body += LittleEndian32(BinaryCrc32(body));
+  EXPECT_NE(InputErrorOf([&] { OpenBinaryFile(body, "t.bin", kTestFormat); }).find("section table states"),
+            std::string::npos);
+}
+
+TEST(BinaryFile, FlatVersionsOpenWithTheLegacyChecksum) {
+  // Version 2 of the test format, as flat files were written: magic, version, fields, FNV.
+  std::string flat = std::string("NERFTEST") + LittleEndian32(2) + LittleEndian32(7);
+  flat += LittleEndian64(LegacyFnv1aChecksum(flat));
+  BinaryFile file = OpenBinaryFile(flat, "t.bin", kTestFormat);
+  EXPECT_EQ(file.version, 2u);
+  EXPECT_FALSE(file.sectioned());
+  EXPECT_EQ(file.fields.remaining(), 4u) << "the fields end before the checksum";
+  EXPECT_EQ(file.fields.Get<uint32_t>("seven"), 7u);
+  EXPECT_NE(InputErrorOf([&] { file.Section("AAAA"); }).find("no 'AAAA' section"), std::string::npos);
+  std::string flipped = flat;
   flipped[13] ^= 0x10;
   const std::string message = InputErrorOf([&] { OpenBinaryFile(flipped, "t.bin", kTestFormat); });
-  EXPECT_NE(message.find("t.bin"), std::string::npos) << message;
-  EXPECT_NE(message.find("checksum"), std::string::npos) << message;
-  EXPECT_NE(message.find("make it again"), std::string::npos) << message;
+  EXPECT_NE(message.find("t.bin: checksum mismatch (the file is corrupt or truncated; make it again)"),
+            std::string::npos)
+      << message;
+  EXPECT_NE(InputErrorOf([&] { OpenBinaryFile(flat.substr(0, 15), "t.bin", kTestFormat); }).find("truncated"),
+            std::string::npos);
 }
 
 TEST(BinaryFile, ReaderNeverReadsPastItsSpan) {
@@ -591,19 +653,22 @@ TEST(BinaryFile, ReaderNeverReadsPastItsSpan) {
   EXPECT_EQ(r.remaining(), 2u) << "a failed read takes nothing";
   // A count that the bytes left cannot hold fails before anything is allocated.
   EXPECT_NE(InputErrorOf([&] { r.GetArray<double>(uint64_t{1} << 61, "huge"); }).find("huge"), std::string::npos);
+  EXPECT_NE(InputErrorOf([&] { r.ExpectEnd("the span"); }).find("span: 2 bytes of trailing data after the span"),
+            std::string::npos);
   EXPECT_EQ(r.Take(2, "rest"), "45");
   EXPECT_EQ(r.remaining(), 0u);
+  EXPECT_NO_THROW(r.ExpectEnd("the span"));
   EXPECT_NE(InputErrorOf([&] { r.Take(1, "more"); }).find("more"), std::string::npos);
 }
 
 TEST(BinaryFile, WriteBinaryFileIsAtomicAndReadsBack) {
   TempDir dir;
   BinaryFileWriter w(kTestFormat, 3);
-  w.Put(double{2.5});
+  w.Section("DATA").Put(double{2.5});
   WriteBinaryFile(dir.File("x.bin"), std::move(w));
   const std::string bytes = ReadFileBytes(dir.File("x.bin"));
-  BinaryFile file = OpenBinaryFile(bytes, dir.File("x.bin"), kTestFormat);
-  EXPECT_EQ(file.fields.Get<double>("value"), 2.5);
+  const BinaryFile file = OpenBinaryFile(bytes, dir.File("x.bin"), kTestFormat);
+  EXPECT_EQ(file.Section("DATA").Get<double>("value"), 2.5);
   EXPECT_EQ(std::distance(std::filesystem::directory_iterator(dir.path()), {}), 1) << "no temporary file left";
 }
 

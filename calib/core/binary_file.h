@@ -1,13 +1,24 @@
-// The container of our binary formats (.nerf, .ssdf, training checkpoints):
-// little-endian fields after an 8-byte magic and, for versioned formats, a
-// u32 version; a checksum of every byte before it last. A reader checks
-// the magic, the version and the checksum, in that order, before any field
-// (so a flipped byte is named as corruption, a newer file as a newer
-// version), then reads the fields from a span that ends before the checksum
-// and never reads past its end: a shortfall is an InputError naming the file,
-// the field and the byte. Sizes read from a file are checked against the
-// bytes left before anything is allocated for them. Files are written through
+// The container of our binary formats (.nerf, .ssdf, training checkpoints),
+// little-endian:
+//   magic[8]  u32 version  u32 section_count
+//   section_count x (tag[4] u64 size)   the section table
+//   the sections' bytes, in table order
+//   u32 crc32 (zlib's) of every byte before it
+// A reader checks the magic, the version, the crc and the length, in that
+// order, before any field (so a flipped byte is named as corruption, a cut
+// file as truncated, a newer file as a newer version), then asks for
+// sections by tag: each a reader over exactly its bytes that never reads past
+// them (a shortfall is an InputError naming the file, the field and the
+// byte). Sections a reader does not ask for are skipped (a later version may
+// add some); a missing one it requires is an InputError naming the file and
+// the tag. Sizes read from a file are checked against the bytes left before
+// anything is allocated for them. Files are written through
 // calib/core/atomic_file.h.
+//
+// Files written before the container had sections (a format's versions
+// below its sectioned_since, and unversioned formats) are flat: the magic, the
+// version if any, the fields, and LegacyFnv1aChecksum last. They are read
+// only: OpenBinaryFile gives their fields as one reader.
 #pragma once
 
 #include <cstdint>
@@ -20,10 +31,12 @@
 
 namespace nerfar {
 
-// The checksum the formats end with: FNV-1a 64 (prime 1099511628211), started from
+// The checksum flat (pre-section) files end with: FNV-1a 64 (prime 1099511628211), started from
 // 1469598103934665603 — the published offset basis 14695981039346656037 with its last digit lost
-// when the first format was written. Every file has it, so it stays.
-uint64_t BinaryChecksum(std::string_view bytes);
+// when the first format was written. Kept to read those files.
+uint64_t LegacyFnv1aChecksum(std::string_view bytes);
+// zlib's crc32 of the bytes: what a sectioned file ends with.
+uint32_t BinaryCrc32(std::string_view bytes);
 
 // What a reader expects of a file.
 struct BinaryFormat {
@@ -33,6 +46,8 @@ struct BinaryFormat {
   // put their version in the magic (a file of another one is "not a <name>").
   bool versioned = false;
   uint32_t oldest_version = 0, newest_version = 0;
+  // The first version with sections and crc32; older ones (and unversioned formats) are flat.
+  uint32_t sectioned_since = 0;
   std::string_view remedy;  // appended to the corruption message: what the user can do ("" for nothing)
 };
 
@@ -58,13 +73,20 @@ class ByteWriter {
   std::string bytes_;
 };
 
-// A file of a format: its magic and version first; Seal() appends the checksum.
-class BinaryFileWriter : public ByteWriter {
+// A sectioned file of a format: Section(tag) starts a section (what is put in it until the next
+// Section() or Seal() is its bytes); Seal() lays out the header, the table, the sections and the crc.
+class BinaryFileWriter {
  public:
-  // version: written after the magic when the format is versioned (ignored otherwise).
-  explicit BinaryFileWriter(const BinaryFormat& format, uint32_t version = 0);
-  // The file's bytes, checksum last.
+  // version: at least the format's sectioned_since.
+  BinaryFileWriter(const BinaryFormat& format, uint32_t version);
+  // tag: 4 characters, each tag once per file.
+  ByteWriter& Section(std::string_view tag);
+  // The file's bytes, crc32 last.
   std::string Seal() &&;
+
+ private:
+  std::string header_;  // magic and version
+  std::vector<std::pair<std::string, ByteWriter>> sections_;
 };
 
 // Writes the file atomically (a temporary file, then a rename).
@@ -96,9 +118,12 @@ class ByteReader {
     if (count > 0) std::memcpy(values.data(), bytes.data(), count * sizeof(T));  // an empty vector's data() may be null
     return values;
   }
-  size_t pos() const { return pos_; }  // bytes read so far
+  size_t pos() const { return pos_; }        // bytes read so far
+  size_t offset() const { return offset_; }  // where the span starts in its file
   size_t remaining() const { return bytes_.size() - pos_; }
   const std::string& source() const { return source_; }
+  // InputError "source: N bytes of trailing data after what" unless every byte was read.
+  void ExpectEnd(const std::string& what) const;
   // InputError "source: what" (for a field that reads but holds a wrong value).
   [[noreturn]] void Fail(const std::string& what) const;
 
@@ -110,15 +135,36 @@ class ByteReader {
   size_t pos_ = 0;
 };
 
-// A file of a format, checked: its version (0 for unversioned formats) and a reader of the
-// fields between the version and the checksum.
-struct BinaryFile {
+// A file of a format, checked: its version (0 for unversioned formats) and its fields.
+class BinaryFile {
+ public:
   uint32_t version = 0;
+  bool sectioned() const { return sectioned_; }
+  // A flat file's fields (between the version and the checksum); empty in a sectioned file.
   ByteReader fields;
+  // A reader over exactly the bytes of the section `tag`; InputError naming the file and the tag
+  // when the file has none (a flat file has no sections).
+  ByteReader Section(std::string_view tag) const;
+  bool HasSection(std::string_view tag) const;
+
+ private:
+  friend BinaryFile OpenBinaryFile(std::string_view, const std::string&, const BinaryFormat&);
+  struct Entry {
+    std::string tag;
+    size_t offset = 0, size = 0;
+  };
+  BinaryFile(std::string_view bytes, std::string source)
+      : fields({}, source), bytes_(bytes), source_(std::move(source)) {}
+  const Entry* Find(std::string_view tag) const;
+  bool sectioned_ = false;
+  std::string_view bytes_;
+  std::string source_, name_;
+  std::vector<Entry> sections_;
 };
 
-// Checks the magic, the version and the checksum of `bytes` (a whole file), each failure an
-// InputError naming source. The reader borrows `bytes`: keep them alive while reading.
+// Checks the magic, the version, the checksum and (sectioned) the section table of `bytes` (a
+// whole file), each failure an InputError naming source. The result borrows `bytes`: keep them
+// alive while reading.
 BinaryFile OpenBinaryFile(std::string_view bytes, const std::string& source, const BinaryFormat& format);
 
 }  // namespace nerfar

@@ -14,7 +14,9 @@
 namespace nerfar {
 namespace {
 
-constexpr BinaryFormat kFormat{"nerfar NeRF file", "NERFARF1", true, 1, kNerfFileVersion, ""};
+// Versions 1 and 2 are flat (read only); 3 has the sections HEAD (the header and the payload's
+// coding) and BRIK (the stored payload).
+constexpr BinaryFormat kFormat{"nerfar NeRF file", "NERFARF1", true, 1, kNerfFileVersion, 3, ""};
 constexpr uint32_t kColorModelLogLinear = 1;            // log L = a + b·d per channel
 constexpr int kValuesPerVertex = 1 + kNerfColorCoeffs;  // channels: density, colour 0..11
 constexpr uint8_t kCompressionNone = 0, kCompressionZlib = 1;
@@ -130,6 +132,29 @@ struct Header {
   uint32_t brick_count = 0;
   uint64_t vertex_count = 0;
 };
+
+// How the payload is stored (versions 2 and 3): bits per channel, compression, its inflated size.
+struct PayloadCoding {
+  uint8_t bits[kValuesPerVertex] = {};
+  uint8_t compression = kCompressionNone;
+  uint64_t payload_size = 0;
+};
+
+void PutCoding(ByteWriter& w, const NerfFileOptions& options, uint64_t payload_size) {
+  for (int ch = 0; ch < kValuesPerVertex; ++ch) w.Put(uint8_t(ChannelBits(options, ch)));
+  w.Put(options.compress ? kCompressionZlib : kCompressionNone);
+  w.Put(uint16_t{0});
+  w.Put(payload_size);
+}
+
+PayloadCoding ReadCoding(ByteReader& r) {
+  PayloadCoding c;
+  for (uint8_t& b : c.bits) b = r.Get<uint8_t>("bits per value");
+  c.compression = r.Get<uint8_t>("compression");
+  r.Get<uint16_t>("padding");
+  c.payload_size = r.Get<uint64_t>("payload size");
+  return c;
+}
 
 void PutHeader(ByteWriter& w, const NerfField& f, uint32_t brick_count, uint64_t stored) {
   w.Put(kColorModelLogLinear);
@@ -277,6 +302,92 @@ void ReadValuesV2(ByteReader& r, const std::string& source, const std::vector<ui
   }
 }
 
+// The bricks and values of a payload of versions 2 and 3 (`stored` as the file holds it).
+std::vector<uint64_t> ReadPayload(std::string_view stored, const PayloadCoding& c, const Header& h,
+                                  const std::string& source, NerfField& f) {
+  for (int ch = 0; ch < kValuesPerVertex; ++ch)
+    if (c.bits[ch] < 4 || c.bits[ch] > 16)
+      ThrowInputError(source, "channel " + std::to_string(ch) + " has " + std::to_string(c.bits[ch]) +
+                                  " bits per value (expected 4..16)");
+  if (c.compression != kCompressionNone && c.compression != kCompressionZlib)
+    ThrowInputError(source, "compression " + std::to_string(c.compression) + " (expected 0 none or 1 zlib)");
+  if (c.payload_size > kMaxPayloadBytes || (c.compression == kCompressionNone && c.payload_size != stored.size()))
+    ThrowInputError(source, "payload size " + std::to_string(c.payload_size) + " does not match the file");
+  // The bricks' codes: the header's vertices at their bits, padded to a byte per brick and channel.
+  uint64_t bits_per_vertex = 0;
+  for (const uint8_t b : c.bits) bits_per_vertex += b;
+  const uint64_t least = uint64_t(h.brick_count) * kBrickBytes + h.vertex_count * bits_per_vertex / 8;
+  const uint64_t most = least + uint64_t(h.brick_count) * kValuesPerVertex + 1;
+  if (c.payload_size < least || c.payload_size > most ||
+      (c.compression == kCompressionZlib && c.payload_size > kDeflateMaxRatio * stored.size() + 64))
+    ThrowInputError(source, "payload size " + std::to_string(c.payload_size) + " does not fit " +
+                                std::to_string(h.brick_count) + " bricks of " + std::to_string(h.vertex_count) +
+                                " stored vertices in " + std::to_string(stored.size()) +
+                                " stored bytes (the file is corrupt)");
+  std::string inflated;
+  if (c.compression == kCompressionZlib) {
+    inflated.resize(c.payload_size);
+    uLongf size = uLongf(c.payload_size);
+    const int status = uncompress(reinterpret_cast<Bytef*>(inflated.data()), &size,
+                                  reinterpret_cast<const Bytef*>(stored.data()), uLong(stored.size()));
+    if (status != Z_OK || size != c.payload_size)
+      ThrowInputError(source, "compressed payload does not inflate to its stated " + std::to_string(c.payload_size) +
+                                  " bytes (the file is corrupt)");
+  } else {
+    inflated = std::string(stored);
+  }
+  ByteReader p(inflated, source + " (payload)");
+  std::vector<uint64_t> masks = ReadBricks(p, source, h, f);
+  ReadValuesV2(p, source, masks, c.bits, f);
+  if (p.remaining() != 0)
+    ThrowInputError(source, "payload has " + std::to_string(p.remaining()) + " bytes of trailing data");
+  return masks;
+}
+
+// A flat version-2 body: the coding, the stored payload's size, the payload.
+std::vector<uint64_t> ReadVersion2Body(ByteReader& r, const Header& h, size_t file_size, NerfField& f) {
+  const PayloadCoding coding = ReadCoding(r);
+  const uint64_t stored_size = r.Get<uint64_t>("stored payload size");
+  if (r.remaining() != stored_size)
+    r.Fail("file has " + std::to_string(file_size) + " bytes (expected " +
+           std::to_string(file_size - r.remaining() + stored_size) + "; truncated or trailing data)");
+  return ReadPayload(r.Take(stored_size, "payload"), coding, h, r.source(), f);
+}
+
+// A version-1 body: the brick list, then every stored vertex's values as half floats.
+std::vector<uint64_t> ReadVersion1Body(ByteReader& r, const Header& h, size_t file_size, NerfField& f) {
+  const uint64_t body = uint64_t(h.brick_count) * 28 + h.vertex_count * kValuesPerVertex * 2;
+  if (r.remaining() != body)
+    r.Fail("file has " + std::to_string(file_size) + " bytes (expected " +
+           std::to_string(file_size - r.remaining() + body) + " for " + std::to_string(h.brick_count) +
+           " bricks; truncated or trailing data)");
+  std::vector<uint64_t> masks = ReadBricks(r, r.source(), h, f);
+  ReadValuesV1(r, r.source(), masks, f);
+  return masks;
+}
+
+// Every corner of an occupied cell that lies in a listed brick must be stored
+// (else the reader would invent an empty corner where the field had a value).
+void CheckOccupiedCornersStored(const std::vector<uint64_t>& masks, const std::string& source, const NerfField& f) {
+  for (uint32_t b = 0; b < masks.size(); ++b) {
+    const uint64_t bits = f.occupancy[b];
+    const int bx = f.brick_coords[3 * b], by = f.brick_coords[3 * b + 1], bz = f.brick_coords[3 * b + 2];
+    for (int cell = 0; cell < 64; ++cell) {
+      if (!((bits >> cell) & 1u)) continue;
+      const int i = bx * 4 + (cell & 3), j = by * 4 + ((cell >> 2) & 3), k = bz * 4 + (cell >> 4);
+      if (i >= f.res[0] - 1 || j >= f.res[1] - 1 || k >= f.res[2] - 1)
+        ThrowInputError(source, "brick " + std::to_string(b) + " marks a cell outside the grid as occupied");
+      for (int n = 0; n < 8; ++n) {
+        const int32_t s = f.Slot(i + (n & 1), j + ((n >> 1) & 1), k + (n >> 2));
+        // A corner in an unlisted brick is empty space, as it was in the saved field.
+        if (s >= 0 && !((masks[size_t(s) / kNerfBrickSlots] >> (s % kNerfBrickSlots)) & 1u))
+          ThrowInputError(source,
+                          "brick " + std::to_string(b) + " has an occupied cell with a corner that is not stored");
+      }
+    }
+  }
+}
+
 }  // namespace
 
 std::vector<std::string> NerfFileOptions::Validate() const {
@@ -337,99 +448,30 @@ std::string SerializeNerf(const NerfField& f, const NerfFileOptions& options) {
     body = std::move(packed);
   }
   BinaryFileWriter w(kFormat, kNerfFileVersion);
-  w.bytes().reserve(body.size() + 160);
-  PutHeader(w, f, uint32_t(order.size()), stored);
-  for (int ch = 0; ch < kValuesPerVertex; ++ch) w.Put(uint8_t(ChannelBits(options, ch)));
-  w.Put(options.compress ? kCompressionZlib : kCompressionNone);
-  w.Put(uint16_t{0});
-  w.Put(payload_size);
-  w.Put(uint64_t(body.size()));
-  w.PutBytes(body);
+  ByteWriter& head = w.Section("HEAD");
+  PutHeader(head, f, uint32_t(order.size()), stored);
+  PutCoding(head, options, payload_size);
+  w.Section("BRIK").PutBytes(body);
   return std::move(w).Seal();
 }
 
 NerfField ParseNerf(const std::string& bytes, const std::string& source) {
-  BinaryFile file = OpenBinaryFile(bytes, source, kFormat);
-  ByteReader& r = file.fields;
+  const BinaryFile file = OpenBinaryFile(bytes, source, kFormat);
   NerfField f;
-  const Header h = ReadHeader(r, source, f);
   std::vector<uint64_t> masks;
-  if (file.version == 1) {
-    const uint64_t body = uint64_t(h.brick_count) * 28 + h.vertex_count * kValuesPerVertex * 2;
-    if (r.remaining() != body)
-      ThrowInputError(source, "file has " + std::to_string(bytes.size()) + " bytes (expected " +
-                                  std::to_string(bytes.size() - r.remaining() + body) + " for " +
-                                  std::to_string(h.brick_count) + " bricks; truncated or trailing data)");
-    masks = ReadBricks(r, source, h, f);
-    ReadValuesV1(r, source, masks, f);
+  if (file.sectioned()) {
+    ByteReader head = file.Section("HEAD");
+    const Header h = ReadHeader(head, source, f);
+    const PayloadCoding coding = ReadCoding(head);
+    head.ExpectEnd("the header");
+    ByteReader stored = file.Section("BRIK");
+    masks = ReadPayload(stored.Take(stored.remaining(), "payload"), coding, h, source, f);
   } else {
-    uint8_t bits[kValuesPerVertex];
-    for (uint8_t& b : bits) b = r.Get<uint8_t>("bits per value");
-    const uint8_t compression = r.Get<uint8_t>("compression");
-    r.Get<uint16_t>("padding");
-    const uint64_t payload_size = r.Get<uint64_t>("payload size");
-    const uint64_t stored_size = r.Get<uint64_t>("stored payload size");
-    if (r.remaining() != stored_size)
-      ThrowInputError(source, "file has " + std::to_string(bytes.size()) + " bytes (expected " +
-                                  std::to_string(bytes.size() - r.remaining() + stored_size) +
-                                  "; truncated or trailing data)");
-    for (int ch = 0; ch < kValuesPerVertex; ++ch)
-      if (bits[ch] < 4 || bits[ch] > 16)
-        ThrowInputError(source, "channel " + std::to_string(ch) + " has " + std::to_string(bits[ch]) +
-                                    " bits per value (expected 4..16)");
-    if (compression != kCompressionNone && compression != kCompressionZlib)
-      ThrowInputError(source, "compression " + std::to_string(compression) + " (expected 0 none or 1 zlib)");
-    if (payload_size > kMaxPayloadBytes || (compression == kCompressionNone && payload_size != stored_size))
-      ThrowInputError(source, "payload size " + std::to_string(payload_size) + " does not match the file");
-    // The bricks' codes: the header's vertices at their bits, padded to a byte per brick and channel.
-    uint64_t bits_per_vertex = 0;
-    for (const uint8_t b : bits) bits_per_vertex += b;
-    const uint64_t least = uint64_t(h.brick_count) * kBrickBytes + h.vertex_count * bits_per_vertex / 8;
-    const uint64_t most = least + uint64_t(h.brick_count) * kValuesPerVertex + 1;
-    if (payload_size < least || payload_size > most ||
-        (compression == kCompressionZlib && payload_size > kDeflateMaxRatio * stored_size + 64))
-      ThrowInputError(source, "payload size " + std::to_string(payload_size) + " does not fit " +
-                                  std::to_string(h.brick_count) + " bricks of " + std::to_string(h.vertex_count) +
-                                  " stored vertices in " + std::to_string(stored_size) +
-                                  " stored bytes (the file is corrupt)");
-    const std::string_view stored = r.Take(stored_size, "payload");
-    std::string inflated;
-    if (compression == kCompressionZlib) {
-      inflated.resize(payload_size);
-      uLongf size = uLongf(payload_size);
-      const int status = uncompress(reinterpret_cast<Bytef*>(inflated.data()), &size,
-                                    reinterpret_cast<const Bytef*>(stored.data()), uLong(stored_size));
-      if (status != Z_OK || size != payload_size)
-        ThrowInputError(source, "compressed payload does not inflate to its stated " + std::to_string(payload_size) +
-                                    " bytes (the file is corrupt)");
-    } else {
-      inflated = std::string(stored);
-    }
-    ByteReader p(inflated, source + " (payload)");
-    masks = ReadBricks(p, source, h, f);
-    ReadValuesV2(p, source, masks, bits, f);
-    if (p.remaining() != 0)
-      ThrowInputError(source, "payload has " + std::to_string(p.remaining()) + " bytes of trailing data");
+    ByteReader r = file.fields;
+    const Header h = ReadHeader(r, source, f);
+    masks = file.version == 1 ? ReadVersion1Body(r, h, bytes.size(), f) : ReadVersion2Body(r, h, bytes.size(), f);
   }
-  // Every corner of an occupied cell that lies in a listed brick must be stored
-  // (else the reader would invent an empty corner where the field had a value).
-  for (uint32_t b = 0; b < h.brick_count; ++b) {
-    const uint64_t bits = f.occupancy[b];
-    const int bx = f.brick_coords[3 * b], by = f.brick_coords[3 * b + 1], bz = f.brick_coords[3 * b + 2];
-    for (int cell = 0; cell < 64; ++cell) {
-      if (!((bits >> cell) & 1u)) continue;
-      const int i = bx * 4 + (cell & 3), j = by * 4 + ((cell >> 2) & 3), k = bz * 4 + (cell >> 4);
-      if (i >= f.res[0] - 1 || j >= f.res[1] - 1 || k >= f.res[2] - 1)
-        ThrowInputError(source, "brick " + std::to_string(b) + " marks a cell outside the grid as occupied");
-      for (int n = 0; n < 8; ++n) {
-        const int32_t s = f.Slot(i + (n & 1), j + ((n >> 1) & 1), k + (n >> 2));
-        // A corner in an unlisted brick is empty space, as it was in the saved field.
-        if (s >= 0 && !((masks[size_t(s) / kNerfBrickSlots] >> (s % kNerfBrickSlots)) & 1u))
-          ThrowInputError(source,
-                          "brick " + std::to_string(b) + " has an occupied cell with a corner that is not stored");
-      }
-    }
-  }
+  CheckOccupiedCornersStored(masks, source, f);
   f.UpdateSkipGrid();
   return f;
 }

@@ -2,13 +2,13 @@
 // NerfField. Only the vertices that some occupied cell needs are stored (the
 // rest of an allocated brick reads as empty space).
 //
-// Version 2 (written): "NERFARF1" magic, u32 version, u32 colour model, f32
-// aabb[6], f32 origin[3], f32 voxel_m, f32 occupancy_sigma, i32 res[3], u32
-// brick_count, u64 stored_vertex_count, u8 bits[13] (bits per stored value:
-// density, then the 12 colour coefficients), u8 compression (0 none, 1 zlib),
-// u16 0, u64 payload bytes, u64 stored payload bytes, the payload (zlib
-// deflated when compression is 1), u64 checksum of everything before it
-// (the magic, version and checksum are calib/core/binary_file.h's). Payload: per brick i32 coords[3] + u64 mask of
+// Version 3 (written): the sectioned container of calib/core/binary_file.h
+// ("NERFARF1" magic, version, section table, crc32) with two sections.
+// HEAD: u32 colour model, f32 aabb[6], f32 origin[3], f32 voxel_m, f32
+// occupancy_sigma, i32 res[3], u32 brick_count, u64 stored_vertex_count, u8
+// bits[13] (bits per stored value: density, then the 12 colour coefficients),
+// u8 compression (0 none, 1 zlib), u16 0, u64 payload bytes. BRIK: the payload
+// (zlib deflated when compression is 1). Payload: per brick i32 coords[3] + u64 mask of
 // stored vertices + u64 cell occupancy; then per brick and per channel (density, colour 0..11) an i8 exponent e, an i32
 // base b and the brick's stored vertices' codes q (bits[channel] bits each, little-endian bit order, padded to a byte):
 // the value is (b + q)·2^e. The writer picks per brick and channel the smallest e whose 2^bits - 1 levels span the
@@ -16,9 +16,11 @@
 // min) / (2^bits - 3), 2^-23 · brick max |value|).
 // Loading a loaded field's file again gives exactly the loaded values, and
 // from the second save on the bytes repeat.
-// Version 1 (read only): the same header up to stored_vertex_count, then per
+// Version 2 (read only): flat, "NERFARF1", u32 version, HEAD's fields, u64
+// stored payload bytes, the payload, u64 FNV checksum (binary_file.h's legacy one).
+// Version 1 (read only): flat, the same header up to stored_vertex_count, then per
 // brick i32 coords[3] + u64 mask + u64 occupancy, per stored vertex f16
-// density + 12 x f16 colour, u64 checksum.
+// density + 12 x f16 colour, u64 FNV checksum.
 #pragma once
 
 #include <string>
@@ -28,7 +30,7 @@
 
 namespace nerfar {
 
-inline constexpr uint32_t kNerfFileVersion = 2;
+inline constexpr uint32_t kNerfFileVersion = 3;
 // Largest file the reader accepts (a wrong path to a huge file fails fast).
 inline constexpr size_t kNerfMaxFileBytes = size_t{1} << 31;
 

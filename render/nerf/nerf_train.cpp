@@ -996,12 +996,17 @@ NerfField NerfTrainer::FinalField() const {
 
 // ------------------------------------------------------------ checkpoints
 
-// The checkpoint: the container of calib/core/binary_file.h (its version is in the magic), then
-// the identity (options JSON, dataset) as u64-length strings, step, level, Adam step, seconds
-// trained, the grid, and the field's and optimiser's arrays, each a u64 count and its values.
+// The checkpoint: the sectioned container of calib/core/binary_file.h ("NERFCKPT", version kNerfCheckpointVersion) with
+// the sections IDEN, the identity (options JSON, dataset) as u64-length strings, and TRAN, the
+// training state: step, level, Adam step, seconds trained, the grid, and the field's and
+// optimiser's arrays, each a u64 count and its values. Checkpoints written before the container had
+// sections ("NERFCKP2", version 2 in the magic) are flat: the identity and the state in that order
+// and the legacy checksum; they are read too.
 namespace {
-constexpr BinaryFormat kCheckpointFormat{"nerfar training checkpoint", "NERFCKP2", false, 0, 0,
+constexpr BinaryFormat kCheckpointFormat{"nerfar training checkpoint", "NERFCKPT", true, 3, kNerfCheckpointVersion, 3,
                                          "delete it to start over"};
+constexpr BinaryFormat kFlatCheckpointFormat{"nerfar training checkpoint", "NERFCKP2", false, 0, 0, 0,
+                                             "delete it to start over"};
 constexpr size_t kMaxCheckpointBytes = size_t{16} << 30;
 
 template <typename T>
@@ -1031,28 +1036,30 @@ std::string GetString(ByteReader& r, const char* what) {
 
 void NerfTrainer::SaveCheckpoint(const std::string& path) const {
   const State& s = *state_;
-  BinaryFileWriter w(kCheckpointFormat);
+  BinaryFileWriter w(kCheckpointFormat, kNerfCheckpointVersion);
   NerfTrainOptions identity = s.options;
   identity.max_seconds = 0;           // a resumed run may have another time budget
   identity.save_occupancy_sigma = 0;  // applies to the saved model only
-  PutString(w, identity.ToJson());
-  PutString(w, s.data.source + " " + std::to_string(s.data.train.size()));
-  w.Put(int32_t(s.step));
-  w.Put(int32_t(s.level));
-  w.Put(int32_t(s.adam_t));
-  w.Put(s.Elapsed());
+  ByteWriter& iden = w.Section("IDEN");
+  PutString(iden, identity.ToJson());
+  PutString(iden, s.data.source + " " + std::to_string(s.data.train.size()));
+  ByteWriter& tran = w.Section("TRAN");
+  tran.Put(int32_t(s.step));
+  tran.Put(int32_t(s.level));
+  tran.Put(int32_t(s.adam_t));
+  tran.Put(s.Elapsed());
   const NerfField& f = s.field;
-  w.Put(f.voxel_m);
-  for (int a = 0; a < 3; ++a) w.Put(int32_t(f.res[a]));
-  PutVec(w, f.brick_coords);
-  PutVec(w, f.density);
-  PutVec(w, f.color);
-  PutVec(w, f.occupancy);
-  PutVec(w, s.m_density);
-  PutVec(w, s.v_density);
-  PutVec(w, s.m_color);
-  PutVec(w, s.v_color);
-  PutVec(w, s.max_weight);
+  tran.Put(f.voxel_m);
+  for (int a = 0; a < 3; ++a) tran.Put(int32_t(f.res[a]));
+  PutVec(tran, f.brick_coords);
+  PutVec(tran, f.density);
+  PutVec(tran, f.color);
+  PutVec(tran, f.occupancy);
+  PutVec(tran, s.m_density);
+  PutVec(tran, s.v_density);
+  PutVec(tran, s.m_color);
+  PutVec(tran, s.v_color);
+  PutVec(tran, s.max_weight);
   WriteBinaryFile(path, std::move(w));
 }
 
@@ -1084,16 +1091,20 @@ void CheckGridOfLevel(const NerfField& f, int level, const NerfTrainOptions& opt
 void NerfTrainer::LoadCheckpoint(const std::string& path) {
   State& s = *state_;
   const std::string bytes = ReadFileBytes(path, kMaxCheckpointBytes);
-  BinaryFile file = OpenBinaryFile(bytes, path, kCheckpointFormat);
-  ByteReader& r = file.fields;
+  const bool flat = std::string_view(bytes).substr(0, 8) == kFlatCheckpointFormat.magic;
+  const BinaryFile file = OpenBinaryFile(bytes, path, flat ? kFlatCheckpointFormat : kCheckpointFormat);
+  // A flat file holds the identity and the state in one run of fields.
+  ByteReader iden = flat ? file.fields : file.Section("IDEN");
   NerfTrainOptions identity = s.options;
   identity.max_seconds = 0;
   identity.save_occupancy_sigma = 0;
-  if (GetString(r, "options") != identity.ToJson())
+  if (GetString(iden, "options") != identity.ToJson())
     ThrowInputError(path,
                     "checkpoint was made with other training options (use the same preset and --set, or delete it)");
-  if (GetString(r, "dataset") != s.data.source + " " + std::to_string(s.data.train.size()))
+  if (GetString(iden, "dataset") != s.data.source + " " + std::to_string(s.data.train.size()))
     ThrowInputError(path, "checkpoint was made from another dataset (delete it to start over)");
+  if (!flat) iden.ExpectEnd("the identity");
+  ByteReader r = flat ? iden : file.Section("TRAN");
   const int step = r.Get<int32_t>("step"), level = r.Get<int32_t>("level"), adam_t = r.Get<int32_t>("Adam step");
   const double elapsed = r.Get<double>("seconds trained");
   NerfField f;
@@ -1126,8 +1137,7 @@ void NerfTrainer::LoadCheckpoint(const std::string& path) {
   s.m_color = GetVec<float>(r, slots * kNerfColorCoeffs, "colour moment 1");
   s.v_color = GetVec<float>(r, slots * kNerfColorCoeffs, "colour moment 2");
   s.max_weight = GetVec<float>(r, slots, "sample weights");
-  if (r.remaining() != 0)
-    ThrowInputError(path, "checkpoint has " + std::to_string(r.remaining()) + " bytes of trailing data");
+  r.ExpectEnd("the training state");
   const std::vector<std::string> problems = f.Validate();
   if (!problems.empty()) ThrowInputError(path, "checkpoint field: " + problems.front());
   s.field = std::move(f);

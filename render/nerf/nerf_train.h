@@ -31,6 +31,9 @@
 
 namespace nerfar {
 
+// The version of the checkpoints this build writes (nerf_train.cpp has the layout).
+inline constexpr uint32_t kNerfCheckpointVersion = 3;
+
 struct NerfView {
   std::string name;        // file name without folder and extension, e.g. "r_003"
   std::string image_path;  // where the image came from ("" for in-memory views)
@@ -231,7 +234,8 @@ class NerfTrainer {
   NerfField FinalField() const;
 
   // Checkpoints: the whole training state (field, Adam moments, step, time),
-  // written atomically. Loading checks that options and data match.
+  // written atomically (version kNerfCheckpointVersion; earlier ones load too).
+  // Loading checks that options and data match.
   void SaveCheckpoint(const std::string& path) const;
   void LoadCheckpoint(const std::string& path);
 

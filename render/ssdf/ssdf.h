@@ -189,10 +189,11 @@ class SsdfBatch {
 };
 
 // ---------------------------------------------------------------- the file
-// Binary, little-endian: magic "NERFSSDF", version, sizes, geometry, mesh
-// reference, bounds, material, options, float32 arrays, checksum (the
-// container of calib/core/binary_file.h).
-inline constexpr uint32_t kSsdfFileVersion = 1;
+// Binary, little-endian, in the sectioned container of calib/core/binary_file.h
+// (magic "NERFSSDF", version, section table, crc32): sizes, geometry, mesh
+// reference, bounds and options; the material if any; the float32 arrays
+// (ssdf_io.cpp has the layout). Version 1 files (flat, before sections) are read too.
+inline constexpr uint32_t kSsdfFileVersion = 2;
 
 std::string SerializeSsdf(const SsdfField& field);
 // InputError "source: what is wrong (expected)" for bad magic, version, sizes,

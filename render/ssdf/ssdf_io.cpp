@@ -1,16 +1,19 @@
 // The .ssdf file: little-endian binary (the project targets x86-64 and
-// AArch64 hosts, both little-endian).
+// AArch64 hosts, both little-endian), in the sectioned container of
+// calib/core/binary_file.h ("NERFSSDF", version, section table, crc32).
 //
-//   "NERFSSDF" u32 version  u32 grid dirs components
-//   f64 centre[3] radius edge  f64 bounds_min[3] bounds_max[3]
-//   str mesh_reference  u8 has_material [f64 albedo[3] roughness metallic f0,
-//   str mesh albedo_texture roughness_texture metallic_texture]  str options_json
-//   f32 mean[R²]  f32 basis[R²][K]  f32 coefficients[N³][K]
-//   u64 checksum of every byte before it (BinaryChecksum)
+// Version 2 (written), sections:
+//   GRID  u32 grid dirs components  f64 centre[3] radius edge
+//         f64 bounds_min[3] bounds_max[3]  str mesh_reference  str options_json
+//   MATL  (only with a material) f64 albedo[3] roughness metallic f0,
+//         str mesh albedo_texture roughness_texture metallic_texture
+//   MEAN  f32 mean[R²]   BASI  f32 basis[R²][K]   COEF  f32 coefficients[N³][K]
+// Version 1 (read only), flat: u32 version, GRID's fields up to
+// mesh_reference, u8 has_material [MATL's fields], str options_json, the
+// three arrays, u64 FNV checksum (binary_file.h's legacy one).
 //
-// str = u32 length + bytes (at most 64 KiB). The magic, version and checksum
-// are the container of calib/core/binary_file.h; sizes are checked against
-// the file length before anything is allocated.
+// str = u32 length + bytes (at most 64 KiB); sizes are checked against the
+// bytes there are before anything is allocated.
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -23,7 +26,7 @@ namespace nerfar {
 
 namespace {
 
-constexpr BinaryFormat kFormat{"SSDF file", "NERFSSDF", true, kSsdfFileVersion, kSsdfFileVersion, ""};
+constexpr BinaryFormat kFormat{"SSDF file", "NERFSSDF", true, 1, kSsdfFileVersion, 2, ""};
 constexpr uint32_t kMaxString = 64 * 1024;
 constexpr size_t kMaxFileBytes = size_t{2} << 30;
 
@@ -51,12 +54,7 @@ std::string GetString(ByteReader& r, const char* what) {
 
 bool FiniteVec3(const Vec3& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
 
-}  // namespace
-
-std::string SerializeSsdf(const SsdfField& field) {
-  const std::vector<std::string> problems = field.Validate();
-  NERFAR_CHECK(problems.empty());
-  BinaryFileWriter w(kFormat, kSsdfFileVersion);
+void PutShape(ByteWriter& w, const SsdfField& field) {
   w.Put(static_cast<uint32_t>(field.grid()));
   w.Put(static_cast<uint32_t>(field.dirs()));
   w.Put(static_cast<uint32_t>(field.components()));
@@ -65,76 +63,141 @@ std::string SerializeSsdf(const SsdfField& field) {
   w.Put(field.edge());
   PutVec3(w, field.mesh_bounds.min);
   PutVec3(w, field.mesh_bounds.max);
-  PutString(w, field.mesh_reference);
-  w.Put(static_cast<uint8_t>(field.material ? 1 : 0));
-  if (field.material) {
-    const Material& m = *field.material;
-    PutVec3(w, m.albedo);
-    w.Put(m.roughness);
-    w.Put(m.metallic);
-    w.Put(m.f0);
-    PutString(w, m.mesh);
-    PutString(w, m.albedo_texture);
-    PutString(w, m.roughness_texture);
-    PutString(w, m.metallic_texture);
-  }
-  PutString(w, field.options_json);
-  w.PutArray(field.mean());
-  w.PutArray(field.basis());
-  w.PutArray(field.coefficients());
+}
+
+void PutMaterial(ByteWriter& w, const Material& m) {
+  PutVec3(w, m.albedo);
+  w.Put(m.roughness);
+  w.Put(m.metallic);
+  w.Put(m.f0);
+  PutString(w, m.mesh);
+  PutString(w, m.albedo_texture);
+  PutString(w, m.roughness_texture);
+  PutString(w, m.metallic_texture);
+}
+
+// What GRID holds before its strings: the sizes and the geometry.
+struct Shape {
+  uint32_t grid = 0, dirs = 0, components = 0;
+  Vec3 center;
+  double radius = 0, edge = 0;
+  Bounds mesh_bounds;
+};
+
+// The sizes (refused out of range before anything is allocated for them) and the geometry.
+Shape ReadShape(ByteReader& r) {
+  Shape shape;
+  shape.grid = r.Get<uint32_t>("grid size");
+  shape.dirs = r.Get<uint32_t>("direction resolution");
+  shape.components = r.Get<uint32_t>("component count");
+  Problems problems(r.source());
+  if (shape.grid < 2 || shape.grid > 128) problems.Add("grid", std::to_string(shape.grid) + " (expected 2 to 128)");
+  if (shape.dirs < 4 || shape.dirs > 512) problems.Add("dirs", std::to_string(shape.dirs) + " (expected 4 to 512)");
+  if (shape.components < 1 || shape.components > 1024)
+    problems.Add("components", std::to_string(shape.components) + " (expected 1 to 1024)");
+  problems.ThrowIfAny();
+  shape.center = GetVec3(r, "centre");
+  shape.radius = r.Get<double>("radius");
+  shape.edge = r.Get<double>("grid edge");
+  shape.mesh_bounds.min = GetVec3(r, "mesh bounds");
+  shape.mesh_bounds.max = GetVec3(r, "mesh bounds");
+  return shape;
+}
+
+// The material, its values' problems added to `problems`.
+Material ReadMaterial(ByteReader& r, Problems& problems) {
+  Material m;
+  m.albedo = GetVec3(r, "material albedo");
+  m.roughness = r.Get<double>("material roughness");
+  m.metallic = r.Get<double>("material metallic");
+  m.f0 = r.Get<double>("material f0");
+  m.mesh = GetString(r, "material mesh");
+  m.albedo_texture = GetString(r, "albedo texture");
+  m.roughness_texture = GetString(r, "roughness texture");
+  m.metallic_texture = GetString(r, "metallic texture");
+  const auto unit = [](double v) { return v >= 0 && v <= 1; };
+  if (!FiniteVec3(m.albedo) || m.albedo.x < 0 || m.albedo.y < 0 || m.albedo.z < 0)
+    problems.Add("material", "albedo not finite and non-negative");
+  if (!unit(m.roughness) || !unit(m.metallic) || !unit(m.f0))
+    problems.Add("material", "roughness, metallic or f0 outside [0, 1]");
+  return m;
+}
+
+struct Arrays {
+  std::vector<float> mean, basis, coefficients;
+};
+
+// The mean, basis and coefficients of the shape's sizes, from one reader each (the same one in a
+// flat file, which must then hold exactly the three).
+Arrays ReadArrays(const Shape& shape, ByteReader& mean, ByteReader& basis, ByteReader& coefficients) {
+  const size_t d = size_t(shape.dirs) * shape.dirs, p = size_t(shape.grid) * shape.grid * shape.grid;
+  const size_t k = shape.components, floats = d + d * k + p * k;
+  if (&mean == &coefficients && mean.remaining() != floats * sizeof(float))
+    mean.Fail(std::to_string(mean.remaining()) + " bytes of arrays (expected " +
+              std::to_string(floats * sizeof(float)) + " for grid " + std::to_string(shape.grid) + ", dirs " +
+              std::to_string(shape.dirs) + ", components " + std::to_string(k) + ")");
+  Arrays arrays;
+  arrays.mean = mean.GetArray<float>(d, "mean");
+  arrays.basis = basis.GetArray<float>(d * k, "basis");
+  arrays.coefficients = coefficients.GetArray<float>(p * k, "coefficients");
+  mean.ExpectEnd("the mean");
+  basis.ExpectEnd("the basis");
+  coefficients.ExpectEnd("the coefficients");
+  return arrays;
+}
+
+}  // namespace
+
+std::string SerializeSsdf(const SsdfField& field) {
+  const std::vector<std::string> problems = field.Validate();
+  NERFAR_CHECK(problems.empty());
+  BinaryFileWriter w(kFormat, kSsdfFileVersion);
+  ByteWriter& grid = w.Section("GRID");
+  PutShape(grid, field);
+  PutString(grid, field.mesh_reference);
+  PutString(grid, field.options_json);
+  if (field.material) PutMaterial(w.Section("MATL"), *field.material);
+  w.Section("MEAN").PutArray(field.mean());
+  w.Section("BASI").PutArray(field.basis());
+  w.Section("COEF").PutArray(field.coefficients());
   return std::move(w).Seal();
 }
 
 SsdfField ParseSsdf(const std::string& bytes, const std::string& source) {
-  BinaryFile file = OpenBinaryFile(bytes, source, kFormat);
-  ByteReader& r = file.fields;
+  const BinaryFile file = OpenBinaryFile(bytes, source, kFormat);
   SsdfField field;
   Problems problems(source);
-  const auto grid = r.Get<uint32_t>("grid size"), dirs = r.Get<uint32_t>("direction resolution"),
-             components = r.Get<uint32_t>("component count");
-  if (grid < 2 || grid > 128) problems.Add("grid", std::to_string(grid) + " (expected 2 to 128)");
-  if (dirs < 4 || dirs > 512) problems.Add("dirs", std::to_string(dirs) + " (expected 4 to 512)");
-  if (components < 1 || components > 1024)
-    problems.Add("components", std::to_string(components) + " (expected 1 to 1024)");
-  problems.ThrowIfAny();
-  field.grid_ = static_cast<int>(grid);
-  field.dirs_ = static_cast<int>(dirs);
-  field.components_ = static_cast<int>(components);
-  field.center_ = GetVec3(r, "centre");
-  field.radius_ = r.Get<double>("radius");
-  field.edge_ = r.Get<double>("grid edge");
-  field.mesh_bounds.min = GetVec3(r, "mesh bounds");
-  field.mesh_bounds.max = GetVec3(r, "mesh bounds");
-  field.mesh_reference = GetString(r, "mesh reference");
-  const auto has_material = r.Get<uint8_t>("material flag");
-  if (has_material > 1) ThrowInputError(source, "material flag " + std::to_string(has_material) + " (expected 0 or 1)");
-  if (has_material) {
-    Material m;
-    m.albedo = GetVec3(r, "material albedo");
-    m.roughness = r.Get<double>("material roughness");
-    m.metallic = r.Get<double>("material metallic");
-    m.f0 = r.Get<double>("material f0");
-    m.mesh = GetString(r, "material mesh");
-    m.albedo_texture = GetString(r, "albedo texture");
-    m.roughness_texture = GetString(r, "roughness texture");
-    m.metallic_texture = GetString(r, "metallic texture");
-    const auto unit = [](double v) { return v >= 0 && v <= 1; };
-    if (!FiniteVec3(m.albedo) || m.albedo.x < 0 || m.albedo.y < 0 || m.albedo.z < 0)
-      problems.Add("material", "albedo not finite and non-negative");
-    if (!unit(m.roughness) || !unit(m.metallic) || !unit(m.f0))
-      problems.Add("material", "roughness, metallic or f0 outside [0, 1]");
-    field.material = m;
+  Shape shape;
+  Arrays arrays;
+  if (file.sectioned()) {
+    ByteReader grid = file.Section("GRID");
+    shape = ReadShape(grid);
+    field.mesh_reference = GetString(grid, "mesh reference");
+    field.options_json = GetString(grid, "options");
+    grid.ExpectEnd("the grid section");
+    if (file.HasSection("MATL")) {
+      ByteReader material = file.Section("MATL");
+      field.material = ReadMaterial(material, problems);
+      material.ExpectEnd("the material");
+    }
+    ByteReader mean = file.Section("MEAN"), basis = file.Section("BASI"), coefficients = file.Section("COEF");
+    arrays = ReadArrays(shape, mean, basis, coefficients);
+  } else {
+    ByteReader r = file.fields;
+    shape = ReadShape(r);
+    field.mesh_reference = GetString(r, "mesh reference");
+    const auto has_material = r.Get<uint8_t>("material flag");
+    if (has_material > 1)
+      ThrowInputError(source, "material flag " + std::to_string(has_material) + " (expected 0 or 1)");
+    if (has_material) field.material = ReadMaterial(r, problems);
+    field.options_json = GetString(r, "options");
+    arrays = ReadArrays(shape, r, r, r);
   }
-  field.options_json = GetString(r, "options");
-  const size_t d = static_cast<size_t>(dirs) * dirs, p = static_cast<size_t>(grid) * grid * grid;
-  const size_t floats = d + d * components + p * components;
-  if (r.remaining() != floats * sizeof(float))
-    ThrowInputError(source, std::to_string(r.remaining()) + " bytes of arrays (expected " +
-                                std::to_string(floats * sizeof(float)) + " for grid " + std::to_string(grid) +
-                                ", dirs " + std::to_string(dirs) + ", components " + std::to_string(components) + ")");
-  field.mean_ = r.GetArray<float>(d, "mean");
-  field.basis_ = r.GetArray<float>(d * components, "basis");
-  field.coefficients_ = r.GetArray<float>(p * components, "coefficients");
+  field.grid_ = int(shape.grid), field.dirs_ = int(shape.dirs), field.components_ = int(shape.components);
+  field.center_ = shape.center, field.radius_ = shape.radius, field.edge_ = shape.edge;
+  field.mesh_bounds = shape.mesh_bounds;
+  field.mean_ = std::move(arrays.mean), field.basis_ = std::move(arrays.basis);
+  field.coefficients_ = std::move(arrays.coefficients);
   if (!FiniteVec3(field.mesh_bounds.min) || !FiniteVec3(field.mesh_bounds.max))
     problems.Add("mesh bounds", "not finite (expected finite)");
   for (const std::string& problem : field.Validate()) problems.Add("", problem);

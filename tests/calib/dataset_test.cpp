@@ -23,18 +23,9 @@ namespace nerfar {
 namespace {
 
 namespace fs = std::filesystem;
+using testing::InputErrorOf;
 using testing::TempDir;
 using testing::WriteText;
-
-template <typename Body>
-std::string InputErrorOf(Body body) {
-  try {
-    body();
-  } catch (const InputError& e) {
-    return e.what();
-  }
-  return "";
-}
 
 Mat3 RandomRotation(std::mt19937& rng) {
   std::normal_distribution<double> n(0.0, 1.0);

@@ -1,15 +1,14 @@
 // Shared by the fuzz targets: a per-process scratch file for readers that
-// take a path, and the checksum (calib/core/binary_file.h) that the .nerf, .ssdf and checkpoint
-// files end with (appended by the targets so that mutated bodies get past
-// the checksum and reach the parser; the raw bytes are tried as well), and
-// where a checkpoint's identity ends.
+// take a path, and the checksums (calib/core/binary_file.h) that the .nerf, .ssdf and checkpoint
+// files end with, crc32 (sectioned files) or the legacy FNV (flat files), appended by the targets
+// so that mutated bodies get past the checksum and reach the parser (the raw bytes are tried as
+// well).
 #pragma once
 
 #include <unistd.h>
 
 #include <cstdint>
 #include <cstdio>
-#include <cstring>
 #include <filesystem>
 #include <string>
 
@@ -39,11 +38,15 @@ inline bool WriteBytes(const std::string& path, const std::string& bytes) {
   return std::fclose(file) == 0 && ok;
 }
 
-// bytes followed by their checksum (little-endian), as the binary formats end.
-inline std::string WithChecksum(std::string bytes) {
-  const std::uint64_t sum = BinaryChecksum(bytes);
-  bytes.append(reinterpret_cast<const char*>(&sum), 8);
-  return bytes;
+// The bytes with each checksum a file may end with appended: crc32 (sectioned files) and the
+// legacy FNV (flat ones).
+inline std::string WithCrc32(std::string bytes) {
+  const std::uint32_t crc = BinaryCrc32(bytes);
+  return bytes.append(reinterpret_cast<const char*>(&crc), 4);
+}
+inline std::string WithLegacyChecksum(std::string bytes) {
+  const std::uint64_t sum = LegacyFnv1aChecksum(bytes);
+  return bytes.append(reinterpret_cast<const char*>(&sum), 8);
 }
 
 // Runs `read`; InputError (bad input, said so) is the one accepted failure.
@@ -53,18 +56,6 @@ void Expect(Read read) {
     read();
   } catch (const InputError&) {
   }
-}
-
-// The number of bytes of a checkpoint before its grid: the magic and the
-// two identity strings (options, dataset), each a u64 length and its bytes.
-inline size_t CheckpointIdentityBytes(const std::string& checkpoint) {
-  size_t at = 8;
-  for (int i = 0; i < 2 && at + 8 <= checkpoint.size(); ++i) {
-    std::uint64_t length = 0;
-    std::memcpy(&length, checkpoint.data() + at, 8);
-    at += 8 + length;
-  }
-  return at;
 }
 
 }  // namespace nerfar::fuzz

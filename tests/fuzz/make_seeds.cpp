@@ -2,8 +2,8 @@
 // (build target fuzz_make_seeds; run it from the source tree's root after a
 // format changes): tests/fuzz/corpus/{nerf,ssdf,checkpoint,image,mesh}/ and
 // corpus/dataset/camera.json. Binary files with a checksum are stored
-// without its last 8 bytes (the targets append it); checkpoints also without
-// their identity (checkpoint_fuzz.cpp puts its trainer's in front).
+// without it (the targets append it); of checkpoints only the training state
+// (TRAN) is stored (checkpoint_fuzz.cpp puts its trainer's identity with it).
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -19,6 +19,7 @@
 #include "render/nerf/nerf_file.h"
 #include "render/ssdf/ssdf.h"
 #include "tests/fuzz/fuzz_support.h"
+#include "tests/support/sectioned_file.h"
 #include "tests/support/tiny_trainer.h"
 
 namespace {
@@ -34,7 +35,8 @@ void Write(const std::string& name, const std::string& bytes) {
   std::printf("%-40s %6zu bytes\n", name.c_str(), bytes.size());
 }
 
-std::string WithoutChecksum(const std::string& bytes) { return bytes.substr(0, bytes.size() - 8); }
+// A sectioned file without its crc32.
+std::string WithoutChecksum(const std::string& bytes) { return bytes.substr(0, bytes.size() - 4); }
 
 // A 12 cm slab with a 4 cm block on it at 2 cm voxels: a few bricks, some cells occupied.
 NerfField SmallField() {
@@ -109,8 +111,7 @@ void CheckpointSeeds() {
     while (trainer.step() < steps) trainer.Step();
     trainer.SaveCheckpoint(path);
     const std::string saved = ReadFileBytes(path);
-    const size_t identity = fuzz::CheckpointIdentityBytes(saved);
-    Write("checkpoint/step" + std::to_string(steps) + ".bin", saved.substr(identity, saved.size() - identity - 8));
+    Write("checkpoint/step" + std::to_string(steps) + ".bin", testing::SectionBytes(saved, "TRAN"));
   }
   fs::remove(path);
 }

@@ -1,5 +1,5 @@
 // Fuzzes the .nerf reader (ParseNerf): the bytes as they are, and with their
-// checksum appended (the corpus holds files without their last 8 bytes), so
+// checksum appended, crc32 and legacy (the corpus holds files without their checksum), so
 // that mutated headers, brick lists and payloads reach the parser. Any input
 // must be read or rejected with InputError.
 #include <cstdint>
@@ -13,6 +13,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, size_t size) {
   using namespace nerfar;
   const std::string bytes(reinterpret_cast<const char*>(data), size);
   fuzz::Expect([&] { ParseNerf(bytes, "fuzz.nerf"); });
-  fuzz::Expect([&] { ParseNerf(fuzz::WithChecksum(bytes), "fuzz.nerf"); });
+  fuzz::Expect([&] { ParseNerf(fuzz::WithCrc32(bytes), "fuzz.nerf"); });
+  fuzz::Expect([&] { ParseNerf(fuzz::WithLegacyChecksum(bytes), "fuzz.nerf"); });
   return 0;
 }

@@ -1,5 +1,5 @@
 // Fuzzes the .ssdf reader (ParseSsdf): the bytes as they are, and with their
-// checksum appended (the corpus holds files without their last 8 bytes).
+// checksum appended, crc32 and legacy (the corpus holds files without their checksum).
 // Any input must be read or rejected with InputError.
 #include <cstdint>
 #include <string>
@@ -12,6 +12,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, size_t size) {
   using namespace nerfar;
   const std::string bytes(reinterpret_cast<const char*>(data), size);
   fuzz::Expect([&] { ParseSsdf(bytes, "fuzz.ssdf"); });
-  fuzz::Expect([&] { ParseSsdf(fuzz::WithChecksum(bytes), "fuzz.ssdf"); });
+  fuzz::Expect([&] { ParseSsdf(fuzz::WithCrc32(bytes), "fuzz.ssdf"); });
+  fuzz::Expect([&] { ParseSsdf(fuzz::WithLegacyChecksum(bytes), "fuzz.ssdf"); });
   return 0;
 }

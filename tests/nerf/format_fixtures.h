@@ -35,7 +35,7 @@ inline NerfField FormatFixtureField() {
   return f;
 }
 
-// Steps trained before tests/data/formats/train.ckpt was written.
+// Steps trained before tests/data/formats/train_vN.ckpt was written.
 inline constexpr int kFormatFixtureTrainSteps = 3;
 
 }  // namespace nerfar::testing

@@ -21,10 +21,13 @@
 #include "render/nerf/nerf_train.h"
 #include "tests/nerf/box_scene.h"
 #include "tests/nerf/format_fixtures.h"
+#include "tests/support/sectioned_file.h"
 #include "tests/support/support.h"
 
 namespace nerfar {
 namespace {
+
+using testing::InputErrorOf;
 
 Aabb UnitBox() { return {Vec3(0, 0, 0), Vec3(1, 1, 1)}; }
 
@@ -316,39 +319,34 @@ TEST(NerfFile, OccupiedCellsBesideUnallocatedBricksRoundTrip) {
   }
 }
 
-TEST(NerfFile, TruncatedAndCorruptFilesAreRejected) {
+TEST(NerfFile, TruncatedCorruptAndNewerFilesAreRejectedAsSuch) {
   const std::string good = Bytes(BallField(1.0 / 16, 4.0f, 0.3f));
   for (size_t len : {size_t{0}, size_t{4}, size_t{12}, size_t{40}, size_t{90}, good.size() / 2, good.size() - 1}) {
-    try {
-      ParseNerf(good.substr(0, len), "cut.nerf");
-      ADD_FAILURE() << "accepted a file truncated to " << len << " bytes";
-    } catch (const InputError& e) {
-      EXPECT_NE(std::string(e.what()).find("cut.nerf"), std::string::npos) << e.what();
-    }
+    const std::string message = InputErrorOf([&] { ParseNerf(good.substr(0, len), "cut.nerf"); });
+    // Shorter than the magic: not a .nerf; else named as truncated.
+    EXPECT_NE(message.find(len < 8 ? "cut.nerf: not a nerfar NeRF file" : "cut.nerf: file is truncated"),
+              std::string::npos)
+        << len << " bytes: " << message;
+    // Once the section table (16 + 2 x 12 bytes) is whole, the message says how long the file was.
+    if (len >= 40)
+      EXPECT_NE(message.find("where its section table needs " + std::to_string(good.size())), std::string::npos)
+          << len << " bytes: " << message;
   }
-  std::string bad = good;
-  bad[good.size() / 2] ^= 0x20;
-  EXPECT_THROW(
-      {
-        try {
-          ParseNerf(bad, "flip.nerf");
-        } catch (const InputError& e) {
-          EXPECT_NE(std::string(e.what()).find("checksum"), std::string::npos) << e.what();
-          throw;
-        }
-      },
-      InputError);
+  std::string flipped = good;
+  flipped[good.size() / 2] ^= 0x20;
+  EXPECT_NE(
+      InputErrorOf([&] { ParseNerf(flipped, "flip.nerf"); }).find("flip.nerf: crc32 mismatch (the file is corrupt"),
+      std::string::npos);
   std::string magic = good;
   magic[0] = 'X';
-  EXPECT_THROW(ParseNerf(magic, "m.nerf"), InputError);
-  std::string version = good;
-  version[8] = 9;
-  try {
-    ParseNerf(version, "v.nerf");
-    ADD_FAILURE() << "accepted version 9";
-  } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find("version"), std::string::npos) << e.what();
-  }
+  EXPECT_NE(InputErrorOf([&] { ParseNerf(magic, "m.nerf"); }).find("m.nerf: not a nerfar NeRF file"),
+            std::string::npos);
+  std::string newer = good;
+  newer[8] = char(kNerfFileVersion + 1);
+  EXPECT_NE(InputErrorOf([&] { ParseNerf(newer, "v.nerf"); })
+                .find("v.nerf: nerfar NeRF file version " + std::to_string(kNerfFileVersion + 1) + " (expected 1 to " +
+                      std::to_string(kNerfFileVersion) + "; written by a newer nerfar?)"),
+            std::string::npos);
   EXPECT_THROW(ParseNerf(good + "x", "long.nerf"), InputError);
   EXPECT_THROW(LoadNerf("/nonexistent/x.nerf"), InputError);
 }
@@ -459,7 +457,7 @@ TEST(NerfFile, ReadsVersion1Files) {
     PutForTest(v1, half(f.density[s]));
     for (int m = 0; m < kNerfColorCoeffs; ++m) PutForTest(v1, half(f.color[s * kNerfColorCoeffs + m]));
   }
-  PutForTest(v1, BinaryChecksum(v1));
+  PutForTest(v1, LegacyFnv1aChecksum(v1));
   const NerfField g = ParseNerf(v1, "old.nerf");
   ASSERT_EQ(g.BrickCount(), f.BrickCount());
   for (size_t s = 0; s < f.SlotCount(); ++s) {
@@ -482,9 +480,10 @@ TEST(NerfFile, ReadsVersion1Files) {
 // payload. The reader refuses the size against the header's bricks and the
 // stored bytes (deflate packs at most ~1032:1) before allocating anything.
 TEST(NerfFile, APayloadSizeTheFileCannotHoldIsRefusedBeforeAllocating) {
+  // (A flat version-2 file; its payload is read as version 3's is.)
   std::string bytes = testing::ReadText(testing::TestDataPath("../fuzz/regressions/nerf/payload_size_4gb.bin"));
   ASSERT_GT(bytes.size(), 100u);
-  PutForTest(bytes, BinaryChecksum(bytes));
+  PutForTest(bytes, LegacyFnv1aChecksum(bytes));
   try {
     ParseNerf(bytes, "bomb.nerf");
     ADD_FAILURE() << "accepted the file";
@@ -505,14 +504,13 @@ TEST(NerfFile, APayloadSizeTheFileCannotHoldIsRefusedBeforeAllocating) {
 
 TEST(NerfFile, CorruptPayloadWithAValidChecksumIsRejected) {
   const std::string good = Bytes(TexturedBall(1.0 / 16, 5));
-  // Bytes in the middle of the deflated payload changed and the checksum recomputed:
+  // Bytes in the middle of the deflated payload changed and the crc recomputed:
   // the reader must still refuse (zlib's own check, or a value out of range), never crash.
   for (size_t at : {good.size() / 3, good.size() / 2, good.size() - 20}) {
-    std::string bad = good.substr(0, good.size() - 8);
+    std::string bad = good;
     bad[at] = char(bad[at] ^ 0x5a);
-    PutForTest(bad, BinaryChecksum(bad));
     try {
-      ParseNerf(bad, "bad.nerf");
+      ParseNerf(testing::Resealed(bad), "bad.nerf");
       ADD_FAILURE() << "accepted a corrupt payload (byte " << at << ")";
     } catch (const InputError& e) {
       EXPECT_NE(std::string(e.what()).find("bad.nerf"), std::string::npos) << e.what();
@@ -522,7 +520,7 @@ TEST(NerfFile, CorruptPayloadWithAValidChecksumIsRejected) {
 
 TEST(NerfFile, RandomlyCorruptedFilesWithValidChecksumsNeverCrash) {
   // Uncompressed, so that changed bytes reach the parser itself (no zlib check in
-  // between); the checksum recomputed so that they get past it. Every result must
+  // between); the crc recomputed so that they get past it. Every result must
   // be a clean InputError or a field that validates.
   NerfFileOptions o;
   o.compress = false;
@@ -530,15 +528,14 @@ TEST(NerfFile, RandomlyCorruptedFilesWithValidChecksumsNeverCrash) {
   std::mt19937 rng(17);
   int refused = 0;
   for (int trial = 0; trial < 300; ++trial) {
-    std::string bad = good.substr(0, good.size() - 8);
+    std::string bad = good;
     const int changes = 1 + trial % 3;
-    for (int c = 0; c < changes; ++c) {
-      const size_t at = trial < 150 ? rng() % std::min<size_t>(bad.size(), 160) : rng() % bad.size();  // header first
+    for (int c = 0; c < changes; ++c) {  // header and section table first
+      const size_t at = trial < 150 ? rng() % std::min<size_t>(bad.size() - 4, 200) : rng() % (bad.size() - 4);
       bad[at] = char(rng() & 0xff);
     }
-    PutForTest(bad, BinaryChecksum(bad));
     try {
-      const NerfField f = ParseNerf(bad, "fuzz.nerf");
+      const NerfField f = ParseNerf(testing::Resealed(bad), "fuzz.nerf");
       EXPECT_TRUE(f.Validate().empty()) << "trial " << trial;
     } catch (const InputError& e) {
       ++refused;
@@ -575,51 +572,92 @@ void ExpectWithinQuantisation(const NerfField& loaded, const NerfField& field, c
   EXPECT_GT(checked, 50u) << "precondition: the ball has vertices";
 }
 
-TEST(OldFiles, NerfFilesReadAndSaveToTheSameBytes) {
+// The fields of a version-2 file (between its version and its checksum) as version 3 lays them
+// out: HEAD, then BRIK after its size (version 2 stored that size after the header).
+std::string Version2FieldsOf(const std::string& version3) {
+  std::string fields = testing::SectionBytes(version3, "HEAD");
+  const std::string payload = testing::SectionBytes(version3, "BRIK");
+  PutForTest(fields, uint64_t(payload.size()));
+  return fields + payload;
+}
+
+// tests/data/formats/NAME_vVERSION.EXT, its bytes.
+std::string FormatFixture(const std::string& name, uint32_t version, const std::string& ext) {
+  return testing::ReadText(testing::TestDataPath("formats/" + name + "_v" + std::to_string(version) + ext));
+}
+
+TEST(OldFiles, NerfFilesOfEachVersionReadAndSaveTheSameFields) {
   NerfFileOptions raw;
   raw.compress = false;
   raw.density_bits = 16;
   raw.color_base_bits = 10;
   raw.color_slope_bits = 6;
   const NerfField field = testing::FormatFixtureField();
-  for (const auto& [name, options] : {std::pair{"field.nerf", NerfFileOptions{}}, std::pair{"field_raw.nerf", raw}}) {
-    SCOPED_TRACE(name);
-    const std::string old = testing::ReadText(testing::TestDataPath(std::string("formats/") + name));
-    const NerfField loaded = ParseNerf(old, name);
-    ExpectWithinQuantisation(loaded, field, options);
-    // The fixture is a loaded field saved again: from there on the bytes repeat (nerf_file.h).
-    EXPECT_TRUE(SerializeNerf(loaded, options) == old) << "the writer no longer writes the file it wrote";
+  for (const auto& [name, options] : {std::pair{"field", NerfFileOptions{}}, std::pair{"field_raw", raw}})
+    for (const uint32_t version : {uint32_t{2}, kNerfFileVersion}) {
+      SCOPED_TRACE(std::string(name) + " version " + std::to_string(version));
+      const std::string old = FormatFixture(name, version, ".nerf");
+      const NerfField loaded = ParseNerf(old, name);
+      ExpectWithinQuantisation(loaded, field, options);
+      // The fixture is a loaded field saved again: from there on the bytes repeat (nerf_file.h);
+      // version 2's fields are now in sections.
+      const std::string again = SerializeNerf(loaded, options);
+      if (version == kNerfFileVersion)
+        EXPECT_TRUE(again == old) << "the writer no longer writes the file it wrote";
+      else
+        EXPECT_TRUE(Version2FieldsOf(again) == old.substr(12, old.size() - 20)) << "the writer changed the fields";
+    }
+}
+
+TEST(OldFiles, CheckpointsOfEachVersionLoadAndSaveEveryValue) {
+  const NerfTrainData data = testing::TinyTrainData();
+  NerfTrainer trainer(data, testing::TinyTrainOptions());
+  // Version 2 is flat ("NERFCKP2", its fields the identity then the state), later ones sectioned.
+  for (const uint32_t version : {uint32_t{2}, kNerfCheckpointVersion}) {
+    SCOPED_TRACE("version " + std::to_string(version));
+    const std::string old_path = testing::TestDataPath("formats/train_v" + std::to_string(version) + ".ckpt");
+    // Refused as "made with other training options" when NerfTrainOptions gained a field since the
+    // fixture was written (its JSON is the checkpoint's identity): then write the fixtures again.
+    trainer.LoadCheckpoint(old_path);
+    EXPECT_EQ(trainer.step(), testing::kFormatFixtureTrainSteps);
+    EXPECT_TRUE(trainer.field().Validate().empty());
+    EXPECT_GT(trainer.field().BrickCount(), 0u);
+    testing::TempDir dir;
+    trainer.SaveCheckpoint(dir.File("again.ckpt"));
+    const std::string old = testing::ReadText(old_path), again = testing::ReadText(dir.File("again.ckpt"));
+    const std::string identity = testing::SectionBytes(again, "IDEN"), state = testing::SectionBytes(again, "TRAN");
+    const std::string old_fields = version == 2
+                                       ? old.substr(8, old.size() - 16)
+                                       : testing::SectionBytes(old, "IDEN") + testing::SectionBytes(old, "TRAN");
+    // The same fields but the seconds trained (a double after step, level and Adam step).
+    const std::string fields = identity + state;
+    ASSERT_EQ(fields.size(), old_fields.size());
+    const size_t elapsed_at = identity.size() + 12;
+    EXPECT_TRUE(fields.compare(0, elapsed_at, old_fields, 0, elapsed_at) == 0) << "identity, step, level";
+    EXPECT_TRUE(fields.compare(elapsed_at + 8, std::string::npos, old_fields, elapsed_at + 8) == 0)
+        << "grid, field and optimiser state";
   }
 }
 
-TEST(OldFiles, CheckpointLoadsAndSavesEveryValue) {
+TEST(NerfTrain, CheckpointsCorruptTruncatedAndNewerAreNamedSo) {
   const NerfTrainData data = testing::TinyTrainData();
   NerfTrainer trainer(data, testing::TinyTrainOptions());
-  const std::string old_path = testing::TestDataPath("formats/train.ckpt");
-  // Refused as "made with other training options" when NerfTrainOptions gained a field since the
-  // fixture was written (its JSON is the checkpoint's identity): then write the fixtures again.
-  trainer.LoadCheckpoint(old_path);
-  EXPECT_EQ(trainer.step(), testing::kFormatFixtureTrainSteps);
-  EXPECT_TRUE(trainer.field().Validate().empty());
-  EXPECT_GT(trainer.field().BrickCount(), 0u);
   testing::TempDir dir;
-  trainer.SaveCheckpoint(dir.File("again.ckpt"));
-  const std::string old = testing::ReadText(old_path), again = testing::ReadText(dir.File("again.ckpt"));
-  ASSERT_EQ(again.size(), old.size());
-  // The same bytes but the seconds trained (a double after the magic, the two identity strings
-  // and step, level and Adam step) and the checksum over them.
-  size_t elapsed_at = 8;
-  for (int n = 0; n < 2; ++n) {
-    uint64_t length;
-    std::memcpy(&length, old.data() + elapsed_at, 8);
-    elapsed_at += 8 + length;
-  }
-  elapsed_at += 12;
-  ASSERT_LT(elapsed_at + 8, old.size() - 8);
-  EXPECT_TRUE(again.compare(0, elapsed_at, old, 0, elapsed_at) == 0) << "identity, step, level";
-  EXPECT_TRUE(again.compare(elapsed_at + 8, old.size() - 16 - elapsed_at, old, elapsed_at + 8,
-                            old.size() - 16 - elapsed_at) == 0)
-      << "grid, field and optimiser state";
+  trainer.SaveCheckpoint(dir.File("c.ckpt"));
+  const std::string good = testing::ReadText(dir.File("c.ckpt"));
+  ASSERT_EQ(good.substr(0, 8), "NERFCKPT");
+  const auto error_of = [&](const std::string& bytes) {
+    testing::WriteText(dir.File("bad.ckpt"), bytes);
+    return InputErrorOf([&] { trainer.LoadCheckpoint(dir.File("bad.ckpt")); });
+  };
+  std::string flipped = good;
+  flipped[good.size() / 2] ^= 0x10;
+  EXPECT_NE(error_of(flipped).find("crc32 mismatch (the file is corrupt; delete it to start over)"), std::string::npos);
+  EXPECT_NE(error_of(good.substr(0, good.size() / 2)).find("file is truncated"), std::string::npos);
+  std::string newer = good;
+  newer[8] = 4;
+  EXPECT_NE(error_of(newer).find("version 4 (expected 3; written by a newer nerfar?)"), std::string::npos);
+  EXPECT_NO_THROW(trainer.LoadCheckpoint(dir.File("c.ckpt")));
 }
 
 // Brute-force volume rendering with the point queries (no skipping, no early

@@ -16,6 +16,7 @@
 #include "calib/core/binary_file.h"
 #include "calib/core/parallel.h"
 #include "tests/ssdf/format_fixtures.h"
+#include "tests/support/sectioned_file.h"
 #include "tests/support/support.h"
 
 namespace nerfar {
@@ -471,43 +472,60 @@ TEST(File, CorruptAndTruncatedFilesAreRejected) {
   ExpectRejected("", "magic");
   ExpectRejected("NERFSSDX" + good.substr(8), "magic");
   for (size_t cut : {size_t{8}, size_t{12}, size_t{40}, good.size() / 2, good.size() - 1})
-    ExpectRejected(good.substr(0, cut), "");
+    ExpectRejected(good.substr(0, cut), "file is truncated");
   std::string flipped = good;
   flipped[good.size() / 2] ^= 0x10;
-  ExpectRejected(flipped, "checksum");
+  ExpectRejected(flipped, "crc32 mismatch (the file is corrupt");
   std::string version = good;
   version[8] = 7;
-  ExpectRejected(version, "version 7");
+  ExpectRejected(version, "version 7 (expected 1 to 2; written by a newer nerfar?)");
 
-  // Well-formed checksum, bad contents: every check still runs.
-  const auto resealed = [](std::string bytes) {
-    const uint64_t h = BinaryChecksum(std::string_view(bytes).substr(0, bytes.size() - 8));
-    std::memcpy(bytes.data() + bytes.size() - 8, &h, 8);
-    return bytes;
-  };
+  // Well-formed crc, bad contents: every check still runs.
+  const size_t grid_at = testing::SectionOf(good, "GRID").offset();
   std::string grid = good;
   const uint32_t one = 1;
-  std::memcpy(grid.data() + 12, &one, 4);
-  ExpectRejected(resealed(grid), "grid");
+  std::memcpy(grid.data() + grid_at, &one, 4);
+  ExpectRejected(testing::Resealed(grid), "grid");
   std::string huge = good;
   const uint32_t big = 512;
-  std::memcpy(huge.data() + 16, &big, 4);  // dirs 512: sizes no longer match the file
-  ExpectRejected(resealed(huge), "expected");
+  std::memcpy(huge.data() + grid_at + 4, &big, 4);  // dirs 512: sizes no longer match the sections
+  ExpectRejected(testing::Resealed(huge), "expected");
   std::string nan = good;
   const float not_a_number = std::numeric_limits<float>::quiet_NaN();
-  std::memcpy(nan.data() + nan.size() - 8 - 4, &not_a_number, 4);  // last coefficient
-  ExpectRejected(resealed(nan), "finite");
+  std::memcpy(nan.data() + nan.size() - 4 - 4, &not_a_number, 4);  // last coefficient
+  ExpectRejected(testing::Resealed(nan), "finite");
   std::string radius = good;
   const double negative = -1;
-  std::memcpy(radius.data() + 8 + 16 + 24, &negative, 8);
-  ExpectRejected(resealed(radius), "radius");
+  std::memcpy(radius.data() + grid_at + 12 + 24, &negative, 8);
+  ExpectRejected(testing::Resealed(radius), "radius");
 
   TempDir dir;
   EXPECT_THROW(ReadSsdf(dir.File("missing.ssdf")), InputError);
 }
 
+TEST(File, UnknownSectionsAreSkippedAMissingOneIsNamed) {
+  SsdfBakeOptions o = TestOptions();
+  o.grid = 3;
+  const SsdfField field = BakeSsdf(Box(), o, Material{});
+  const std::string good = SerializeSsdf(field);
+  // The file again through the container's writer, its sections copied, some left out, one added.
+  const auto rewrite = [&](const std::vector<std::string>& tags, bool extra) {
+    const BinaryFormat format{"SSDF file", "NERFSSDF", true, kSsdfFileVersion, kSsdfFileVersion, kSsdfFileVersion, ""};
+    BinaryFileWriter w(format, kSsdfFileVersion);
+    if (extra) w.Section("XTRA").PutBytes("a later version's section");
+    for (const std::string& tag : tags) w.Section(tag).PutBytes(testing::SectionBytes(good, tag));
+    return std::move(w).Seal();
+  };
+  const SsdfField back = ParseSsdf(rewrite({"GRID", "MATL", "MEAN", "BASI", "COEF"}, true), "field.ssdf");
+  EXPECT_TRUE(back.coefficients() == field.coefficients());
+  ASSERT_TRUE(back.material.has_value()) << "MATL read";
+  EXPECT_FALSE(ParseSsdf(rewrite({"GRID", "MEAN", "BASI", "COEF"}, false), "field.ssdf").material.has_value())
+      << "no MATL: no material";
+  ExpectRejected(rewrite({"GRID", "MATL", "MEAN", "BASI"}, false), "field.ssdf: no 'COEF' section");
+}
+
 TEST(File, RandomlyDamagedHeadersNeverCrash) {
-  // Mutations of the header and strings, resealed so that the checksum passes:
+  // Mutations of the header, section table and strings, resealed so that the crc passes:
   // every one either parses into a valid field or is an InputError.
   SsdfBakeOptions o = TestOptions();
   o.grid = 3;
@@ -515,16 +533,14 @@ TEST(File, RandomlyDamagedHeadersNeverCrash) {
   o.components = 4;
   const std::string good = SerializeSsdf(BakeSsdf(Box(), o, Material{}));
   std::mt19937 rng(12);
-  std::uniform_int_distribution<size_t> where(0, std::min<size_t>(good.size() - 9, 400));
+  std::uniform_int_distribution<size_t> where(0, std::min<size_t>(good.size() - 5, 400));
   std::uniform_int_distribution<int> byte(0, 255);
   int parsed = 0, rejected = 0;
   for (int i = 0; i < 500; ++i) {
     std::string bytes = good;
     for (int k = 0; k < 3; ++k) bytes[where(rng)] = static_cast<char>(byte(rng));
-    const uint64_t h = BinaryChecksum(std::string_view(bytes).substr(0, bytes.size() - 8));
-    std::memcpy(bytes.data() + bytes.size() - 8, &h, 8);
     try {
-      const SsdfField field = ParseSsdf(bytes, "field.ssdf");
+      const SsdfField field = ParseSsdf(testing::Resealed(bytes), "field.ssdf");
       EXPECT_TRUE(field.Validate().empty());
       ++parsed;
     } catch (const InputError&) {
@@ -552,25 +568,42 @@ TEST(File, SharedObjectsBakeAndLoadBackBitIdentical) {
   }
 }
 
-// A .ssdf written by an earlier build (tests/data/formats, see tests/make_format_fixtures.cpp)
-// reads with what was written into it and saves to the same bytes.
-TEST(OldFiles, SsdfReadsAndSavesToTheSameBytes) {
-  const std::string old = testing::ReadText(testing::TestDataPath("formats/tetra.ssdf"));
-  const SsdfField field = ParseSsdf(old, "tetra.ssdf");
-  const SsdfBakeOptions options = testing::FormatFixtureSsdfOptions();
-  EXPECT_EQ(field.grid(), options.grid);
-  EXPECT_EQ(field.dirs(), options.dirs);
-  EXPECT_EQ(field.components(), options.components);
-  EXPECT_EQ(field.mesh_reference, testing::FormatFixtureMesh().source);
-  ASSERT_TRUE(field.material.has_value());
-  const Material expected = testing::FormatFixtureMaterial();
-  EXPECT_EQ(field.material->albedo.y, expected.albedo.y);
-  EXPECT_EQ(field.material->roughness, expected.roughness);
-  EXPECT_EQ(field.material->metallic, expected.metallic);
-  EXPECT_EQ(field.material->f0, expected.f0);
-  EXPECT_EQ(field.material->albedo_texture, expected.albedo_texture);
-  EXPECT_NE(field.options_json.find("\"grid\":4"), std::string::npos) << field.options_json;
-  EXPECT_TRUE(SerializeSsdf(field) == old) << "the writer no longer writes the file it wrote";
+// .ssdf files written by earlier builds (tests/data/formats, see tests/make_format_fixtures.cpp),
+// flat version 1 and this one, read with what was written into them and save the same fields
+// (version 1's in sections).
+TEST(OldFiles, SsdfFilesOfEachVersionReadAndSaveTheSameFields) {
+  for (const uint32_t version : {uint32_t{1}, kSsdfFileVersion}) {
+    SCOPED_TRACE("version " + std::to_string(version));
+    const std::string old =
+        testing::ReadText(testing::TestDataPath("formats/tetra_v" + std::to_string(version) + ".ssdf"));
+    const SsdfField field = ParseSsdf(old, "tetra.ssdf");
+    const SsdfBakeOptions options = testing::FormatFixtureSsdfOptions();
+    EXPECT_EQ(field.grid(), options.grid);
+    EXPECT_EQ(field.dirs(), options.dirs);
+    EXPECT_EQ(field.components(), options.components);
+    EXPECT_EQ(field.mesh_reference, testing::FormatFixtureMesh().source);
+    ASSERT_TRUE(field.material.has_value());
+    const Material expected = testing::FormatFixtureMaterial();
+    EXPECT_EQ(field.material->albedo.y, expected.albedo.y);
+    EXPECT_EQ(field.material->roughness, expected.roughness);
+    EXPECT_EQ(field.material->metallic, expected.metallic);
+    EXPECT_EQ(field.material->f0, expected.f0);
+    EXPECT_EQ(field.material->albedo_texture, expected.albedo_texture);
+    EXPECT_NE(field.options_json.find("\"grid\":4"), std::string::npos) << field.options_json;
+    const std::string again = SerializeSsdf(field);
+    if (version == kSsdfFileVersion) {
+      EXPECT_TRUE(again == old) << "the writer no longer writes the file it wrote";
+      continue;
+    }
+    // Version 1's fields: GRID up to the mesh reference, the material flag and MATL, the options
+    // (GRID's last string), the arrays.
+    const std::string grid = testing::SectionBytes(again, "GRID");
+    const size_t options_at = grid.size() - 4 - field.options_json.size();
+    const std::string fields = grid.substr(0, options_at) + '\x01' + testing::SectionBytes(again, "MATL") +
+                               grid.substr(options_at) + testing::SectionBytes(again, "MEAN") +
+                               testing::SectionBytes(again, "BASI") + testing::SectionBytes(again, "COEF");
+    EXPECT_TRUE(fields == old.substr(12, old.size() - 20)) << "the writer no longer writes the fields it wrote";
+  }
 }
 
 }  // namespace

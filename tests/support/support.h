@@ -9,7 +9,20 @@
 #include <string>
 #include <vector>
 
+#include "calib/core/error.h"
+
 namespace nerfar::testing {
+
+// Message of the InputError thrown by body, or "" if none was thrown.
+template <typename Body>
+std::string InputErrorOf(Body body) {
+  try {
+    body();
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  return "";
+}
 
 // A fresh empty directory, removed when the object goes out of scope.
 class TempDir {

@@ -1,7 +1,7 @@
 // The smallest trainer the tests and fuzzers use: one 8x6 view of a 20 cm box
 // (its pixels a gradient) and the fast preset on a 10 cm grid (one brick, one
 // level, 64 rays a step), so a checkpoint is about 10 kilobytes. The
-// checkpoint fixture tests/data/formats/train.ckpt (make_format_fixtures.cpp)
+// checkpoint fixture tests/data/formats/train_vN.ckpt (make_format_fixtures.cpp)
 // and the checkpoint fuzz target (tests/fuzz) both train it: a change here
 // changes the checkpoint's identity, and the fixture must be written again.
 #pragma once
