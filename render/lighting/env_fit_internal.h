@@ -97,6 +97,8 @@ double Loss(const FitState& st, const Eigen::MatrixXd& S, bool update_robust, Fi
 // light no reflection explains, and a lobe that lights them is no evidence of
 // a light outside.
 double ReflectingGain(const FitState& without, const FitState& with);
+// The same gain on the samples `skip` does not mark (it marks the emitter-like ones too).
+double GainOn(const FitState& without, const FitState& with, const std::vector<bool>& skip);
 // The lobes' amplitudes for fixed albedo and gain (NNLS over the three
 // channels at once: a grey lobe's one amplitude serves all three, a coloured
 // lobe has one per channel; minimum-energy prior).

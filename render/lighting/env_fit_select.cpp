@@ -3,7 +3,9 @@
 // and per-lobe chroma; each change kept only when its log-likelihood gain
 // beats BIC's penalty for the parameters it adds.
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -81,26 +83,27 @@ FitState TrainedOnFold(FitState m, int fold, int steps) {
   return m;
 }
 
+// The model without a change, trained on each fold (TrainedOnFold): what
+// every held-out test of one state of the fit compares against.
+std::array<FitState, 2> FoldBaselines(const FitState& st, int steps) {
+  return {TrainedOnFold(st, 0, steps), TrainedOnFold(st, 1, steps)};
+}
+
 // The log-likelihood gain of lobe k's colour on the albedo cells it was not
 // fitted to, summed over the two folds (two-fold cross-validation over the
-// cells): a colour that explains one surface's own material within its cells
-// (leaves facing up, sharing a cell with a sand table, under a "green"
-// zenith) does not carry to other cells, a coloured light does (a blue sky in
-// the shadows all over the table).
-double HeldOutChromaGain(const FitState& st, Eigen::Index k, int steps) {
+// cells; `grey`: FoldBaselines of st): a colour that explains one surface's
+// own material within its cells (leaves facing up, sharing a cell with a sand
+// table, under a "green" zenith) does not carry to other cells, a coloured
+// light does (a blue sky in the shadows all over the table).
+double HeldOutChromaGain(const FitState& st, const std::array<FitState, 2>& grey, Eigen::Index k, int steps) {
   double gain = 0;
   for (int fold = 0; fold < 2; ++fold) {
-    FitState coloured_start = st;
-    coloured_start.lobes.coloured[k] = true;
-    const FitState grey = TrainedOnFold(st, fold, steps);
-    const FitState coloured = TrainedOnFold(std::move(coloured_start), fold, steps);
+    FitState coloured = st;
+    coloured.lobes.coloured[k] = true;
+    coloured = TrainedOnFold(std::move(coloured), fold, steps);
     std::vector<bool> skip = st.emitter;
     for (size_t i = 0; i < skip.size(); ++i) skip[i] = skip[i] || st.cell[i] % 2 == fold;
-    const double n = static_cast<double>(st.s->size()), s2 = st.robust_scale * st.robust_scale;
-    gain +=
-        n *
-        (Loss(grey, Shading(grey), false, nullptr, &skip) - Loss(coloured, Shading(coloured), false, nullptr, &skip)) /
-        s2;
+    gain += GainOn(grey[fold], coloured, skip);
   }
   return gain;
 }
@@ -196,13 +199,16 @@ int FreeChroma(FitState& st, const EnvEstimateOptions& o) {
   const auto energy = [&](Eigen::Index k) { return st.mu.row(k).sum() * st.lobe_integral[k]; };
   std::stable_sort(order.begin(), order.end(), [&](Eigen::Index a, Eigen::Index b) { return energy(a) < energy(b); });
   int coloured = 0;
+  std::optional<std::array<FitState, 2>> grey;  // of st as it stands; the in-sample test below iterates st
   for (Eigen::Index k : order) {
     FitState trial = st;
     trial.lobes.coloured[k] = true;
-    const double held_out = HeldOutChromaGain(st, k, o.chroma_steps);
+    if (!grey) grey = FoldBaselines(st, o.chroma_steps);
+    const double held_out = HeldOutChromaGain(st, *grey, k, o.chroma_steps);
     LogVerbose("env fit: lobe " + std::to_string(k) + "'s colour, gain on the cells it was not fitted to " +
                std::to_string(held_out));
     if (!(held_out > 0)) continue;
+    grey.reset();
     if (!(GainAfterSteps(st, trial, o.chroma_steps) > penalty)) continue;
     st = std::move(trial);
     ++coloured;

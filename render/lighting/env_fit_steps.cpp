@@ -104,13 +104,14 @@ double Loss(const FitState& st, const Eigen::MatrixXd& S, bool update_robust, Fi
   return total * st.robust_scale * st.robust_scale / std::max<size_t>(n, 1);
 }
 
-double ReflectingGain(const FitState& without, const FitState& with) {
+double GainOn(const FitState& without, const FitState& with, const std::vector<bool>& skip) {
   const double n = static_cast<double>(with.s->size()), s2 = with.robust_scale * with.robust_scale;
   return n *
-         (Loss(without, Shading(without), false, nullptr, &without.emitter) -
-          Loss(with, Shading(with), false, nullptr, &with.emitter)) /
+         (Loss(without, Shading(without), false, nullptr, &skip) - Loss(with, Shading(with), false, nullptr, &skip)) /
          s2;
 }
+
+double ReflectingGain(const FitState& without, const FitState& with) { return GainOn(without, with, with.emitter); }
 
 void SolveLight(FitState& st) {
   const size_t n = st.s->size();

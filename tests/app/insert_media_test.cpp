@@ -23,11 +23,9 @@
 #include "calib/core/image_io.h"
 #include "calib/core/json.h"
 #include "calib/dataset.h"
-#include "render/lighting/env_light.h"
 #include "render/mesh/mesh.h"
-#include "render/nerf/nerf_field.h"
-#include "render/nerf/nerf_file.h"
 #include "tests/support/nerfar_command.h"
+#include "tests/support/slab_scene.h"
 #include "tests/support/support.h"
 
 namespace nerfar {
@@ -68,13 +66,8 @@ void WriteScene(const testing::TempDir& dir) {
   WriteExrRgb(frame.image_path, ImageF(kWidth, kHeight, 3, 0.3f));
   dataset.frames.push_back(frame);
   WriteDataset(dir.File("ds/transforms_test.json"), dataset);
-  NerfField slab =
-      NerfField::Dense({{-0.3, -0.3, -0.04}, {0.3, 0.3, 0.0}}, 0.02, std::log(5000.0f), {-1.0f, -1.0f, -1.0f});
-  slab.UpdateOccupancy(1.0f);
-  SaveNerf(dir.File("slab.nerf"), slab);
-  EnvLight env;
-  env.lobes.push_back(Sg{Normalized(Vec3(0.2, 0.1, 1.0)), 8.0, {6.0, 6.0, 6.0}});
-  WriteEnvLight(dir.File("env.json"), env);
+  testing::WriteSlabNerf(dir.File("slab.nerf"), Aabb{{-0.3, -0.3, -0.04}, {0.3, 0.3, 0.0}});
+  testing::WriteOverheadEnv(dir.File("env.json"));
   testing::WriteText(dir.File("pose.json"), R"({"object_to_world": [[1,0,0,0],[0,1,0,0],[0,0,1,0.01],[0,0,0,1]]})");
 }
 

@@ -13,9 +13,7 @@
 
 #include "calib/core/exr.h"
 #include "calib/core/json.h"
-#include "render/lighting/env_light.h"
-#include "render/nerf/nerf_field.h"
-#include "render/nerf/nerf_file.h"
+#include "tests/support/slab_scene.h"
 #include "tests/support/support.h"
 
 namespace nerfar {
@@ -115,13 +113,8 @@ TEST(InsertRun, WritesEveryOutputNamedLikeTheDatasetAndMultipliesTheBackgroundBy
   r = testing::RunCommand(nerfar + " bake " + scene + "/objects/torus_diffuse.json -o " + dir.File("torus.ssdf") +
                           " --preset fast --quiet");
   ASSERT_EQ(r.exit_code, 0) << r.output;
-  NerfField slab =
-      NerfField::Dense({{-0.6, -0.4, -0.04}, {0.6, 0.4, 0.0}}, 0.02, std::log(5000.0f), {-1.0f, -1.0f, -1.0f});
-  slab.UpdateOccupancy(1.0f);
-  SaveNerf(dir.File("slab.nerf"), slab);
-  EnvLight env;
-  env.lobes.push_back(Sg{Normalized(Vec3(0.2, 0.1, 1.0)), 8.0, {6.0, 6.0, 6.0}});
-  WriteEnvLight(dir.File("env.json"), env);
+  testing::WriteSlabNerf(dir.File("slab.nerf"), Aabb{{-0.6, -0.4, -0.04}, {0.6, 0.4, 0.0}});
+  testing::WriteOverheadEnv(dir.File("env.json"));
   const std::string truth = scene + "/insert/torus_diffuse";
   r = testing::RunCommand(nerfar + " insert --nerf " + dir.File("slab.nerf") + " --env " + dir.File("env.json") +
                           " --object " + dir.File("torus.ssdf") + " --pose " + truth + "/pose.json --dataset " + scene +
