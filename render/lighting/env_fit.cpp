@@ -225,8 +225,8 @@ SgMixture FitEnvironment(const EnvSurfaceSamples& samples, const Aabb& aabb, con
   local.dictionary_size = static_cast<int>(dict.size());
   const Eigen::MatrixXd A_dict = LobeIrradianceMatrix(samples, dict.axes, dict.sharpness);
   // Sharp sources are searched for against the fit of the dictionary's first
-  // level (broad lobes) alone: the finer levels, hundreds of lobes of
-  // sharpness up to 48, bend to imitate a source's light without its
+  // level (broad lobes) alone: the finer levels, many lobes of narrower
+  // sharpness, bend to imitate a source's light without its
   // shadows, and leave a residual that points nowhere.
   const size_t broad = std::min(dict.size(), static_cast<size_t>(options.dictionary_base));
   AppendColumns(st, dict, A_dict, 0, broad);

@@ -91,7 +91,6 @@ EnvEstimateOptions EnvEstimateOptions::Preset(const std::string& name) {
     o.views = 50;
     o.pixels_per_view = 48;
     o.rays_per_point = 128;
-    o.dictionary_levels = 2;
     o.iterations = 8;
     o.max_view_attempts = 200;
     return o;

@@ -86,7 +86,16 @@ struct EnvEstimateOptions {
   int lobes = 32;  // M: lobes in the result (paper: 32)
   // Dictionary levels: level l has dictionary_base·4^l lobes on a Fibonacci
   // sphere with sharpness dictionary_sharpness·4^l (same relative overlap).
-  int dictionary_levels = 3;
+  // One level: 24 lobes of λ = 3, as wide as their spacing, span the
+  // spherical-harmonic bands 0-2 (9 coefficients) that carry the samples'
+  // shading: shading is the light convolved with the clamped cosine, which
+  // passes band 2 at a quarter of band 0's gain, band 3 not at all and
+  // bands 4 and up under 5 %. Finer levels add only detail shading cannot
+  // see, which the fit then places where noise and the few side-facing
+  // samples pull it (bright blobs near the horizon that a glossy object
+  // reflects). Finer light shows in shadows, which the sharp-source search
+  // reads.
+  int dictionary_levels = 1;
   int dictionary_base = 24;
   double dictionary_sharpness = 3.0;
   int iterations = 12;                // alternations of the albedo and light solves

@@ -610,13 +610,14 @@ TEST(EnvSources, FindsTwoLightsOfDifferentSizeAndColour) {
 // A broad distant light (a disc of 15° radius, elevation 40°, azimuth 30°,
 // as a window beside the table; it gives the table 4x the sky's irradiance)
 // casts soft shadows, as wide as the disc: the estimate must not call it a
-// sharp source. No lobe may be sharper than the dictionary's sharpest
-// (3·4² = 48, half maximum 9.7°, already narrower than the disc): a sharper
-// source must owe its gain to its sharpness (AddSources, env_fit_select.cpp)
-// and keep it once the whole dictionary is in (KeepSupportedSources). The
-// light itself is still found: within 4° of the disc's centre and 25 % of
-// its energy (the fill's tolerances of the two-lights test: a broad light's
-// soft shadows place it less sharply, and its cone shares the sky's light).
+// sharp source. No lobe may be sharper than the disc warrants: an SG of the
+// disc's solid angle Ω has sharpness 2π/Ω (about 29); the source's size is
+// chosen on a ladder of steps of √10 from options.source_sharpness_min, so
+// the rung nearest 2π/Ω and the one above it are the sizes the disc can
+// honestly be given. The light itself is still found: within a third of the
+// disc's radius of its centre (the penumbra's middle then moves by under a
+// sixth of its width) and 25 % of its energy (its cone shares the sky's
+// light).
 TEST(EnvSources, ABroadLightIsNoSharpSource) {
   Tabletop s;
   const DistantDisc window{FromElevationAzimuth(40, 30), 15.0, Vec3{2, 2, 2}};
@@ -629,8 +630,13 @@ TEST(EnvSources, ABroadLightIsNoSharpSource) {
   for (const Sg& g : est.lobes) sharpest = std::max(sharpest, g.sharpness);
   LogInfo("broad light: error " + std::to_string(w.error_deg) + "°, energy " + std::to_string(w.energy_ratio) +
           ", sharpest lobe " + std::to_string(sharpest) + "; " + Describe(est));
-  EXPECT_LE(sharpest, options.dictionary_sharpness * std::pow(4.0, options.dictionary_levels - 1));
-  EXPECT_LT(w.error_deg, 4.0);
+  const double disc_solid_angle = 2 * kPi * (1 - std::cos(window.radius_deg * kPi / 180));
+  const double rung = std::sqrt(10.0);
+  const double nearest_rung =
+      options.source_sharpness_min *
+      std::pow(rung, std::round(std::log(2 * kPi / disc_solid_angle / options.source_sharpness_min) / std::log(rung)));
+  EXPECT_LE(sharpest, nearest_rung * rung * 1.0001);
+  EXPECT_LT(w.error_deg, window.radius_deg / 3);
   EXPECT_NEAR(w.energy_ratio, 1.0, 0.25);
 }
 
