@@ -77,10 +77,10 @@ struct NerfSceneOptions {
   // Every problem as "field: what is wrong (what was expected)", the field
   // under its Fields() name.
   std::vector<std::string> Validate() const;
-  // The knobs under the names `nerfar insert --set` gives them: the marches'
-  // step and early stop (nerf_, light_render_), the seen radiance's (seen_),
-  // surface_depth, normal_probe_voxels, light_seen_radiance and
-  // seen_cache_views (cache_views).
+  // The knobs under the names `nerfar insert --set` and `nerfar live --set`
+  // give them: the marches' step and early stop (nerf_, light_render_), the
+  // seen radiance's (seen_), surface_depth, normal_probe_voxels,
+  // light_seen_radiance and seen_cache_views (cache_views).
   std::vector<OptionField> Fields();
   // The options as one compact JSON object under the Fields() names.
   std::string ToJson() const;
