@@ -12,6 +12,7 @@
 namespace nerfar {
 
 class NerfField;
+struct NerfSceneOptions;
 struct TriangleMesh;
 
 struct BenchFigure {
@@ -74,6 +75,11 @@ double MedianMilliseconds(Body&& body, int min_repeats, double min_seconds) {
 NerfField BenchTabletopNerf();
 TriangleMesh BenchObjectMesh(const std::string& scenes_dir, std::string* name);
 SgMixture BenchEnvironment();
+// The insertion benches' NeRF scene options: the preset's
+// (NerfSceneOptions::Preset) with the NERFAR_BENCH_INSERT_* overrides of the
+// light's march and views (bench_insert_light.cpp); InputError for a value
+// out of range.
+NerfSceneOptions BenchInsertSceneOptions(const std::string& preset);
 
 // Stage entry points (one bench_NAME.cpp each).
 std::vector<BenchFigure> BenchCore(const BenchOptions& options);

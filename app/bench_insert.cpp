@@ -553,7 +553,9 @@ void AddPresetFigures(const char* preset, const StageMedians& m, const InsertOpt
 void BenchInsertRealNerfLight(const BenchOptions& options, std::vector<BenchFigure>& figures);
 
 std::vector<BenchFigure> BenchInsert(const BenchOptions& options) {
-  PresetWithOverrides("fast");  // a bad NERFAR_BENCH_INSERT_OFF or _KNOBS stops the bench before any work
+  // A bad NERFAR_BENCH_INSERT_OFF, _KNOBS or scene override stops the bench before any work.
+  PresetWithOverrides("fast");
+  BenchInsertSceneOptions("fast");
   std::vector<BenchFigure> figures;
   BenchInsertRealNerfLight(options, figures);
   // NERFAR_BENCH_INSERT_GT=0 skips the ground-truth quality part;
@@ -570,7 +572,6 @@ std::vector<BenchFigure> BenchInsert(const BenchOptions& options) {
   const int width = options.quick ? 320 : 1280, height = options.quick ? 180 : 720;
   const int repeats = options.quick ? 2 : 3;
   const NerfField nerf = BenchTabletopNerf();
-  const NerfScene scene(nerf);
   const SgMixture environment = BenchEnvironment();
   std::string mesh_name;
   const TriangleMesh mesh = BenchObjectMesh(options.scenes_dir, &mesh_name);
@@ -589,6 +590,7 @@ std::vector<BenchFigure> BenchInsert(const BenchOptions& options) {
   for (const char* preset : {"fast", "balanced", "accurate"}) {
     if (presets.find(preset) == std::string::npos) continue;
     const InsertOptions insert_options = PresetWithOverrides(preset);
+    const NerfScene scene(nerf, BenchInsertSceneOptions(preset));  // as `nerfar insert --preset` builds it
     const StageMedians m =
         TimePreset(scene, environment, object, view.camera, view.T_world_camera, insert_options, repeats);
     AddPresetFigures(preset, m, insert_options, size, figures);

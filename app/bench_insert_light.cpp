@@ -23,11 +23,7 @@
 
 namespace nerfar {
 
-namespace {
-
-// The preset's NerfSceneOptions (NerfSceneOptions::Preset) with the
-// NERFAR_BENCH_INSERT_* overrides below.
-NerfSceneOptions SceneOptionsFor(const std::string& preset) {
+NerfSceneOptions BenchInsertSceneOptions(const std::string& preset) {
   NerfSceneOptions o = NerfSceneOptions::Preset(preset);
   // NERFAR_BENCH_INSERT_LIGHT_RENDER=full|live|preview: the light rays' march
   // (NerfSceneOptions::light_render; default live).
@@ -49,6 +45,8 @@ NerfSceneOptions SceneOptionsFor(const std::string& preset) {
   problems.ThrowIfAny();
   return o;
 }
+
+namespace {
 
 // The object the light is taken for: monkey_diffuse posed by
 // NERFAR_BENCH_INSERT_NERF_POSE (default scenes/lamps/insert/monkey_diffuse/pose.json);
@@ -233,7 +231,7 @@ void BenchInsertRealNerfLight(const BenchOptions& options, std::vector<BenchFigu
       insert_options.light.directions = std::atoi(d);
     if (const char* k = BenchVariable("NERFAR_BENCH_INSERT_LIGHT_REFINE"))
       insert_options.light.refine_rays = std::atoi(k);
-    const NerfSceneOptions scene_options = SceneOptionsFor(preset);
+    const NerfSceneOptions scene_options = BenchInsertSceneOptions(preset);
     const std::string note = std::string(preset) + ", " + where +
                              "; N=" + std::to_string(insert_options.light.directions) +
                              ", refine_rays=" + std::to_string(insert_options.light.refine_rays) +

@@ -96,7 +96,7 @@ LiveObjectState PlaceCovering(const LivePipeline& pipeline, const TriangleMesh& 
 
 struct RunSetup {
   const Sequence* sequence = nullptr;
-  const NerfScene* scene = nullptr;
+  NerfScene* scene = nullptr;  // its options set by the pipeline from the preset
   const SgMixture* environment = nullptr;
   const TriangleMesh* mesh = nullptr;
   const SsdfField* field = nullptr;
@@ -274,7 +274,7 @@ std::vector<BenchFigure> BenchLive(const BenchOptions& options) {
   const Sequence hand_held = RenderSequence(width, height, frames, true);
   LogInfo("bench live: rendered 2 x " + std::to_string(frames) + " frames in " + FormatDuration(NowSeconds() - t));
   const NerfField nerf = BenchTabletopNerf();
-  const NerfScene scene(nerf);
+  NerfScene scene(nerf);
   const SgMixture environment = BenchEnvironment();
   std::string mesh_name;
   const TriangleMesh mesh = BenchObjectMesh(options.scenes_dir, &mesh_name);

@@ -37,6 +37,7 @@
 #include "calib/dataset.h"
 #include "calib/object.h"
 #include "render/insert/inserter.h"
+#include "render/insert/nerf_insert_options.h"
 #include "render/insert/nerf_scene.h"
 #include "render/insert/quality.h"
 #include "render/insert/ssdf_visibility.h"
@@ -149,19 +150,15 @@ struct InsertArgs {
 };
 
 // Every knob of an insert job, each under its `--set` name: the insertion's
-// (InsertOptions), the NeRF scene's (NerfSceneOptions) and whether κ
-// receivers that end on the tag board's plane are taken onto it.
+// and the NeRF scene's (NerfInsertOptions, as `nerfar live` takes them) and
+// whether κ receivers that end on the tag board's plane are taken onto it.
 struct InsertKnobs {
-  InsertOptions insert;
-  NerfSceneOptions nerf;
+  NerfInsertOptions options;
   bool support_plane = true;  // where the dataset has a board.json
 
-  static InsertKnobs Preset(const std::string& name) {
-    return {InsertOptions::Preset(name), NerfSceneOptions::Preset(name)};
-  }
+  static InsertKnobs Preset(const std::string& name) { return {NerfInsertOptions::Preset(name)}; }
   std::vector<OptionField> Fields() {
-    std::vector<OptionField> fields = insert.Fields();
-    for (const OptionField& f : nerf.Fields()) fields.push_back(f);
+    std::vector<OptionField> fields = options.Fields();
     fields.push_back(FieldOf("support_plane", &support_plane));
     return fields;
   }
@@ -457,7 +454,7 @@ std::string ExactText(double value) {
 // the order given. The light source's and the NeRF scene's named flags set
 // their fields as --set does (the flag named in an error).
 InsertKnobs KnobsFrom(const InsertArgs& a) {
-  InsertKnobs knobs{InsertOptionsFrom(a), NerfSceneOptions::Preset(a.preset)};
+  InsertKnobs knobs{{InsertOptionsFrom(a), NerfSceneOptions::Preset(a.preset)}};
   const std::vector<OptionField> fields = knobs.Fields();
   const auto set = [&fields](const std::string& flag, const std::string& key, const std::string& value) {
     SetOptionField(fields, key + "=" + value, flag);
@@ -477,10 +474,9 @@ InsertKnobs KnobsFrom(const InsertArgs& a) {
   return knobs;
 }
 
-void ValidateOptions(const InsertOptions& options, const NerfSceneOptions& nerf_options) {
+void ValidateOptions(const NerfInsertOptions& options) {
   Problems p("nerfar insert options");
   for (const std::string& s : options.Validate()) p.Add("", s);
-  for (const std::string& s : nerf_options.Validate()) p.Add("", s);
   p.ThrowIfAny();
 }
 
@@ -936,9 +932,9 @@ int RunInsert(const CommandArgs& args) {
   InsertArgs a;
   if (!ParseInsertArgs(args, a)) return 0;
   const InsertKnobs knobs = KnobsFrom(a);
-  const InsertOptions& options = knobs.insert;
-  const NerfSceneOptions& nerf_options = knobs.nerf;
-  ValidateOptions(options, nerf_options);
+  const InsertOptions& options = knobs.options.insert;
+  const NerfSceneOptions& nerf_options = knobs.options.nerf;
+  ValidateOptions(knobs.options);
 
   // Inputs.
   const Dataset capture = ReadDataset(DatasetSplitPath(a.dataset_dir, a.split));

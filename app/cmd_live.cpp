@@ -34,6 +34,7 @@
 #include "calib/core/log.h"
 #include "calib/core/media.h"
 #include "calib/core/parallel.h"
+#include "render/insert/nerf_insert_options.h"
 #include "render/synth/camera_stream.h"
 #include "tracking/frame_sources.h"
 #include "tracking/reconnecting_source.h"
@@ -113,8 +114,8 @@ std::optional<LiveArgs> ParseLiveArgs(const CommandArgs& args) {
   parser.Option("--frames", &a.frames, "N", "stop after N frames (headless default 60; window: until closed)");
   parser.Option("--preset", &a.preset, "P", "insertion preset: fast (default) | balanced | accurate");
   parser.Option("--set", &a.sets, "KEY=VALUE",
-                "set one insertion option over the preset, also the one switched to (repeatable; the keys: the "
-                "insertion knobs of `nerfar insert --help`, not the NeRF scene's)");
+                "set one knob over the preset, also the one switched to (repeatable; the keys of `nerfar insert "
+                "--set`, the insertion's and the NeRF scene's, but support_plane)");
   // balanced by default: on noisy 640x480 frames the fast detector (decimated)
   // lost 8 of 60 frames of the demo stream where balanced lost none.
   parser.Option("--tracker-preset", &a.tracker_preset, "P",
@@ -165,7 +166,7 @@ std::optional<LiveArgs> ParseLiveArgs(const CommandArgs& args) {
     usage.Add("--tracker-preset", "'" + a.tracker_preset + "' (expected fast, balanced or accurate)");
   usage.ThrowIfAny();
   // An unknown key or a bad value stops here (InputError); one out of range too.
-  for (const std::string& problem : LiveInsertOptions(a.preset, a.sets).Validate()) usage.Add("--set", problem);
+  for (const std::string& problem : NerfInsertOptions::Preset(a.preset, a.sets).Validate()) usage.Add("--set", problem);
   usage.ThrowIfAny();
   return a;
 }

@@ -11,6 +11,8 @@
 #include "calib/core/media.h"
 #include "calib/core/metrics.h"
 #include "calib/core/parallel.h"
+#include "render/insert/nerf_insert_options.h"
+#include "render/insert/nerf_scene.h"
 #include "render/insert/ssdf_visibility.h"
 #include "render/sg/fit.h"
 #include "render/sg/sg.h"
@@ -145,16 +147,10 @@ Image8 ArBase(Image8 frame, int divisor) {
 
 }  // namespace
 
-InsertOptions LiveInsertOptions(const std::string& preset, const std::vector<std::string>& sets) {
-  InsertOptions options = InsertOptions::Preset(preset);
-  for (const std::string& item : sets) options.Set(item);
-  return options;
-}
-
 std::vector<std::string> LiveOptions::Validate() const {
   std::vector<std::string> p;
-  if (preset != "fast" && preset != "balanced" && preset != "accurate")
-    p.push_back("preset: '" + preset + "' (expected fast, balanced or accurate)");
+  const bool known_preset = preset == "fast" || preset == "balanced" || preset == "accurate";
+  if (!known_preset) p.push_back("preset: '" + preset + "' (expected fast, balanced or accurate)");
   if (response != "display" && response != "srgb")
     p.push_back("response: '" + response + "' (expected display or srgb)");
   if (!(alongside_scale > 0.05 && alongside_scale <= 1))
@@ -165,6 +161,13 @@ std::vector<std::string> LiveOptions::Validate() const {
   if (gain_grid_step < 1 || gain_grid_step > 64)
     p.push_back("gain_grid_step: " + std::to_string(gain_grid_step) + " (expected 1..64)");
   for (const std::string& s : tracker.Validate()) p.push_back("tracker." + s);
+  if (known_preset) {
+    try {
+      for (const std::string& s : NerfInsertOptions::Preset(preset, insert_sets).Validate()) p.push_back(s);
+    } catch (const InputError& e) {  // an unknown key, or a value that is not of its field's kind
+      p.push_back(e.what());
+    }
+  }
   return p;
 }
 
@@ -178,12 +181,12 @@ std::vector<std::pair<std::string, double>> StageList(const LiveStageTimes& t) {
           {"process", t.process_ms}};
 }
 
-LivePipeline::LivePipeline(FrameSource& source, const Board& board, const CameraIntrinsics& camera,
-                           const SceneField& scene, SgMixture environment, std::vector<LiveAsset> assets,
-                           LiveOptions options)
+LivePipeline::LivePipeline(FrameSource& source, const Board& board, const CameraIntrinsics& camera, SceneField& scene,
+                           SgMixture environment, std::vector<LiveAsset> assets, LiveOptions options)
     : source_(source),
       camera_(camera),
       scene_(scene),
+      nerf_scene_(dynamic_cast<NerfScene*>(&scene)),
       assets_(std::move(assets)),
       options_(std::move(options)),
       codec_(options_.response == "display") {
@@ -195,8 +198,9 @@ LivePipeline::LivePipeline(FrameSource& source, const Board& board, const Camera
     problems.ThrowIfAny();
   }
   tracker_ = std::make_unique<Tracker>(board, camera_, options_.tracker);
-  inserter_ = std::make_unique<Inserter>(scene_, std::move(environment),
-                                         LiveInsertOptions(options_.preset, options_.insert_sets));
+  const NerfInsertOptions knobs = Knobs(options_.preset);
+  if (nerf_scene_ != nullptr) nerf_scene_->set_options(knobs.nerf);
+  inserter_ = std::make_unique<Inserter>(scene_, std::move(environment), knobs.insert);
   preset_ = options_.preset;
   hud_on_.store(options_.hud);
   for (const LiveAsset& a : assets_) {
@@ -218,8 +222,24 @@ void LivePipeline::set_object(size_t i, const LiveObjectState& state) {
   states_.at(i) = state;
 }
 
+NerfInsertOptions LivePipeline::Knobs(const std::string& preset) const {
+  return NerfInsertOptions::Preset(preset, options_.insert_sets);
+}
+
+void LivePipeline::SwitchPreset(const std::string& preset) {
+  const NerfInsertOptions knobs = Knobs(preset);
+  if (nerf_scene_ != nullptr) {
+    const std::lock_guard<std::mutex> lock(scene_options_mutex_);
+    nerf_scene_->set_options(knobs.nerf);
+  }
+  // A new Inserter rather than new options for the old one: what it keeps
+  // between frames (the lights, γ, κ's receivers and lattice) was taken
+  // from the scene as its old options rendered it.
+  inserter_ = std::make_unique<Inserter>(scene_, inserter_->environment(), knobs.insert);
+}
+
 void LivePipeline::set_preset(const std::string& preset) {
-  (void)LiveInsertOptions(preset, options_.insert_sets);  // InputError for an unknown name
+  (void)Knobs(preset);  // InputError for an unknown name
   std::lock_guard<std::mutex> lock(edit_mutex_);
   if (preset != preset_) preset_changed_ = true;
   preset_ = preset;
@@ -246,6 +266,7 @@ std::optional<Vec3> LivePipeline::PickSurface(const LiveFrame& frame, double x, 
   const Vec3 direction = Normalized(frame.T_world_camera.Rotate(d_camera));
   const auto range = IntersectBox(scene_.Box(), origin, direction);
   if (!range) return std::nullopt;
+  const std::lock_guard<std::mutex> lock(scene_options_mutex_);  // not while a preset switch changes them
   const std::optional<double> t = MedianHitDistance(scene_, origin, direction, range->first, range->second);
   if (!t) return std::nullopt;
   return origin + direction * *t;
@@ -574,14 +595,14 @@ LiveFrame LivePipeline::Process(Captured captured) {
 
   // The user's edits as of now.
   std::vector<LiveObjectState> states;
+  std::optional<std::string> switched_preset;
   {
     std::lock_guard<std::mutex> lock(edit_mutex_);
     states = states_;
-    if (preset_changed_) {
-      inserter_->set_options(LiveInsertOptions(preset_, options_.insert_sets));
-      preset_changed_ = false;
-    }
+    if (preset_changed_) switched_preset = preset_;
+    preset_changed_ = false;
   }
+  if (switched_preset) SwitchPreset(*switched_preset);
   const int views = views_.load();
   t0 = LiveClock::now();
   if (out.has_pose) UpdateGain(out);

@@ -44,6 +44,9 @@ namespace nerfar {
 
 using LiveClock = std::chrono::steady_clock;
 
+class NerfScene;
+struct NerfInsertOptions;
+
 // A virtual object the user can place: its mesh (local frame, +z up) and, if
 // baked, its SSDF field (shadows). Loans to the pipeline.
 struct LiveAsset {
@@ -69,9 +72,12 @@ struct LiveObjectState {
 };
 
 struct LiveOptions {
-  std::string preset = "fast";  // insertion preset (render/insert): fast | balanced | accurate
-  // `--set KEY=VALUE` items (InsertOptions::Set) over whichever preset is in
-  // use, the one switched to in the window included.
+  // Insertion preset (render/insert), of the insertion and of the NeRF
+  // scene alike (NerfInsertOptions): fast | balanced | accurate.
+  std::string preset = "fast";
+  // `--set KEY=VALUE` items (NerfInsertOptions::Set: the insertion's and the
+  // NeRF scene's knobs) over whichever preset is in use, the one switched to
+  // in the window included.
   std::vector<std::string> insert_sets;
   TrackerOptions tracker = TrackerOptions::Preset("fast");
   // How 8-bit frames map to linear light: "display" (the synthetic camera's
@@ -96,10 +102,6 @@ struct LiveOptions {
 
   std::vector<std::string> Validate() const;
 };
-
-// The insertion options of `preset` with the `sets` over them, in order;
-// InputError for an unknown preset, key or value.
-InsertOptions LiveInsertOptions(const std::string& preset, const std::vector<std::string>& sets);
 
 // Views (bit flags): the pipeline only renders what is shown.
 enum LiveView : int { kViewAr = 1, kViewAlongside = 2, kViewLayers = 4 };
@@ -172,8 +174,12 @@ struct LiveError {
 class LivePipeline {
  public:
   // Loans: source, scene, assets outlive the pipeline. `camera` is the
-  // source's intrinsics (rescaled to frame sizes of the same aspect).
-  LivePipeline(FrameSource& source, const Board& board, const CameraIntrinsics& camera, const SceneField& scene,
+  // source's intrinsics (rescaled to frame sizes of the same aspect). A
+  // NerfScene takes the NeRF scene's options of the preset with the `--set`
+  // items (NerfInsertOptions) here and again at every preset switch, as
+  // `nerfar insert` builds its scene; other scene fields (the tests'
+  // analytic scenes) are only queried.
+  LivePipeline(FrameSource& source, const Board& board, const CameraIntrinsics& camera, SceneField& scene,
                SgMixture environment, std::vector<LiveAsset> assets, LiveOptions options);
   ~LivePipeline();
   LivePipeline(const LivePipeline&) = delete;
@@ -238,6 +244,10 @@ class LivePipeline {
   std::optional<Captured> CaptureGuarded(bool& end);
   std::optional<LiveFrame> ProcessGuarded(Captured captured);
   void RecordError(std::int64_t frame, const std::string& stage, const std::string& what);
+  // The preset's knobs with options_.insert_sets over them.
+  NerfInsertOptions Knobs(const std::string& preset) const;
+  // A preset switched while running (processing thread only).
+  void SwitchPreset(const std::string& preset);
   // Steps of Process (processing thread only).
   void UpdateGain(const LiveFrame& frame);  // every gain_every frames, from the frame's codes
   std::vector<InsertObject> PlaceObjects(const std::vector<LiveObjectState>& states);
@@ -249,6 +259,11 @@ class LivePipeline {
   FrameSource& source_;
   CameraIntrinsics camera_;
   const SceneField& scene_;
+  // scene_ where it is a NerfScene, whose options follow the preset; the
+  // processing thread changes them while holding scene_options_mutex_,
+  // which PickSurface (the window's thread) holds while it queries the scene.
+  NerfScene* nerf_scene_ = nullptr;
+  mutable std::mutex scene_options_mutex_;
   std::vector<LiveAsset> assets_;
   LiveOptions options_;
   DisplayCodec codec_;

@@ -17,6 +17,7 @@
 #include "calib/core/log.h"
 #include "calib/core/media.h"
 #include "calib/core/random.h"
+#include "render/insert/nerf_insert_options.h"
 #include "render/sg/sg.h"
 
 namespace nerfar {
@@ -269,33 +270,34 @@ void WriteSession(const std::string& session_dir, const SessionInfo& info, const
   Json errors = Json::array();
   for (const LiveError& e : pipeline.errors())
     errors.push_back({{"frame", e.frame >= 0 ? Json(e.frame) : Json(nullptr)}, {"stage", e.stage}, {"what", e.what}});
-  Json session = {
-      {"format", "nerfar-session"},
-      {"version", 1},
-      {"scene", info.scene_dir},
-      {"source", info.source},
-      {"camera", info.camera_path},
-      {"objects", info.objects},
-      {"placements", objects},
-      {"mode", info.mode},
-      {"preset", pipeline.preset()},
-      // The effective insertion options at the end: the preset with --set over it.
-      {"insert_options", Json::parse(LiveInsertOptions(pipeline.preset(), pipeline.options().insert_sets).ToJson())},
-      {"wall_s", info.wall_s},
-      {"threads", info.threads},
-      {"load", info.load.empty() ? ReadLoad() : info.load},
-      {"counters",
-       {{"captured", c.captured},
-        {"dropped_before_process", c.dropped_before_process},
-        {"processed", c.processed},
-        {"dropped_before_display", c.dropped_before_display},
-        {"displayed", c.displayed},
-        {"source_errors", c.source_errors},
-        {"reconnects", c.reconnects},
-        {"frame_errors", c.frame_errors},
-        {"output_errors", c.output_errors}}},
-      {"errors", errors},
-      {"frames", frames}};
+  const NerfInsertOptions knobs = NerfInsertOptions::Preset(pipeline.preset(), pipeline.options().insert_sets);
+  Json session = {{"format", "nerfar-session"},
+                  {"version", 1},
+                  {"scene", info.scene_dir},
+                  {"source", info.source},
+                  {"camera", info.camera_path},
+                  {"objects", info.objects},
+                  {"placements", objects},
+                  {"mode", info.mode},
+                  {"preset", pipeline.preset()},
+                  // The effective options at the end: the preset with --set over it.
+                  {"insert_options", Json::parse(knobs.insert.ToJson())},
+                  {"nerf_scene_options", Json::parse(knobs.nerf.ToJson())},
+                  {"wall_s", info.wall_s},
+                  {"threads", info.threads},
+                  {"load", info.load.empty() ? ReadLoad() : info.load},
+                  {"counters",
+                   {{"captured", c.captured},
+                    {"dropped_before_process", c.dropped_before_process},
+                    {"processed", c.processed},
+                    {"dropped_before_display", c.dropped_before_display},
+                    {"displayed", c.displayed},
+                    {"source_errors", c.source_errors},
+                    {"reconnects", c.reconnects},
+                    {"frame_errors", c.frame_errors},
+                    {"output_errors", c.output_errors}}},
+                  {"errors", errors},
+                  {"frames", frames}};
   MakeDirectories(session_dir);
   WriteJsonFile((fs::path(session_dir) / "session.json").string(), session);
 }

@@ -40,7 +40,7 @@ LiveScenePaths FindLiveScene(const std::string& dir);
 struct LiveSceneData {
   LiveScenePaths paths;
   NerfField nerf;
-  std::unique_ptr<SceneField> field;  // the NeRF as insertion queries it
+  std::unique_ptr<SceneField> field;  // the NeRF as insertion queries it (LivePipeline sets its options)
   EnvLight env;                       // lobes empty when absent or negligible
   std::optional<Board> board;
   std::optional<CameraFile> camera;

@@ -45,6 +45,11 @@ std::vector<OptionField> NerfSceneOptions::Fields() {
           FieldOf("seen_cache_views", &cache_views)};
 }
 
+std::string NerfSceneOptions::ToJson() const {
+  NerfSceneOptions copy = *this;
+  return OptionFieldsJson(copy.Fields());
+}
+
 std::vector<std::string> NerfSceneOptions::Validate() const {
   std::vector<std::string> problems;
   const auto check = [&](bool ok, const std::string& what) {
@@ -154,6 +159,11 @@ uint64_t NerfScene::LightCacheMisses() const {
 void NerfScene::ClearLightCache() {
   const std::lock_guard<std::mutex> lock(cache_mutex_);
   cache_.Clear();
+}
+
+void NerfScene::set_options(const NerfSceneOptions& options) {
+  options_ = options;
+  ClearLightCache();
 }
 
 void NerfScene::Normals(const std::vector<Vec3f>& points, std::vector<Vec3f>& normals) const {

@@ -77,11 +77,13 @@ struct NerfSceneOptions {
   // Every problem as "field: what is wrong (what was expected)", the field
   // under its Fields() name.
   std::vector<std::string> Validate() const;
-  // The knobs under the names `nerfar insert --set` gives them: the marches'
-  // step and early stop (nerf_, light_render_), the seen radiance's (seen_),
-  // surface_depth, normal_probe_voxels, light_seen_radiance and
-  // seen_cache_views (cache_views).
+  // The knobs under the names `nerfar insert --set` and `nerfar live --set`
+  // give them: the marches' step and early stop (nerf_, light_render_), the
+  // seen radiance's (seen_), surface_depth, normal_probe_voxels,
+  // light_seen_radiance and seen_cache_views (cache_views).
   std::vector<OptionField> Fields();
+  // The options as one compact JSON object under the Fields() names.
+  std::string ToJson() const;
 };
 
 class NerfScene final : public SceneField {
@@ -111,6 +113,11 @@ class NerfScene final : public SceneField {
   void TransmittanceDepths(const SceneRays& rays, const std::vector<float>& transmittance,
                            std::vector<float>& depth) const override;
   const NerfSceneOptions& options() const { return options_; }
+  // New options (`nerfar live` switching its preset). The cached views'
+  // answers go with the old ones (their key would refuse them anyway; this
+  // frees them where the new options cache nothing). Rays read the options
+  // unguarded: no other call may be in flight on this scene meanwhile.
+  void set_options(const NerfSceneOptions& options);
 
  private:
   void Render(const SceneRays& rays, SceneSamples& out, bool light) const;

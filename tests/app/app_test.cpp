@@ -159,7 +159,7 @@ TEST(App, LiveHeadlessWritesVideoSheetSessionAndReport) {
   const Result r =
       RunNerfar("live --headless --threads 2 --source synthetic:lamps,size=640x480,spp=1,frames=40 --scene " +
                 dir.path() + " --object " + dir.File("cube.obj") + " -o " + session + " --frames 8" +
-                " --set kappa_step=3 --set light_source=near");
+                " --set kappa_step=3 --set light_source=near --set seen_group_m=0.03");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   for (const char* name : {"live.mp4", "contact_sheet.png", "session.json", "report.json", "report.png", "report.html",
                            "last_ar.png", "last_alongside.png", "last_layers.png"})
@@ -170,6 +170,9 @@ TEST(App, LiveHeadlessWritesVideoSheetSessionAndReport) {
   EXPECT_EQ(s.at("insert_options").at("kappa_step"), 3);
   EXPECT_EQ(s.at("insert_options").at("light_source"), "near");
   EXPECT_EQ(s.at("insert_options").at("occlusion_step"), 4) << "the fast preset's, untouched";
+  // The NeRF scene's knobs take --set too, over the same preset's (fast: 2 cm cells, cached).
+  EXPECT_EQ(s.at("nerf_scene_options").at("seen_group_m"), 0.03);
+  EXPECT_EQ(s.at("nerf_scene_options").at("seen_cache_views"), true) << "the fast preset's, untouched";
   const Json report = ReadJsonFile(session + "/report.json");
   EXPECT_EQ(report.at("tracking").at("frames").get<int>(), 8);
   // The synthetic stream knows its poses: the report compares against them.

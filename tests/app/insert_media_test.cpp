@@ -280,6 +280,22 @@ TEST(Knobs, AnUnknownSetKeyExitsTwoNamingIt) {
   EXPECT_NE(bad.output.find("'two' is not a valid value of kappa_step"), std::string::npos) << bad.output;
 }
 
+// live's --set takes insert's keys, the NeRF scene's among them, but for
+// support_plane (insert's alone: live takes no support plane): the keys
+// each names when refusing an unknown one.
+TEST(Knobs, LiveSetTakesInsertsKeys) {
+  testing::TempDir dir;
+  WriteScene(dir);
+  const Result insert = RunNerfar(InsertOf(dir) + " --set x=1");
+  const Result live = RunNerfar("live --source synthetic --scene " + dir.path() + " --headless --frames 1 --set x=1");
+  EXPECT_EQ(live.exit_code, 2) << live.output;
+  const std::string keys = KnownKeys(insert.output), live_keys = KnownKeys(live.output);
+  ASSERT_FALSE(live_keys.empty()) << live.output;
+  EXPECT_EQ(live_keys + ", support_plane", keys) << insert.output << "\n" << live.output;
+  for (const char* key : {"kappa_step", "light_source", "seen_group_m", "seen_cache_views", "normal_probe_voxels"})
+    EXPECT_NE(live_keys.find(key), std::string::npos) << key << " missing from " << live_keys;
+}
+
 // The bench's NERFAR_BENCH_INSERT_KNOBS and insert's --set are one list of
 // insertion knobs: the keys the bench names when refusing an unknown one are
 // the first insert names, which include fields beyond the bench's former

@@ -2,9 +2,10 @@
 // it runs (material, preset) reach the very next frame and change the
 // object visibly, and a run edited mid-stream shows exactly what a run
 // started with the edited values shows (the differential check); the
-// surface pick finds the true table through fog. The synthetic stream (lamps
-// mat, camera nearly still) is tracked from its tags; the scene is an
-// analytic table (plane z = 0, the stream's table top), the object a red ball.
+// surface pick finds the true table through fog; a NeRF scene takes the
+// preset's options. The synthetic stream (lamps mat, camera nearly still) is
+// tracked from its tags; the scene is an analytic table (plane z = 0, the
+// stream's table top) or the benches' NeRF table, the object a red ball.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -12,7 +13,9 @@
 #include <memory>
 #include <vector>
 
+#include "app/bench.h"
 #include "app/live/pipeline.h"
+#include "render/insert/nerf_scene.h"
 #include "render/insert/rasterizer.h"
 #include "render/lighting/scene_field.h"
 #include "render/mesh/mesh.h"
@@ -34,16 +37,19 @@ SgMaterial Red() {
   return m;
 }
 
-// One pipeline over its own stream (every run renders the same frames).
+// One pipeline over its own stream (every run renders the same frames), by
+// default over the analytic table; `nerf`: over that NeRF scene instead,
+// with the `--set` items `sets`.
 struct LiveRun {
   std::unique_ptr<synth::SyntheticCameraSource> source;
-  std::unique_ptr<testing::AnalyticScene> scene;
+  std::unique_ptr<testing::AnalyticScene> table;
   TriangleMesh ball;
   std::unique_ptr<LivePipeline> pipeline;
 
-  LiveRun(const SgMaterial& material, const std::string& preset, const SsdfField* field = nullptr) {
+  LiveRun(const SgMaterial& material, const std::string& preset, const SsdfField* field = nullptr,
+          NerfScene* nerf = nullptr, const std::vector<std::string>& sets = {}) {
     source = std::make_unique<synth::SyntheticCameraSource>(NearlyStillLampsStream());
-    scene = std::make_unique<testing::AnalyticScene>(testing::PlainTable());
+    table = std::make_unique<testing::AnalyticScene>(testing::PlainTable());
     ball = MakeUvSphere(kRadius, 32, 16);
     LiveAsset asset;
     asset.name = "ball";
@@ -52,6 +58,7 @@ struct LiveRun {
     asset.field = field;
     LiveOptions options;
     options.preset = preset;
+    options.insert_sets = sets;
     options.response = "display";
     options.hud = false;  // the HUD's numbers differ between runs
     options.tracker.confirm_frames = 0;
@@ -60,7 +67,8 @@ struct LiveRun {
     // that roughness and metallic show.
     const SgMixture light = {Sg{{0, 0, 1}, 3.0, {2.0, 2.0, 2.0}},
                              Sg{Normalized(Vec3{1, -1, 0.6}), 40.0, {30.0, 25.0, 20.0}}};
-    pipeline = std::make_unique<LivePipeline>(*source, source->board(), source->camera(), *scene, light,
+    SceneField& scene = nerf != nullptr ? static_cast<SceneField&>(*nerf) : *table;
+    pipeline = std::make_unique<LivePipeline>(*source, source->board(), source->camera(), scene, light,
                                               std::vector<LiveAsset>{asset}, options);
     // The ball on the table under the image centre of the true first pose.
     const Pose pose = source->PoseAt(0);
@@ -237,6 +245,47 @@ TEST(LivePipeline, PresetSwitchTakesEffectAndMatchesARunStartedWithIt) {
   EXPECT_GT(mean_preset, 1.0);
   EXPECT_THROW(edited.pipeline->set_preset("turbo"), InputError);
   EXPECT_EQ(edited.pipeline->preset(), "accurate");
+}
+
+// The NeRF scene's options follow the preset as `nerfar insert`'s do
+// (NerfSceneOptions::Preset) with the `--set` items over them, from the
+// start and from the frame after a switch; one list of `--set` items holds
+// knobs of the scene and of the insertion (kappa_step) alike.
+TEST(LivePipeline, TheNerfSceneTakesThePresetsOptionsWithTheSetsAndFollowsASwitch) {
+  const NerfField field = BenchTabletopNerf();  // a table top at z = 0 under the stream's camera
+  NerfScene scene(field);                       // the default options, which no preset has
+  const std::vector<std::string> sets = {"seen_views=7", "nerf_step_voxels=0.75", "kappa_step=3"};
+  LiveRun run(Red(), "balanced", nullptr, &scene, sets);
+  // What `nerfar insert --preset P --set ...` builds its scene with, and
+  // the values that tells apart (nerf_scene.cpp's presets, named here).
+  const auto expected = [](const std::string& preset) {
+    NerfSceneOptions o = NerfSceneOptions::Preset(preset);
+    o.seen.views = 7;
+    o.render.step_voxels = 0.75f;
+    return o.ToJson();
+  };
+  EXPECT_EQ(scene.options().ToJson(), expected("balanced"));
+  EXPECT_EQ(scene.options().seen.group_m, 0.01);
+  EXPECT_TRUE(scene.options().cache_views);
+  EXPECT_EQ(scene.options().seen.views, 7);
+  EXPECT_EQ(scene.options().render.step_voxels, 0.75f);
+  ASSERT_TRUE(run.Step().has_pose);
+  EXPECT_GT(scene.LightSamples(), 0u) << "the object's light was not taken through the NeRF scene";
+
+  run.pipeline->set_preset("fast");
+  const LiveFrame fast = run.Step();
+  EXPECT_GT(fast.times.insert.lights_recomputed, 0);
+  EXPECT_EQ(scene.options().ToJson(), expected("fast"));
+  EXPECT_EQ(scene.options().seen.group_m, 0.02);
+  EXPECT_TRUE(scene.options().cache_views);
+  EXPECT_EQ(scene.options().seen.views, 7);
+
+  run.pipeline->set_preset("accurate");
+  run.Step();
+  EXPECT_EQ(scene.options().ToJson(), expected("accurate"));
+  EXPECT_EQ(scene.options().seen.group_m, 0.0);
+  EXPECT_FALSE(scene.options().cache_views);
+  EXPECT_EQ(scene.options().render.step_voxels, 0.75f);
 }
 
 TEST(LivePipeline, TheLightIsReusedWhileTheObjectStandsStillAndRefittedWhenItMoves) {

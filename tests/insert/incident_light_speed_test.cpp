@@ -5,6 +5,7 @@
 // light march against the "full" one on a synthetic room.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <string>
@@ -419,6 +420,47 @@ TEST(IncidentLightSpeed, DraggedObjectKeepsTheLightWithTheViewsCache) {
         preset.c_str(), (unsigned long long)plain_views_later, (unsigned long long)cached_views_later, worst_cached,
         worst_plain, worst_flux, (unsigned long long)cached.LightCacheHits(),
         (unsigned long long)cached.LightCacheMisses());
+  }
+}
+
+// A NerfScene switched to other options (NerfScene::set_options: `nerfar
+// live` switching its preset) lights as a scene built with them: the same
+// radiance bit for bit from the same views (none of the cells cached under
+// the old options answers), to the fast preset's shared views and to the
+// accurate preset's own views without the cache.
+TEST(IncidentLightSpeed, SwitchedSceneOptionsLightAsASceneBuiltWithThem) {
+  const NerfField field = LampAndFog();
+  const Sg sky{{0, 0, 1}, 1.0, {0.5, 0.5, 0.5}};
+  const std::vector<Vec3> dirs = FibonacciSphere(1024);
+  const auto light = [&](const SceneField& scene) {
+    return SampleIncidentLight(scene, {sky}, {0.0, 0.0, 0.1}, dirs, LightSource::kFull, nullptr, nullptr, nullptr, 16,
+                               2.0)
+        .radiance;
+  };
+  const auto differing = [](const std::vector<Vec3>& a, const std::vector<Vec3>& b) {
+    size_t n = a.size() == b.size() ? 0 : std::max(a.size(), b.size());
+    for (size_t i = 0; i < std::min(a.size(), b.size()); ++i) n += a[i] == b[i] ? 0 : 1;
+    return n;
+  };
+  NerfScene switched(field, NerfSceneOptions::Preset("balanced"));
+  const std::vector<Vec3> balanced = light(switched);
+  ASSERT_GT(switched.LightCacheMisses(), 0u);  // the premise: cells cached under balanced's options
+  for (const std::string preset : {"fast", "accurate"}) {
+    const NerfSceneOptions options = NerfSceneOptions::Preset(preset);
+    switched.set_options(options);
+    EXPECT_EQ(switched.options().ToJson(), options.ToJson()) << preset;
+    const uint64_t views = switched.LightViewSamples(), hits = switched.LightCacheHits();
+    const uint64_t misses = switched.LightCacheMisses();
+    const std::vector<Vec3> after = light(switched);
+    const NerfScene fresh(field, options);
+    const std::vector<Vec3> reference = light(fresh);
+    EXPECT_EQ(differing(after, reference), 0u) << preset;
+    EXPECT_EQ(switched.LightViewSamples() - views, fresh.LightViewSamples()) << preset;
+    EXPECT_EQ(switched.LightCacheHits() - hits, fresh.LightCacheHits()) << preset;
+    EXPECT_EQ(switched.LightCacheMisses() - misses, fresh.LightCacheMisses()) << preset;
+    // The premise: here each preset's light differs from balanced's, so the
+    // equality above is the new options' doing.
+    EXPECT_GT(differing(reference, balanced), 0u) << preset;
   }
 }
 
