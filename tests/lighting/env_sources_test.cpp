@@ -23,6 +23,7 @@
 #include "calib/core/parallel.h"
 #include "render/lighting/env_estimate.h"
 #include "render/sg/sg.h"
+#include "render/sg/sphere.h"
 #include "tests/support/analytic_field.h"
 
 namespace nerfar {
@@ -654,6 +655,34 @@ TEST(EnvSources, AllLightInsideTheVolumeIsNegligible) {
           std::to_string(est.env_to_near_center) + ", evidence " + std::to_string(est.evidence) + " of " +
           std::to_string(est.evidence_needed) + "; " + Describe(est));
   EXPECT_TRUE(written.negligible);
+}
+
+// What a glossy object reflects away from the source: over the upper
+// hemisphere outside the sun's judging cone (and above 3° of elevation,
+// where the sky meets the table's rim), the estimate's radiance against the
+// true sky of 0.15. Shading tells the sky only through the cosine, so the
+// estimate cannot match it in detail; it must not invent detail either: its
+// RMS error must stay below the sky's own radiance, the error of reflecting
+// no sky at all. (Dictionary lobes finer than shading resolves fail this:
+// they gather the sky into bright blobs near the horizon.)
+TEST(EnvSources, TheSkyBesideASunIsCloserThanNoSky) {
+  const Tabletop s = SunnyTable(2.5);
+  const EnvLight est = EstimateEnvironment(TabletopField(s), SourcesOptions());
+  const double cos_cone = std::cos(JudgingRadius(s.discs[0]));
+  const double sky = LuminanceOf(s.sky);
+  double sum_squared = 0, peak = 0;
+  int count = 0;
+  for (const Vec3& d : FibonacciSphere(4000)) {
+    if (d.z < std::sin(3 * kDeg) || Dot(d, s.discs[0].direction) > cos_cone) continue;
+    const double y = LuminanceOf(Evaluate(est.lobes, d));
+    sum_squared += (y - sky) * (y - sky);
+    peak = std::max(peak, y);
+    ++count;
+  }
+  const double rms = std::sqrt(sum_squared / count);
+  LogInfo("sky beside the sun: RMS error " + std::to_string(rms) + " (sky " + std::to_string(sky) + "), peak " +
+          std::to_string(peak) + "; " + Describe(est));
+  EXPECT_LT(rms, sky);
 }
 
 }  // namespace
