@@ -124,11 +124,6 @@ Inserter::Inserter(const SceneField& scene, SgMixture environment, InsertOptions
 
 const SgMixture& Inserter::Light(size_t object) const { return used_lights_.at(object); }
 
-void Inserter::set_options(const InsertOptions& options) {
-  options_ = options;
-  drag_ = std::make_unique<DragHold>();
-}
-
 ImageF Inserter::RenderBackground(const CameraIntrinsics& camera, const Pose& T_world_camera) const {
   ImageF image(camera.width, camera.height, 3, 0.0f);
   const Aabb box = scene_.Box();

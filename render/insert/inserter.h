@@ -169,8 +169,6 @@ class Inserter {
   const SgMixture& Light(size_t object) const;
   const IncidentLight& LightCache(size_t object) const { return lights_.at(object); }
   const InsertOptions& options() const { return options_; }
-  // New options; a light held through a drag is dropped with the old ones.
-  void set_options(const InsertOptions& options);
   const SgMixture& environment() const { return environment_; }
   // A plane the scene is known to hold (the tag board's), onto which shadow
   // receivers that end on it are taken (ReceiversOnPlane); nullopt: none.

@@ -160,56 +160,6 @@ TEST(Determinism, InsertersInTurnOnOneThreadKeepTheirOwnKappa) {
   EXPECT_GT(differ, 300u) << "the two lights must cast different shadows";
 }
 
-// The κ kept between frames belongs to the options it was made with: turning
-// the parallax of near light off on a running inserter must give what an
-// inserter that never had it gives on its second frame (the same history of
-// receivers), not the last frame's κ.
-TEST(Determinism, KappaKeptBetweenFramesFollowsTheParallaxOption) {
-  testing::AnalyticSceneParams params = PlainTable();
-  const testing::AnalyticScene scene(params);
-  const SphereObject object({-0.04, 0.1, 0.05}, 0.04);
-  const CameraIntrinsics camera = testing::TestCamera(240, 180);
-  const Pose cam = LookAt({0.22, -0.3, 0.35}, {-0.1, 0.1, 0.02});
-  SgMixture light = OneLobe({0.8, -0.1, 1.0}, 40.0, 5.0);
-  light.push_back(OneLobe({0, 0, 1}, 1.0, 0.3)[0]);
-  const std::vector<double> distances = {0.15, std::numeric_limits<double>::infinity()};  // a near lamp
-  InsertObject inserted = object.Object(&light);
-  inserted.light_distances = &distances;
-  const auto render = [&](Inserter& inserter) {
-    ImageF frame(camera.width, camera.height, 3, 1.0f);
-    InsertLayers layers;
-    inserter.Render(camera, cam, {inserted}, frame, &layers);
-    return frame;  // the composite: the background multiplied by κ, whatever rectangle κ was taken over
-  };
-  InsertOptions with = InsertOptions::Preset("balanced");
-  with.light.parallax = true;
-  InsertOptions without = with;
-  without.light.parallax = false;
-  Inserter running(scene, {}, with);
-  const ImageF with_parallax = render(running);
-  running.set_options(without);
-  const ImageF switched = render(running);
-  Inserter never(scene, {}, without);
-  render(never);
-  const ImageF without_parallax = render(never);
-  ASSERT_EQ(with_parallax.pixels.size(), without_parallax.pixels.size());
-  size_t moved = 0;
-  for (size_t i = 0; i < with_parallax.pixels.size(); ++i)
-    moved += std::abs(with_parallax.pixels[i] - without_parallax.pixels[i]) > 1e-3f;
-  ASSERT_GT(moved, 20u) << "the near lamp must move the shadow, or the test shows nothing";
-  // Within float rounding: the two inserters' histories differ, and the
-  // composites measured equal to ~1e-7 relative; a stale κ is off by more
-  // than 1e-3 wherever the lamp moved the shadow (checked above).
-  size_t differ = 0, stale = 0;
-  for (size_t i = 0; i < without_parallax.pixels.size(); ++i) {
-    const float v = without_parallax.pixels[i];
-    differ += std::abs(switched.pixels[i] - v) > 1e-5f * std::max(1.0f, std::abs(v));
-    stale += std::abs(switched.pixels[i] - with_parallax.pixels[i]) > 1e-3f;
-  }
-  EXPECT_EQ(differ, 0u) << "the composite differs from the inserter's without parallax at " << differ
-                        << " values (from the last frame's at " << stale << ")";
-}
-
 // The objects' prepared lights (SG shader, γ table rows, SSDF queries) are
 // kept between frames while the lights, their lobes' distances and the
 // objects are unchanged. A running inserter whose light, object or lobe
