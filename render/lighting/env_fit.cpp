@@ -97,6 +97,7 @@ std::vector<int> AlbedoCells(const EnvSurfaceSamples& s, const Aabb& aabb, doubl
 FitState PrepareFit(const EnvSurfaceSamples& samples, const Aabb& aabb, const EnvEstimateOptions& options) {
   FitState st;
   st.s = &samples;
+  st.volume = aabb;
   st.prior = options.albedo_prior;
   st.prior_weight = options.albedo_prior_weight;
   st.robust_scale = options.robust_scale;
@@ -195,7 +196,7 @@ void KeepStrongest(FitState& st, int count) {
     kept.mu.row(k) = st.mu.row(order[k]);
     kept.lobe_integral.push_back(st.lobe_integral[order[k]]);
     kept.lobes.Add(st.lobes.axes[order[k]], st.lobes.sharpness[order[k]], st.lobes.source[order[k]],
-                   st.lobes.coloured[order[k]]);
+                   st.lobes.coloured[order[k]], st.lobes.distance[order[k]]);
   }
   st = std::move(kept);
 }
@@ -245,7 +246,9 @@ SgMixture FitEnvironment(const EnvSurfaceSamples& samples, const Aabb& aabb, con
     const Vec3 mu{st.mu(k, 0), st.mu(k, 1), st.mu(k, 2)};
     if (!(mu.x > 0 || mu.y > 0 || mu.z > 0)) continue;
     result.push_back({st.lobes.axes[k], st.lobes.sharpness[k], mu});
-    parameters += kSgLobeParameters + (st.lobes.coloured[k] ? kChromaParameters : 0);
+    const bool near = st.lobes.distance[k] > 0;
+    parameters += kSgLobeParameters + (st.lobes.coloured[k] ? kChromaParameters : 0) + (near ? 1 : 0);
+    if (st.lobes.source[k]) local.placed.push_back({st.lobes.axes[k], st.lobes.sharpness[k], st.lobes.distance[k]});
   }
   const Eigen::MatrixXd S = Shading(st);
   local.final_loss = Loss(st, S, false, nullptr);

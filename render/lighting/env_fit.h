@@ -25,8 +25,16 @@ namespace nerfar {
 struct EnvFitReport {
   double initial_loss = 0, final_loss = 0;  // robust loss per sample
   int dictionary_size = 0;
-  int active_lobes = 0;        // lobes with non-zero amplitude at the end
-  int sources = 0;             // sharp sources found and kept (among the active lobes)
+  int active_lobes = 0;  // lobes with non-zero amplitude at the end
+  int sources = 0;       // sharp sources found and kept (among the active lobes)
+  // Where the kept sources are: axis and sharpness as in the lobes, and the
+  // distance from the origin along the axis in metres (0: distant). The
+  // lobes hold each as seen from the origin.
+  struct PlacedSource {
+    Vec3 axis;
+    double sharpness = 0, distance_m = 0;
+  };
+  std::vector<PlacedSource> placed;
   int coloured_lobes = 0;      // active lobes whose chroma the data supports (the others are grey)
   double mean_albedo = 0;      // luminance of the fitted albedo, mean over samples
   double relative_rms = 0;     // RMS of (model − L_o)/L_o over samples (luminance)

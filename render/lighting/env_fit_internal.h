@@ -15,17 +15,19 @@ namespace nerfar::env_internal {
 // The lobes of the model: axis and sharpness per column of the fit's matrix;
 // `source` marks the sharp sources found by the search (env_sources.cpp);
 // `coloured` the lobes with an RGB amplitude (the others are grey: one
-// amplitude for the three channels, see SolveLight).
+// amplitude for the three channels, see SolveLight); `distance` how far from
+// the origin a source is (0: distant; BundleIrradiance).
 struct Dictionary {
   std::vector<Vec3> axes;
-  std::vector<double> sharpness;
+  std::vector<double> sharpness, distance;
   std::vector<bool> source, coloured;
   size_t size() const { return axes.size(); }
-  void Add(const Vec3& axis, double lambda, bool is_source, bool is_coloured = false) {
+  void Add(const Vec3& axis, double lambda, bool is_source, bool is_coloured = false, double at = 0) {
     axes.push_back(axis);
     sharpness.push_back(lambda);
     source.push_back(is_source);
     coloured.push_back(is_coloured);
+    distance.push_back(at);
   }
 };
 // Level l: dictionary_base·4^l lobes on a Fibonacci sphere, sharpness dictionary_sharpness·4^l.
@@ -46,6 +48,7 @@ Eigen::VectorXd Nnls(const Eigen::MatrixXd& G, const Eigen::VectorXd& h);
 // The alternation's unknowns and fixed data.
 struct FitState {
   const EnvSurfaceSamples* s = nullptr;
+  Aabb volume;                  // the NeRF's: sources lie outside it
   Dictionary lobes;             // the columns of A
   Eigen::MatrixXd A;            // n × D
   Eigen::MatrixXd mu;           // D × 3
@@ -160,18 +163,22 @@ class ResidualPull {
 struct SourceCandidate {
   Vec3 axis;
   double sharpness = 0;
+  double distance = 0;  // from the origin along the axis (0: distant)
   double score = 0;
 };
-// The light that the current fit's residual asks for most (env_sources.cpp):
-// a coarse search over directions (a point source's shadows and shading on a
-// subset of samples), a continuous refinement of the best directions, then
-// the size (sharpness) that fits the penumbrae best. score 0: none helps.
-SourceCandidate FindSource(const FitState& st, const EnvShadowRays& shadow, const EnvEstimateOptions& o);
+// The lights that the current fit's residual asks for most (env_sources.cpp):
+// for each distance model (distant, and a ladder of distances outside the
+// volume), a coarse search over directions (a point source's shadows and
+// shading on a subset of samples), a continuous refinement of its best few
+// local maxima, then each one's size (sharpness) that fits the penumbrae
+// best; of all those that lower the data term, the best few, best first
+// (empty: none helps).
+std::vector<SourceCandidate> FindSources(const FitState& st, const EnvShadowRays& shadow, const EnvEstimateOptions& o);
 
 // Model selection (env_fit_select.cpp). Sharp sources, one at a time: the
-// search's best light is added as a lobe and the model re-solved for
-// source_steps; kept when its log-likelihood gain beats BIC's penalty for one
-// lobe, else the search ends. Returns the sources added.
+// search's lights, best first, each added as a lobe and the model re-solved
+// for source_steps; the first whose log-likelihood gain beats BIC's penalty
+// is kept; when none is, the search ends. Returns the sources added.
 int AddSources(FitState& st, const EnvShadowRays& shadow, const EnvEstimateOptions& o, const EnvProgress& progress);
 // Each source re-tested by removal; returns the sources left.
 int KeepSupportedSources(FitState& st, const EnvEstimateOptions& o);

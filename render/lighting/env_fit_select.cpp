@@ -38,16 +38,23 @@ double DictionarySharpnessMax(const EnvEstimateOptions& o) {
   return o.dictionary_sharpness * std::pow(4.0, o.dictionary_levels - 1);
 }
 
-// Appends a lobe (amplitude 0) as a column of the fit.
-void AppendLobe(FitState& st, const Vec3& axis, double sharpness, bool source, const EnvShadowRays& shadow,
-                const EnvEstimateOptions& o) {
-  const Eigen::MatrixXd column = LobeIrradianceMatrix(*st.s, {axis}, {sharpness}, shadow, o.source_bundle_rays, o.seed);
+// Appends a lobe (amplitude 0) as a column of the fit; a light at a finite
+// distance through shadow-ray bundles aimed from each sample.
+void AppendLobe(FitState& st, const Vec3& axis, double sharpness, double distance, bool source,
+                const EnvShadowRays& shadow, const EnvEstimateOptions& o) {
   st.A.conservativeResize(Eigen::NoChange, st.A.cols() + 1);
-  st.A.col(st.A.cols() - 1) = column.col(0);
+  if (distance > 0) {
+    const std::vector<double> column = BundleIrradiance(*st.s, shadow, AllSamples(*st.s), {axis}, {sharpness},
+                                                        o.source_bundle_rays, o.seed, {distance})[0];
+    st.A.col(st.A.cols() - 1) = Eigen::Map<const Eigen::VectorXd>(column.data(), st.A.rows());
+  } else {
+    st.A.col(st.A.cols() - 1) =
+        LobeIrradianceMatrix(*st.s, {axis}, {sharpness}, shadow, o.source_bundle_rays, o.seed).col(0);
+  }
   st.mu.conservativeResize(st.mu.rows() + 1, Eigen::NoChange);
   st.mu.row(st.mu.rows() - 1).setZero();
   st.lobe_integral.push_back(SgUnitIntegral(sharpness));
-  st.lobes.Add(axis, sharpness, source);
+  st.lobes.Add(axis, sharpness, source, false, distance);
 }
 
 // Removes column k of the fit.
@@ -60,6 +67,7 @@ void RemoveLobe(FitState& st, Eigen::Index k) {
   st.lobe_integral.erase(st.lobe_integral.begin() + k);
   st.lobes.axes.erase(st.lobes.axes.begin() + k);
   st.lobes.sharpness.erase(st.lobes.sharpness.begin() + k);
+  st.lobes.distance.erase(st.lobes.distance.begin() + k);
   st.lobes.source.erase(st.lobes.source.begin() + k);
   st.lobes.coloured.erase(st.lobes.coloured.begin() + k);
 }
@@ -108,54 +116,76 @@ double HeldOutChromaGain(const FitState& st, const std::array<FitState, 2>& grey
   return gain;
 }
 
+// The sharp sources among the fit's lobes.
+int CountSources(const FitState& st) {
+  return static_cast<int>(std::count(st.lobes.source.begin(), st.lobes.source.end(), true));
+}
+
+// Tries one light of the search as a sharp source (AddSources): appends it,
+// re-solves, and tells whether the data supports it; if so `st` takes it.
+// `rank`: the candidates of this round tried before it.
+bool TrySource(FitState& st, const SourceCandidate& found, size_t rank, const EnvShadowRays& shadow,
+               const EnvEstimateOptions& o) {
+  const double one_parameter = BicPenalty(st, o, 1);
+  const double penalty = BicPenalty(st, o, kSgLobeParameters) + (found.distance > 0 ? one_parameter : 0) +
+                         std::log(static_cast<double>(rank + 1));
+  FitState trial = st, broad = st;
+  AppendLobe(trial, found.axis, found.sharpness, found.distance, true, shadow, o);
+  const double gain = GainAfterSteps(st, trial, o.source_steps);
+  const double broad_sharpness = DictionarySharpnessMax(o);
+  double sharpness_gain = 0;
+  if (found.sharpness > broad_sharpness) {
+    AppendLobe(broad, found.axis, broad_sharpness, found.distance, false, shadow, o);
+    int steps = 0;
+    Iterate(broad, o.source_steps, &steps, 0, nullptr);
+    sharpness_gain = ReflectingGain(broad, trial);
+  }
+  const double sharpness_penalty = one_parameter + std::log(std::max(1.0, found.sharpness / broad_sharpness));
+  const bool supported = gain > penalty && (found.sharpness <= broad_sharpness || sharpness_gain > sharpness_penalty);
+  const double elevation = std::asin(std::clamp(found.axis.z, -1.0, 1.0)) * 180 / kPi;
+  const double azimuth = std::atan2(found.axis.y, found.axis.x) * 180 / kPi;
+  LogInfo("env fit: source " + std::to_string(CountSources(st) + 1) + ", candidate " + std::to_string(rank + 1) +
+          ", at azimuth " + std::to_string(azimuth) + " elevation " + std::to_string(elevation) + " deg, " +
+          (found.distance > 0 ? std::to_string(found.distance) + " m away" : std::string("distant")) + ", sharpness " +
+          std::to_string(found.sharpness) + ": log-likelihood gain " + std::to_string(gain) + ", BIC penalty " +
+          std::to_string(penalty) + "; over a lobe of sharpness " + std::to_string(broad_sharpness) + " " +
+          std::to_string(sharpness_gain) + ", penalty " + std::to_string(sharpness_penalty) +
+          (supported ? " (kept)" : " (not supported)"));
+  if (supported) st = std::move(trial);
+  return supported;
+}
+
 }  // namespace
 
-// Sharp sources, one at a time: the search's best light is added as a lobe
-// and the whole model re-solved for a few steps; it is kept when its
-// log-likelihood gain (the robust loss as a Cauchy likelihood, as the
+// Sharp sources, one at a time: the search's best few lights (env_sources.cpp:
+// distant or at a distance, each at its best size), best first, are each
+// added as a lobe and the whole model re-solved for a few steps; the first
+// whose log-likelihood gain (the robust loss as a Cauchy likelihood, as the
 // environment's own model selection) exceeds BIC's penalty for one lobe's
-// parameters, and the search goes on; otherwise the search stops. A source
-// sharper than the dictionary must also owe its gain to its sharpness (its
-// shadows and their penumbrae): against the dictionary's sharpest lobe on the
-// same axis, re-solved alike, it must gain more than BIC's penalty for the
-// one parameter it adds (the sharpness) and for its direction's search:
-// within the broad lobe's extent the search chose the best of about
-// λ/λ_broad distinguishable directions of the sharp one (their solid angles
-// ~2π/λ), and the largest of K independent log-likelihood gains of one
-// parameter each (χ²₁/2, tail ~e^−t) is about ln K under pure noise.
-// Brightness alone (light that some samples ask for from that side) a broad
-// lobe gives as well, and the dictionary's lobes will. Returns the sources
-// kept.
+// parameters (and its distance's, when it has one) is kept, and the search
+// goes on; when none is, the search stops. The search scores lights on the
+// linearised fit, so its best can fail once re-solved (a point at the
+// horizon that only grazing samples see) where the next one, a real light,
+// passes; the k-th tried pays ln k more, about what the largest of k gains
+// adds under pure noise. A source sharper than the dictionary must also owe
+// its gain to its sharpness (its shadows and their penumbrae): against the
+// dictionary's sharpest lobe on the same axis, re-solved alike, it must gain
+// more than BIC's penalty for the one parameter it adds (the sharpness) and
+// for its direction's search: within the broad lobe's extent the search
+// chose the best of about λ/λ_broad distinguishable directions of the sharp
+// one (their solid angles ~2π/λ), and the largest of K independent
+// log-likelihood gains of one parameter each (χ²₁/2, tail ~e^−t) is about
+// ln K under pure noise. Brightness alone (light that some samples ask for
+// from that side) a broad lobe gives as well, and the dictionary's lobes
+// will. Returns the sources kept.
 int AddSources(FitState& st, const EnvShadowRays& shadow, const EnvEstimateOptions& o, const EnvProgress& progress) {
-  const double penalty = BicPenalty(st, o, kSgLobeParameters), one_parameter = BicPenalty(st, o, 1);
   int kept = 0;
   for (; kept < o.sources_max; ++kept) {
     if (progress) progress("sources", static_cast<size_t>(kept), static_cast<size_t>(o.sources_max));
-    const SourceCandidate found = FindSource(st, shadow, o);
-    if (!(found.score > 0)) break;
-    FitState trial = st, broad = st;
-    AppendLobe(trial, found.axis, found.sharpness, true, shadow, o);
-    const double gain = GainAfterSteps(st, trial, o.source_steps);
-    const double broad_sharpness = DictionarySharpnessMax(o);
-    double sharpness_gain = 0;
-    if (found.sharpness > broad_sharpness) {
-      AppendLobe(broad, found.axis, broad_sharpness, false, shadow, o);
-      int steps = 0;
-      Iterate(broad, o.source_steps, &steps, 0, nullptr);
-      sharpness_gain = ReflectingGain(broad, trial);
-    }
-    const double sharpness_penalty = one_parameter + std::log(std::max(1.0, found.sharpness / broad_sharpness));
-    const bool sharp_enough = found.sharpness <= broad_sharpness || sharpness_gain > sharpness_penalty;
-    const double elevation = std::asin(std::clamp(found.axis.z, -1.0, 1.0)) * 180 / kPi;
-    const double azimuth = std::atan2(found.axis.y, found.axis.x) * 180 / kPi;
-    LogInfo("env fit: source " + std::to_string(kept + 1) + " at azimuth " + std::to_string(azimuth) + " elevation " +
-            std::to_string(elevation) + " deg, sharpness " + std::to_string(found.sharpness) +
-            ": log-likelihood gain " + std::to_string(gain) + ", BIC penalty " + std::to_string(penalty) +
-            "; over a lobe of sharpness " + std::to_string(broad_sharpness) + " " + std::to_string(sharpness_gain) +
-            ", penalty " + std::to_string(sharpness_penalty) +
-            (gain > penalty && sharp_enough ? " (kept)" : " (not supported: search ends)"));
-    if (!(gain > penalty && sharp_enough)) break;
-    st = std::move(trial);
+    const std::vector<SourceCandidate> found = FindSources(st, shadow, o);
+    bool added = false;
+    for (size_t rank = 0; rank < found.size() && !added; ++rank) added = TrySource(st, found[rank], rank, shadow, o);
+    if (!added) break;
   }
   if (progress) progress("sources", static_cast<size_t>(o.sources_max), static_cast<size_t>(o.sources_max));
   return kept;
@@ -175,7 +205,7 @@ int KeepSupportedSources(FitState& st, const EnvEstimateOptions& o) {
                std::to_string(gain) + ", BIC penalty " + std::to_string(penalty));
     if (!(gain > penalty)) st = std::move(trial);
   }
-  return static_cast<int>(std::count(st.lobes.source.begin(), st.lobes.source.end(), true));
+  return CountSources(st);
 }
 
 // Per-lobe chroma, one lobe at a time: the lobe is given an RGB amplitude

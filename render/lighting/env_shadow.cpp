@@ -96,9 +96,19 @@ void LobeDirections(const Vec3& axis, double sharpness, int bundle, double turn,
 
 }  // namespace
 
+Vec3 AimAt(const Vec3& axis, double distance, const Vec3& point, double* falloff) {
+  *falloff = 1;
+  if (!(distance > 0)) return axis;
+  const Vec3 to = axis * distance - point;
+  const double length = std::sqrt(Dot(to, to));
+  *falloff = (distance / length) * (distance / length);
+  return to * (1.0 / length);
+}
+
 std::vector<std::vector<double>> BundleIrradiance(const EnvSurfaceSamples& samples, const EnvShadowRays& shadow,
                                                   const std::vector<uint32_t>& subset, const std::vector<Vec3>& axes,
-                                                  const std::vector<double>& sharpness, int bundle, uint64_t seed) {
+                                                  const std::vector<double>& sharpness, int bundle, uint64_t seed,
+                                                  const std::vector<double>& distance) {
   const size_t lobes = axes.size(), m = subset.size();
   // Per (lobe, sample): the open irradiance, and the bundle's rays with their cosines.
   std::vector<std::vector<double>> open(lobes, std::vector<double>(m, 0.0));
@@ -111,10 +121,12 @@ std::vector<std::vector<double>> BundleIrradiance(const EnvSurfaceSamples& sampl
         [&](size_t a) {
           const uint32_t i = subset[a];
           const Vec3 normal = ToD(samples.normals[i]);
-          open[k][a] = std::max(0.0f, UnitIrradiancePrepared(row, static_cast<float>(Dot(axes[k], normal))));
+          double scale = 1;
+          const Vec3 axis = distance.empty() ? axes[k] : AimAt(axes[k], distance[k], ToD(samples.positions[i]), &scale);
+          open[k][a] = scale * std::max(0.0f, UnitIrradiancePrepared(row, static_cast<float>(Dot(axis, normal))));
           if (!(open[k][a] > 0)) return;
           std::vector<Vec3> lobe;
-          LobeDirections(axes[k], sharpness[k], bundle, 2 * kPi * Uniform(seed, kBundleTurn, i, k), &lobe);
+          LobeDirections(axis, sharpness[k], bundle, 2 * kPi * Uniform(seed, kBundleTurn, i, k), &lobe);
           for (int j = 0; j < bundle; ++j) {
             dirs[k][a * bundle + j] = lobe[j];
             cosine[k][a * bundle + j] = std::max(0.0, Dot(lobe[j], normal));

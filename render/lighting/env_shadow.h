@@ -72,10 +72,21 @@ std::vector<double> BundleIrradiance(const EnvSurfaceSamples& samples, const Env
                                      const std::vector<uint32_t>& subset, const Vec3& axis, double sharpness,
                                      int bundle, uint64_t seed);
 
-// The same for several lobes at once (one batch of shadow rays): column k for lobe k.
+// The same for several lobes at once (one batch of shadow rays): column k for
+// lobe k. `distance` (empty: all distant): per lobe, how far from the world
+// origin along its axis the light is, in metres (0: distant). A light at a
+// finite distance is aimed at from each sample (AimAt): its direction and
+// falloff change over the volume (parallax), its amplitude is as seen from
+// the origin.
 std::vector<std::vector<double>> BundleIrradiance(const EnvSurfaceSamples& samples, const EnvShadowRays& shadow,
                                                   const std::vector<uint32_t>& subset, const std::vector<Vec3>& axes,
-                                                  const std::vector<double>& sharpness, int bundle, uint64_t seed);
+                                                  const std::vector<double>& sharpness, int bundle, uint64_t seed,
+                                                  const std::vector<double>& distance = {});
+
+// The direction from `point` to a light `distance` metres from the origin
+// along `axis` (0: distant, the axis itself), and in `falloff` its irradiance
+// there relative to the origin's, (distance / range)² (1 when distant).
+Vec3 AimAt(const Vec3& axis, double distance, const Vec3& point, double* falloff);
 
 // Every sample's index, 0 .. n−1.
 std::vector<uint32_t> AllSamples(const EnvSurfaceSamples& samples);

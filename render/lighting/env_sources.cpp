@@ -40,15 +40,37 @@ std::vector<uint32_t> EvenSubset(const FitState& st, size_t m) {
   return subset;
 }
 
+// How far from the origin a light in direction `axis` is at `reach` times
+// the distance where the axis leaves the volume (0: distant, or no exit).
+double SourceDistance(const FitState& st, const Vec3& axis, double reach) {
+  float t_near = 0, t_far = 0;
+  if (!(reach > 0) || !IntersectAabb(st.volume, Vec3f{}, Vec3f(axis), t_near, t_far) || !(t_far > 0)) return 0;
+  return reach * t_far;
+}
+
+// The reaches a source is searched at (SourceDistance; 0 first: distant). A
+// light f times as far as the volume's edge turns by about 1/f rad over the
+// volume; beyond f = √λ_min that is within the broadest source's own width
+// (1/√λ_min), and the light is as good as distant. Below, a ladder of
+// halvings down to the volume's edge (f > 1) tells near from far.
+std::vector<double> Reaches(const EnvEstimateOptions& o) {
+  std::vector<double> reaches{0};
+  for (double f = std::sqrt(o.source_sharpness_min); f > 1; f *= 0.5) reaches.push_back(f);
+  return reaches;
+}
+
 // Scores of point sources (bundle of one ray) in the given directions.
 std::vector<double> PointScores(const FitState& st, const ResidualPull& pull, const EnvShadowRays& shadow,
-                                const std::vector<Vec3>& axes, double sharpness, uint64_t seed) {
+                                const std::vector<Vec3>& axes, double sharpness, double reach, uint64_t seed) {
   std::vector<double> scores;
   for (size_t begin = 0; begin < axes.size(); begin += kCandidateBatch) {
     const size_t end = std::min(axes.size(), begin + kCandidateBatch);
     const std::vector<Vec3> batch(axes.begin() + begin, axes.begin() + end);
     const std::vector<double> lambda(batch.size(), sharpness);
-    for (const std::vector<double>& b : BundleIrradiance(*st.s, shadow, pull.subset(), batch, lambda, 1, seed))
+    std::vector<double> distance;
+    for (const Vec3& axis : batch) distance.push_back(SourceDistance(st, axis, reach));
+    for (const std::vector<double>& b :
+         BundleIrradiance(*st.s, shadow, pull.subset(), batch, lambda, 1, seed, distance))
       scores.push_back(pull.Score(b));
   }
   return scores;
@@ -70,26 +92,45 @@ std::vector<Vec3> CoarseMaxima(const std::vector<Vec3>& grid, const std::vector<
   return maxima;
 }
 
+// Where the search has a light: direction, reach (SourceDistance; 0:
+// distant) and score.
+struct Placement {
+  Vec3 axis;
+  double reach = 0, score = 0;
+};
+
 // Compass search on the sphere: the four neighbours at angle h along the
-// tangent frame; move to the best when it scores higher, else halve h; stop
-// below h_min (a tenth of the sharpest lobe's width).
-SourceCandidate RefineDirection(const FitState& st, const ResidualPull& pull, const EnvShadowRays& shadow,
-                                const Vec3& start, double h, double sharpness, uint64_t seed) {
-  SourceCandidate best{start, sharpness, PointScores(st, pull, shadow, {start}, sharpness, seed)[0]};
+// tangent frame, and for a light at a distance its reach times 2^±s (s
+// starting at half the ladder's step, halved with h: the distance is placed
+// between the ladder's rungs too, within the ladder's range, Reaches); move
+// to the best when it scores higher, else halve h; stop below h_min (a tenth
+// of the sharpest lobe's width).
+Placement RefinePlacement(const FitState& st, const ResidualPull& pull, const EnvShadowRays& shadow,
+                          const Placement& start, double h, double sharpness, double reach_max, uint64_t seed) {
+  Placement best = start;
+  best.score = PointScores(st, pull, shadow, {start.axis}, sharpness, start.reach, seed)[0];
   const double h_min = 0.1 / std::sqrt(sharpness);
+  double s = 0.5;
   for (int step = 0; step < 100 && h > h_min; ++step) {
     Vec3 u, v;
     OrthonormalBasis(best.axis, u, v);
-    std::vector<Vec3> around;
+    std::vector<Placement> around;
+    std::vector<Vec3> turned;
     for (const Vec3& t : {u, u * -1.0, v, v * -1.0})
-      around.push_back(Normalized(best.axis * std::cos(h) + t * std::sin(h)));
-    const std::vector<double> scores = PointScores(st, pull, shadow, around, sharpness, seed);
-    const size_t k = static_cast<size_t>(std::max_element(scores.begin(), scores.end()) - scores.begin());
-    if (scores[k] > best.score) {
-      best.axis = around[k];
-      best.score = scores[k];
+      turned.push_back(Normalized(best.axis * std::cos(h) + t * std::sin(h)));
+    const std::vector<double> scores = PointScores(st, pull, shadow, turned, sharpness, best.reach, seed);
+    for (size_t k = 0; k < turned.size(); ++k) around.push_back({turned[k], best.reach, scores[k]});
+    if (best.reach > 0)
+      for (const double reach : {best.reach * std::exp2(s), best.reach * std::exp2(-s)})
+        if (reach > 1 && reach <= reach_max)
+          around.push_back({best.axis, reach, PointScores(st, pull, shadow, {best.axis}, sharpness, reach, seed)[0]});
+    const Placement& top = *std::max_element(around.begin(), around.end(),
+                                             [](const Placement& a, const Placement& b) { return a.score < b.score; });
+    if (top.score > best.score) {
+      best = top;
     } else {
       h *= 0.5;
+      s *= 0.5;
     }
   }
   return best;
@@ -98,18 +139,20 @@ SourceCandidate RefineDirection(const FitState& st, const ResidualPull& pull, co
 // The size: a geometric ladder of sharpnesses from the options' range, each
 // lobe's column from `bundle` rays spread over it; the best score wins.
 SourceCandidate ChooseSize(const FitState& st, const ResidualPull& pull, const EnvShadowRays& shadow, const Vec3& axis,
-                           const EnvEstimateOptions& o) {
+                           double reach, const EnvEstimateOptions& o) {
   std::vector<double> ladder;
   const double ratio = std::sqrt(10.0);
   for (double lambda = o.source_sharpness_min; lambda <= o.source_sharpness_max * 1.0001; lambda *= ratio)
     ladder.push_back(lambda);
   const std::vector<Vec3> axes(ladder.size(), axis);
+  const double distance = SourceDistance(st, axis, reach);
   const std::vector<std::vector<double>> columns =
-      BundleIrradiance(*st.s, shadow, pull.subset(), axes, ladder, o.source_bundle_rays, o.seed);
-  SourceCandidate best{axis, ladder.back(), 0};
+      BundleIrradiance(*st.s, shadow, pull.subset(), axes, ladder, o.source_bundle_rays, o.seed,
+                       std::vector<double>(ladder.size(), distance));
+  SourceCandidate best{axis, ladder.back(), distance, 0};
   for (size_t k = 0; k < ladder.size(); ++k) {
     const double score = pull.Score(columns[k]);
-    if (score > best.score) best = {axis, ladder[k], score};
+    if (score > best.score) best = {axis, ladder[k], distance, score};
   }
   return best;
 }
@@ -189,20 +232,28 @@ double ResidualPull::Score(const std::vector<double>& b) const {
   return num > 0 && den > 1e-12 * open ? num * num / den : 0.0;
 }
 
-SourceCandidate FindSource(const FitState& st, const EnvShadowRays& shadow, const EnvEstimateOptions& o) {
+std::vector<SourceCandidate> FindSources(const FitState& st, const EnvShadowRays& shadow, const EnvEstimateOptions& o) {
   const ResidualPull coarse(st, EvenSubset(st, static_cast<size_t>(o.source_search_samples)));
   const ResidualPull fine(st, EvenSubset(st, static_cast<size_t>(o.source_refine_samples)));
   const std::vector<Vec3> grid = FibonacciSphere(o.source_candidates);
   const double spacing = std::sqrt(4 * kPi / o.source_candidates);
   const double point = o.source_sharpness_max;  // the search's point source
-  const std::vector<double> scores = PointScores(st, coarse, shadow, grid, point, o.seed);
-  SourceCandidate best;
-  for (const Vec3& start : CoarseMaxima(grid, scores, spacing)) {
-    const SourceCandidate refined = RefineDirection(st, fine, shadow, start, spacing, point, o.seed);
-    if (refined.score > best.score) best = refined;
+  std::vector<SourceCandidate> found;
+  const std::vector<double> reaches = Reaches(o);
+  const double reach_max = *std::max_element(reaches.begin(), reaches.end());
+  for (const double reach : reaches) {
+    const std::vector<double> scores = PointScores(st, coarse, shadow, grid, point, reach, o.seed);
+    for (const Vec3& start : CoarseMaxima(grid, scores, spacing)) {
+      const Placement refined = RefinePlacement(st, fine, shadow, {start, reach}, spacing, point, reach_max, o.seed);
+      if (!(refined.score > 0)) continue;
+      const SourceCandidate sized = ChooseSize(st, fine, shadow, refined.axis, refined.reach, o);
+      if (sized.score > 0) found.push_back(sized);
+    }
   }
-  if (!(best.score > 0)) return best;
-  return ChooseSize(st, fine, shadow, best.axis, o);
+  std::stable_sort(found.begin(), found.end(),
+                   [](const SourceCandidate& a, const SourceCandidate& b) { return a.score > b.score; });
+  if (found.size() > kRefinedDirections) found.resize(kRefinedDirections);
+  return found;
 }
 
 }  // namespace nerfar::env_internal
