@@ -129,9 +129,9 @@ bool TrySource(FitState& st, const SourceCandidate& found, size_t rank, const En
   const double one_parameter = BicPenalty(st, o, 1);
   const double penalty = BicPenalty(st, o, kSgLobeParameters) + (found.distance > 0 ? one_parameter : 0) +
                          std::log(static_cast<double>(rank + 1));
-  FitState trial = st, broad = st;
+  FitState trial = st, without = st, broad = st;  // st stays as it is unless the source is kept
   AppendLobe(trial, found.axis, found.sharpness, found.distance, true, shadow, o);
-  const double gain = GainAfterSteps(st, trial, o.source_steps);
+  const double gain = GainAfterSteps(without, trial, o.source_steps);
   const double broad_sharpness = DictionarySharpnessMax(o);
   double sharpness_gain = 0;
   if (found.sharpness > broad_sharpness) {
@@ -183,9 +183,14 @@ int AddSources(FitState& st, const EnvShadowRays& shadow, const EnvEstimateOptio
   for (; kept < o.sources_max; ++kept) {
     if (progress) progress("sources", static_cast<size_t>(kept), static_cast<size_t>(o.sources_max));
     const std::vector<SourceCandidate> found = FindSources(st, shadow, o);
+    if (found.empty()) break;
     bool added = false;
     for (size_t rank = 0; rank < found.size() && !added; ++rank) added = TrySource(st, found[rank], rank, shadow, o);
-    if (!added) break;
+    if (added) continue;
+    // Nothing kept: the fit goes on as the tests' baseline did (source_steps more).
+    int steps = 0;
+    Iterate(st, o.source_steps, &steps, 0, nullptr);
+    break;
   }
   if (progress) progress("sources", static_cast<size_t>(o.sources_max), static_cast<size_t>(o.sources_max));
   return kept;
