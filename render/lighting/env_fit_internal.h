@@ -35,11 +35,12 @@ Dictionary MakeDictionary(const EnvEstimateOptions& o);
 
 // A(i, k): irradiance at sample i from unit-amplitude lobe k: through the
 // NeRF's visibility cache for lobes it resolves (CacheSharpnessLimit), through
-// bundles of `bundle` shadow rays for sharper ones (when `shadow` is given;
-// see env_lobes.cpp).
+// bundles of `bundle` shadow rays for sharper ones and for lights at a
+// distance (`distance`, empty: all distant; BundleIrradiance) when `shadow`
+// is given (see env_lobes.cpp).
 Eigen::MatrixXd LobeIrradianceMatrix(const EnvSurfaceSamples& s, const std::vector<Vec3>& axes,
                                      const std::vector<double>& sharpness, const EnvShadowRays& shadow = nullptr,
-                                     int bundle = 1, uint64_t seed = 0);
+                                     int bundle = 1, uint64_t seed = 0, const std::vector<double>& distance = {});
 
 // min ‖Bx − y‖² s.t. x ≥ 0 from the normal equations G = BᵀB, h = Bᵀy
 // (Lawson-Hanson active set).

@@ -38,19 +38,13 @@ double DictionarySharpnessMax(const EnvEstimateOptions& o) {
   return o.dictionary_sharpness * std::pow(4.0, o.dictionary_levels - 1);
 }
 
-// Appends a lobe (amplitude 0) as a column of the fit; a light at a finite
-// distance through shadow-ray bundles aimed from each sample.
+// Appends a lobe (amplitude 0) as a column of the fit.
 void AppendLobe(FitState& st, const Vec3& axis, double sharpness, double distance, bool source,
                 const EnvShadowRays& shadow, const EnvEstimateOptions& o) {
+  const Eigen::MatrixXd column =
+      LobeIrradianceMatrix(*st.s, {axis}, {sharpness}, shadow, o.source_bundle_rays, o.seed, {distance});
   st.A.conservativeResize(Eigen::NoChange, st.A.cols() + 1);
-  if (distance > 0) {
-    const std::vector<double> column = BundleIrradiance(*st.s, shadow, AllSamples(*st.s), {axis}, {sharpness},
-                                                        o.source_bundle_rays, o.seed, {distance})[0];
-    st.A.col(st.A.cols() - 1) = Eigen::Map<const Eigen::VectorXd>(column.data(), st.A.rows());
-  } else {
-    st.A.col(st.A.cols() - 1) =
-        LobeIrradianceMatrix(*st.s, {axis}, {sharpness}, shadow, o.source_bundle_rays, o.seed).col(0);
-  }
+  st.A.col(st.A.cols() - 1) = column.col(0);
   st.mu.conservativeResize(st.mu.rows() + 1, Eigen::NoChange);
   st.mu.row(st.mu.rows() - 1).setZero();
   st.lobe_integral.push_back(SgUnitIntegral(sharpness));
@@ -129,12 +123,13 @@ bool TrySource(FitState& st, const SourceCandidate& found, size_t rank, const En
   const double one_parameter = BicPenalty(st, o, 1);
   const double penalty = BicPenalty(st, o, kSgLobeParameters) + (found.distance > 0 ? one_parameter : 0) +
                          std::log(static_cast<double>(rank + 1));
-  FitState trial = st, without = st, broad = st;  // st stays as it is unless the source is kept
+  FitState trial = st, without = st;  // st stays as it is unless the source is kept
   AppendLobe(trial, found.axis, found.sharpness, found.distance, true, shadow, o);
   const double gain = GainAfterSteps(without, trial, o.source_steps);
   const double broad_sharpness = DictionarySharpnessMax(o);
   double sharpness_gain = 0;
   if (found.sharpness > broad_sharpness) {
+    FitState broad = st;
     AppendLobe(broad, found.axis, broad_sharpness, found.distance, false, shadow, o);
     int steps = 0;
     Iterate(broad, o.source_steps, &steps, 0, nullptr);

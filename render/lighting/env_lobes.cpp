@@ -39,23 +39,27 @@ Dictionary MakeDictionary(const EnvEstimateOptions& o) {
 // normalised by their largest term, so nothing underflows).
 Eigen::MatrixXd LobeIrradianceMatrix(const EnvSurfaceSamples& s, const std::vector<Vec3>& axes,
                                      const std::vector<double>& sharpness, const EnvShadowRays& shadow, int bundle,
-                                     uint64_t seed) {
+                                     uint64_t seed, const std::vector<double>& distance) {
   const size_t n = s.size(), d = axes.size();
   const int R = s.rays_per_point;
-  // Lobes sharper than the cache resolves: through shadow-ray bundles.
+  // Lobes sharper than the cache resolves, and lights at a distance (the
+  // cache's rays leave each sample, not aimed at a point): through shadow-ray
+  // bundles.
   std::vector<bool> by_rays(d, false);
   std::vector<Vec3> sharp_axes;
-  std::vector<double> sharp_lambda;
+  std::vector<double> sharp_lambda, sharp_distance;
   for (size_t k = 0; k < d; ++k) {
-    by_rays[k] = shadow != nullptr && sharpness[k] > CacheSharpnessLimit(R);
+    const double at = distance.empty() ? 0 : distance[k];
+    by_rays[k] = shadow != nullptr && (sharpness[k] > CacheSharpnessLimit(R) || at > 0);
     if (!by_rays[k]) continue;
     sharp_axes.push_back(axes[k]);
     sharp_lambda.push_back(sharpness[k]);
+    sharp_distance.push_back(at);
   }
   Eigen::MatrixXd A(n, d);
   if (!sharp_axes.empty()) {
     const std::vector<std::vector<double>> columns =
-        BundleIrradiance(s, shadow, AllSamples(s), sharp_axes, sharp_lambda, bundle, seed);
+        BundleIrradiance(s, shadow, AllSamples(s), sharp_axes, sharp_lambda, bundle, seed, sharp_distance);
     for (size_t k = 0, next = 0; k < d; ++k)
       if (by_rays[k])
         A.col(static_cast<Eigen::Index>(k)) = Eigen::Map<const Eigen::VectorXd>(columns[next++].data(), n);
