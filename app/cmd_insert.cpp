@@ -960,10 +960,8 @@ int RunInsert(const CommandArgs& args) {
   EnvLight environment;
   if (!a.env_path.empty()) {
     environment = ReadEnvLight(a.env_path);
-    if (environment.negligible) {
+    if (DropIfNegligible(environment))
       LogInfo("insert: " + a.env_path + " marks the environment as negligible: it is dropped");
-      environment.lobes.clear();
-    }
   }
   const std::vector<LoadedObject> loaded = LoadObjects(a);
   const Dataset dataset = a.video ? VideoViews(a, capture, path_file, ObjectCentre(loaded.front())) : capture;
@@ -979,7 +977,7 @@ int RunInsert(const CommandArgs& args) {
   WriteFileAtomic((fs::path(a.output) / "options.json").string(), options_json + "\n");
   const std::vector<InsertObject> objects = InsertObjects(loaded, a.light_probe.empty() ? nullptr : &probe, distances);
 
-  Inserter inserter(scene, environment.lobes, options);
+  Inserter inserter(scene, environment.lobes, options, environment.distance_m);
   const fs::path board_path = fs::path(a.dataset_dir) / "board.json";
   if (knobs.support_plane && !a.truth_geometry && fs::exists(board_path) && !dataset.frames.empty()) {
     const SupportPlane plane =

@@ -350,7 +350,7 @@ int RunLive(const CommandArgs& args) {
   const std::vector<LiveAsset> assets = AssetsOf(objects);
   source =
       ReconnectOnLoss(std::move(source), [&a, source_options] { return OpenSource(a.source_name, source_options); });
-  LivePipeline pipeline(*source, board, camera, *scene.field, scene.env.lobes, assets, options);
+  LivePipeline pipeline(*source, board, camera, *scene.field, scene.env.lobes, assets, options, scene.env.distance_m);
   // A view that cannot be written (a full disk, a folder gone) is reported, not the end of the run.
   const auto write_view = [&pipeline](const std::function<void()>& write) {
     try {

@@ -182,7 +182,8 @@ std::vector<std::pair<std::string, double>> StageList(const LiveStageTimes& t) {
 }
 
 LivePipeline::LivePipeline(FrameSource& source, const Board& board, const CameraIntrinsics& camera, SceneField& scene,
-                           SgMixture environment, std::vector<LiveAsset> assets, LiveOptions options)
+                           SgMixture environment, std::vector<LiveAsset> assets, LiveOptions options,
+                           std::vector<double> environment_distance_m)
     : source_(source),
       camera_(camera),
       scene_(scene),
@@ -200,7 +201,8 @@ LivePipeline::LivePipeline(FrameSource& source, const Board& board, const Camera
   tracker_ = std::make_unique<Tracker>(board, camera_, options_.tracker);
   const NerfInsertOptions knobs = Knobs(options_.preset);
   if (nerf_scene_ != nullptr) nerf_scene_->set_options(knobs.nerf);
-  inserter_ = std::make_unique<Inserter>(scene_, std::move(environment), knobs.insert);
+  inserter_ =
+      std::make_unique<Inserter>(scene_, std::move(environment), knobs.insert, std::move(environment_distance_m));
   preset_ = options_.preset;
   hud_on_.store(options_.hud);
   for (const LiveAsset& a : assets_) {
@@ -235,7 +237,8 @@ void LivePipeline::SwitchPreset(const std::string& preset) {
   // A new Inserter rather than new options for the old one: what it keeps
   // between frames (the lights, γ, κ's receivers and lattice) was taken
   // from the scene as its old options rendered it.
-  inserter_ = std::make_unique<Inserter>(scene_, inserter_->environment(), knobs.insert);
+  inserter_ =
+      std::make_unique<Inserter>(scene_, inserter_->environment(), knobs.insert, inserter_->environment_distance_m());
 }
 
 void LivePipeline::set_preset(const std::string& preset) {

@@ -178,9 +178,11 @@ class LivePipeline {
   // NerfScene takes the NeRF scene's options of the preset with the `--set`
   // items (NerfInsertOptions) here and again at every preset switch, as
   // `nerfar insert` builds its scene; other scene fields (the tests'
-  // analytic scenes) are only queried.
+  // analytic scenes) are only queried. `environment_distance_m`: as
+  // Inserter's (EnvLight::distance_m).
   LivePipeline(FrameSource& source, const Board& board, const CameraIntrinsics& camera, SceneField& scene,
-               SgMixture environment, std::vector<LiveAsset> assets, LiveOptions options);
+               SgMixture environment, std::vector<LiveAsset> assets, LiveOptions options,
+               std::vector<double> environment_distance_m = {});
   ~LivePipeline();
   LivePipeline(const LivePipeline&) = delete;
   LivePipeline& operator=(const LivePipeline&) = delete;

@@ -60,10 +60,8 @@ LiveSceneData LoadLiveScene(const LiveScenePaths& paths) {
   data.field = std::make_unique<NerfScene>(data.nerf);
   if (!paths.env.empty()) {
     data.env = ReadEnvLight(paths.env);
-    if (data.env.negligible) {
+    if (DropIfNegligible(data.env))
       LogInfo("live: " + paths.env + " marks the environment as negligible: it is dropped");
-      data.env.lobes.clear();
-    }
   }
   if (!paths.board.empty()) data.board = ReadBoard(paths.board);
   if (!paths.camera.empty()) data.camera = ReadCameraFile(paths.camera);

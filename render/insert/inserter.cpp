@@ -112,9 +112,11 @@ ImageF ExpandLayer(const ImageF& layer, const PixelRect& rect, int width, int he
 Inserter::~Inserter() = default;
 Inserter::Inserter(Inserter&&) noexcept = default;
 
-Inserter::Inserter(const SceneField& scene, SgMixture environment, InsertOptions options)
+Inserter::Inserter(const SceneField& scene, SgMixture environment, InsertOptions options,
+                   std::vector<double> environment_distance_m)
     : scene_(scene),
       environment_(std::move(environment)),
+      environment_distance_m_(std::move(environment_distance_m)),
       options_(std::move(options)),
       drag_(std::make_unique<DragHold>()) {
   Problems problems("insert options");
@@ -179,7 +181,10 @@ std::vector<LightParallax> Inserter::UpdateLights(const std::vector<InsertObject
         parallax[i].distance = lights_[i].DistancesFor(scene_, used_lights_[i], at, options_.light, &volume);
       continue;
     }
-    const IncidentLight::Update u = lights_[i].Refresh(scene_, environment_, at, options_.light, &volume);
+    std::vector<double> environment_distance;
+    const SgMixture environment = EnvironmentSeenFrom(environment_, environment_distance_m_, at, &environment_distance);
+    const IncidentLight::Update u =
+        lights_[i].Refresh(scene_, environment, at, options_.light, &volume, &environment_distance);
     times.light_ms += u.sample_ms;
     times.fit_ms += u.fit_ms;
     times.lights_recomputed += u.recomputed ? 1 : 0;

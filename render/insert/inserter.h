@@ -151,9 +151,12 @@ void ReceiversFromDepth(const ImageF& depth_z, const CameraIntrinsics& camera, c
 
 class Inserter {
  public:
-  // `environment` may be empty (no distant light). The scene is a loan that
-  // must outlive the Inserter.
-  Inserter(const SceneField& scene, SgMixture environment, InsertOptions options);
+  // `environment` may be empty (no distant light). `environment_distance_m`
+  // (EnvLight::distance_m: one per lobe, or empty): lobes whose light stands
+  // at a distance, each object seeing them from its centre
+  // (EnvironmentSeenFrom). The scene is a loan that must outlive the Inserter.
+  Inserter(const SceneField& scene, SgMixture environment, InsertOptions options,
+           std::vector<double> environment_distance_m = {});
 
   // Composites the objects into `frame` (linear RGB, camera size: the camera
   // frame, or a NeRF rendering from RenderBackground). Never throws on scene
@@ -170,6 +173,7 @@ class Inserter {
   const IncidentLight& LightCache(size_t object) const { return lights_.at(object); }
   const InsertOptions& options() const { return options_; }
   const SgMixture& environment() const { return environment_; }
+  const std::vector<double>& environment_distance_m() const { return environment_distance_m_; }
   // A plane the scene is known to hold (the tag board's), onto which shadow
   // receivers that end on it are taken (ReceiversOnPlane); nullopt: none.
   void set_support_plane(const std::optional<SupportPlane>& plane) { support_ = plane; }
@@ -190,6 +194,7 @@ class Inserter {
 
   const SceneField& scene_;
   SgMixture environment_;
+  std::vector<double> environment_distance_m_;
   InsertOptions options_;
   std::optional<SupportPlane> support_;
   std::vector<IncidentLight> lights_;

@@ -41,10 +41,12 @@ EnvLight EstimateEnvironment(const NerfField& field, const EnvEstimateOptions& o
   const EnvShadowRays shadow =
       options.ignore_near_field ? nullptr : NerfShadowRays(field, options.shadow_render, samples.fog_density);
   env.lobes = FitEnvironment(samples, field.aabb, options, &local.fit, progress, shadow);
+  if (std::any_of(local.fit.lobe_distance_m.begin(), local.fit.lobe_distance_m.end(), [](double d) { return d > 0; }))
+    env.distance_m = local.fit.lobe_distance_m;
   local.seconds_fit = elapsed() - t0;
 
   const std::vector<Vec3> e_env =
-      EnvironmentIrradiance(samples, env.lobes, shadow, options.source_bundle_rays, options.seed);
+      EnvironmentIrradiance(samples, env.lobes, shadow, options.source_bundle_rays, options.seed, env.distance_m);
   double sum_env = 0, sum_nerf = 0;
   for (size_t i = 0; i < samples.size(); ++i) {
     sum_env += Y(e_env[i]);

@@ -247,8 +247,8 @@ SgMixture FitEnvironment(const EnvSurfaceSamples& samples, const Aabb& aabb, con
     if (!(mu.x > 0 || mu.y > 0 || mu.z > 0)) continue;
     result.push_back({st.lobes.axes[k], st.lobes.sharpness[k], mu});
     const bool near = st.lobes.distance[k] > 0;
+    local.lobe_distance_m.push_back(st.lobes.distance[k]);
     parameters += kSgLobeParameters + (st.lobes.coloured[k] ? kChromaParameters : 0) + (near ? 1 : 0);
-    if (st.lobes.source[k]) local.placed.push_back({st.lobes.axes[k], st.lobes.sharpness[k], st.lobes.distance[k]});
   }
   const Eigen::MatrixXd S = Shading(st);
   local.final_loss = Loss(st, S, false, nullptr);

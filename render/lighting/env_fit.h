@@ -27,14 +27,10 @@ struct EnvFitReport {
   int dictionary_size = 0;
   int active_lobes = 0;  // lobes with non-zero amplitude at the end
   int sources = 0;       // sharp sources found and kept (among the active lobes)
-  // Where the kept sources are: axis and sharpness as in the lobes, and the
-  // distance from the origin along the axis in metres (0: distant). The
-  // lobes hold each as seen from the origin.
-  struct PlacedSource {
-    Vec3 axis;
-    double sharpness = 0, distance_m = 0;
-  };
-  std::vector<PlacedSource> placed;
+  // Per returned lobe, the distance of its light from the origin along its
+  // axis in metres (0: distant, as every lobe but a source placed at a
+  // distance); the lobe holds that light as seen from the origin.
+  std::vector<double> lobe_distance_m;
   int coloured_lobes = 0;      // active lobes whose chroma the data supports (the others are grey)
   double mean_albedo = 0;      // luminance of the fitted albedo, mean over samples
   double relative_rms = 0;     // RMS of (model − L_o)/L_o over samples (luminance)
@@ -76,8 +72,11 @@ std::vector<double> NormalBalanceWeights(const std::vector<Vec3f>& normals, doub
 
 // Irradiance E_env(x) = ∫ (1 − Ô) L_env max(n·d, 0) dd of each sample as the
 // fit models it: from its cache, and for lobes sharper than the cache resolves
-// through `bundle` shadow rays each (when `shadow` is given).
+// through `bundle` shadow rays each (when `shadow` is given). `distance`
+// (one per lobe, or empty: all distant): a lobe's light stands at that
+// distance from the origin along its axis (EnvFitReport::lobe_distance_m).
 std::vector<Vec3> EnvironmentIrradiance(const EnvSurfaceSamples& samples, const SgMixture& light,
-                                        const EnvShadowRays& shadow = nullptr, int bundle = 1, uint64_t seed = 0);
+                                        const EnvShadowRays& shadow = nullptr, int bundle = 1, uint64_t seed = 0,
+                                        const std::vector<double>& distance = {});
 
 }  // namespace nerfar

@@ -1,5 +1,6 @@
 #include "render/lighting/env_light.h"
 
+#include <algorithm>
 #include <cmath>
 #include <nlohmann/json.hpp>
 
@@ -15,6 +16,7 @@ namespace {
 constexpr double kMinSharpness = 1e-4, kMaxSharpness = 1e4;  // DESIGN.md range
 constexpr double kMaxAmplitude = 1e7;                        // a sun is 1e6; more is a broken file
 constexpr double kAxisTolerance = 1e-3;                      // |p| − 1 accepted (printed with 6+ digits)
+constexpr double kMaxDistance = 1e6;                         // metres; farther is distant in any scene
 
 Json ToJson(const Vec3& v) { return Json::array({v.x, v.y, v.z}); }
 
@@ -40,6 +42,13 @@ void Check(const EnvLight& env, Problems& problems) {
     problems.Add("/lobes", "has " + std::to_string(env.lobes.size()) + " lobes (expected at most " +
                                std::to_string(kMaxSgLobes) + ")");
   for (size_t k = 0; k < env.lobes.size(); ++k) CheckLobe(env.lobes[k], "/lobes/" + std::to_string(k), problems);
+  if (!env.distance_m.empty() && env.distance_m.size() != env.lobes.size())
+    problems.Add("/lobes", "has " + std::to_string(env.distance_m.size()) + " distances for " +
+                               std::to_string(env.lobes.size()) + " lobes (expected one per lobe, or none)");
+  for (size_t k = 0; k < env.distance_m.size(); ++k)
+    if (!(env.distance_m[k] >= 0 && env.distance_m[k] <= kMaxDistance))
+      problems.Add("/lobes/" + std::to_string(k) + "/distance_m",
+                   "is " + std::to_string(env.distance_m[k]) + " (expected 0 to 1e6)");
   CheckRatio(env.env_to_near_surface, "env_to_near_surface", problems);
   CheckRatio(env.env_to_near_center, "env_to_near_center", problems);
   if (!std::isfinite(env.evidence))
@@ -101,11 +110,13 @@ std::string SerializeEnvLight(const EnvLight& env) {
   doc["format"] = "nerfar-env";
   doc["version"] = kEnvFileVersion;
   Json lobes = Json::array();
-  for (const Sg& lobe : env.lobes) {
+  for (size_t k = 0; k < env.lobes.size(); ++k) {
+    const Sg& lobe = env.lobes[k];
     Json item = Json::object();
     item["axis"] = ToJson(Normalized(lobe.axis));
     item["sharpness"] = lobe.sharpness;
     item["amplitude"] = ToJson(lobe.amplitude);
+    if (k < env.distance_m.size() && env.distance_m[k] > 0) item["distance_m"] = env.distance_m[k];
     lobes.push_back(item);
   }
   doc["lobes"] = lobes;
@@ -146,12 +157,15 @@ EnvLight ParseEnvLight(const std::string& text, const std::string& source) {
           lobe.axis = {axis[0], axis[1], axis[2]};
           lobe.sharpness = item.Number("sharpness");
           lobe.amplitude = {amplitude[0], amplitude[1], amplitude[2]};
+          env.distance_m.push_back(item.OptionalNumber("distance_m", 0, kMaxDistance).value_or(0));
           item.Finish();
           CheckLobe(lobe, "/lobes/" + std::to_string(k), problems);
           lobe.axis = Normalized(lobe.axis);
           env.lobes.push_back(lobe);
         }
     }
+    if (std::all_of(env.distance_m.begin(), env.distance_m.end(), [](double d) { return d == 0; }))
+      env.distance_m.clear();
     env.negligible = root.Bool("negligible");
     if (const Json* energy = root.Object("energy")) {
       JsonObjectReader e(*energy, "/energy", problems);
@@ -180,6 +194,13 @@ EnvLight ParseEnvLight(const std::string& text, const std::string& source) {
 void WriteEnvLight(const std::string& path, const EnvLight& env) { WriteFileAtomic(path, SerializeEnvLight(env)); }
 
 EnvLight ReadEnvLight(const std::string& path) { return ParseEnvLight(ReadFileBytes(path, kMaxJsonBytes), path); }
+
+bool DropIfNegligible(EnvLight& env) {
+  if (!env.negligible) return false;
+  env.lobes.clear();
+  env.distance_m.clear();
+  return true;
+}
 
 void WriteEnvPreview(const std::string& path, const EnvLight& env, int width, int height) {
   WriteExrRgb(path, RenderEquirect(env.lobes, width, height), ExrPixelType::kFloat);

@@ -7,7 +7,8 @@
 //
 // env.json (strict: unknown keys are errors):
 //   { "format": "nerfar-env", "version": 1,
-//     "lobes": [ {"axis": [x, y, z], "sharpness": λ, "amplitude": [r, g, b]}, ... ],
+//     "lobes": [ {"axis": [x, y, z], "sharpness": λ, "amplitude": [r, g, b],
+//                 "distance_m": d}, ... ],      (distance_m optional: absent for distant light)
 //     "negligible": false,
 //     "energy": { "env_to_near_surface": r1, "env_to_near_center": r2, "threshold": t,
 //                 "evidence": e, "evidence_needed": b },   (the last two optional, default 0)
@@ -37,7 +38,13 @@ struct EnvFitResidual {
 };
 
 struct EnvLight {
-  SgMixture lobes;          // L_env(d) = Σ_k G(d; p_k, λ_k, μ_k); at most kMaxSgLobes
+  SgMixture lobes;  // L_env(d) = Σ_k G(d; p_k, λ_k, μ_k); at most kMaxSgLobes
+  // Per lobe (or empty: all distant): how far from the origin along its axis
+  // the lobe's light stands, in metres, where `nerfar env` placed a source at
+  // a distance (a ceiling light); 0: distant. The lobe is that light as seen
+  // from the origin; seen from elsewhere it turns and falls off
+  // (EnvironmentSeenFrom, render/lighting/incident_light.h).
+  std::vector<double> distance_m;
   bool negligible = false;  // true: insertion drops the environment term
   // Luminance of the environment's irradiance over that of the NeRF near
   // field, summed over the surface samples the estimate used (E_env with NeRF
@@ -67,6 +74,9 @@ EnvLight ParseEnvLight(const std::string& text, const std::string& source);
 
 void WriteEnvLight(const std::string& path, const EnvLight& env);  // atomic
 EnvLight ReadEnvLight(const std::string& path);
+// What insertion does with an estimate marked negligible: its lobes and
+// their distances are dropped. Returns whether they were.
+bool DropIfNegligible(EnvLight& env);
 
 // The lobes as a 3-channel float panorama (scenes/README.md equirect
 // convention), e.g. 256 x 128 for the preview EXR.

@@ -104,14 +104,15 @@ Eigen::MatrixXd LobeIrradianceMatrix(const EnvSurfaceSamples& s, const std::vect
 using env_internal::LobeIrradianceMatrix;
 
 std::vector<Vec3> EnvironmentIrradiance(const EnvSurfaceSamples& samples, const SgMixture& light,
-                                        const EnvShadowRays& shadow, int bundle, uint64_t seed) {
+                                        const EnvShadowRays& shadow, int bundle, uint64_t seed,
+                                        const std::vector<double>& distance) {
   std::vector<Vec3> axes;
   std::vector<double> sharpness;
   for (const Sg& g : light) {
     axes.push_back(g.axis);
     sharpness.push_back(g.sharpness);
   }
-  const Eigen::MatrixXd A = LobeIrradianceMatrix(samples, axes, sharpness, shadow, bundle, seed);
+  const Eigen::MatrixXd A = LobeIrradianceMatrix(samples, axes, sharpness, shadow, bundle, seed, distance);
   std::vector<Vec3> e(samples.size());
   for (size_t i = 0; i < samples.size(); ++i)
     for (size_t k = 0; k < light.size(); ++k) e[i] += light[k].amplitude * A(i, k);

@@ -198,9 +198,10 @@ RadianceSamples SampleIncidentLight(const SceneField& scene, const SgMixture& en
 }
 
 void SplitCompactLobes(const SgMixture& environment, int directions, int max_compact, SgMixture* broad,
-                       SgMixture* compact) {
+                       SgMixture* compact, std::vector<size_t>* compact_index) {
   broad->clear();
   compact->clear();
+  if (compact_index) compact_index->clear();
   const double sharp = CompactSharpness(directions);
   // The compact candidates by energy, most first (ties: original order).
   std::vector<size_t> candidates;
@@ -211,7 +212,10 @@ void SplitCompactLobes(const SgMixture& environment, int directions, int max_com
   std::vector<char> is_compact(environment.size(), 0);
   for (size_t i = 0; i < candidates.size() && i < static_cast<size_t>(std::max(max_compact, 0)); ++i)
     is_compact[candidates[i]] = 1;
-  for (size_t k = 0; k < environment.size(); ++k) (is_compact[k] ? compact : broad)->push_back(environment[k]);
+  for (size_t k = 0; k < environment.size(); ++k) {
+    (is_compact[k] ? compact : broad)->push_back(environment[k]);
+    if (is_compact[k] && compact_index) compact_index->push_back(k);
+  }
 }
 
 std::vector<double> LobeTransmittance(const SceneField& scene, const Vec3& center, const SgMixture& lobes, int rays,
@@ -336,6 +340,23 @@ constexpr float kSurfaceOpacity = 0.5f;
 double ParallaxWeight(double sharpness, double min_sharpness) {
   return std::clamp((sharpness - min_sharpness) / min_sharpness, 0.0, 1.0);
 }
+// `lobe` taken at `from` with its source `distance` away along its axis, as
+// seen from p, re-aimed by `weight` in [0, 1] (ReaimLight). The ratio of new
+// to old distance is clamped to [1/4, 4]; a lobe without a finite positive
+// distance, or of weight 0, is returned unchanged.
+Sg ReaimLobe(const Sg& lobe, const Vec3& from, double distance, double weight, const Vec3& p) {
+  if (!std::isfinite(distance) || !(distance > 0.0) || !(weight > 0.0)) return lobe;
+  const Vec3 to_source = from + lobe.axis * distance - p;
+  const double d_new = Length(to_source);
+  if (!(d_new > 0.0) || !std::isfinite(d_new)) return lobe;
+  const double ratio = std::clamp(d_new / distance, 0.25, 4.0);
+  const Vec3 axis = Normalized(lobe.axis * (1.0 - weight) + (to_source / d_new) * weight);
+  if (!(Length(axis) > 0.5)) return lobe;  // opposite directions blended to nothing: keep the lobe
+  Sg out = lobe;
+  out.axis = axis;
+  out.sharpness = lobe.sharpness * (1.0 + weight * (ratio * ratio - 1.0));
+  return out;
+}
 // Whether rays starting at `starts` (null: at the centre) sample the scene as
 // the ones starting at `fitted` (empty: at the centre) did, to `tolerance`.
 bool SameStarts(const std::vector<float>* starts, const std::vector<float>& fitted, double tolerance) {
@@ -399,18 +420,20 @@ std::vector<double> LobeDistances(const SgMixture& light, const std::vector<Vec3
 SgMixture ReaimLight(const SgMixture& light, const LightParallax& parallax, const Vec3& p) {
   SgMixture out = light;
   if (parallax.distance.size() != light.size()) return out;
-  for (size_t k = 0; k < light.size(); ++k) {
-    const double d = parallax.distance[k];
-    const double w = ParallaxWeight(light[k].sharpness, parallax.min_sharpness);
-    if (!std::isfinite(d) || !(d > 0.0) || !(w > 0.0)) continue;
-    const Vec3 to_source = parallax.center + light[k].axis * d - p;
-    const double d_new = Length(to_source);
-    if (!(d_new > 0.0) || !std::isfinite(d_new)) continue;
-    const double ratio = std::clamp(d_new / d, 0.25, 4.0);
-    const Vec3 axis = Normalized(light[k].axis * (1.0 - w) + (to_source / d_new) * w);
-    if (!(Length(axis) > 0.5)) continue;  // opposite directions blended to nothing: keep the lobe
-    out[k].axis = axis;
-    out[k].sharpness = light[k].sharpness * (1.0 + w * (ratio * ratio - 1.0));
+  for (size_t k = 0; k < light.size(); ++k)
+    out[k] = ReaimLobe(light[k], parallax.center, parallax.distance[k],
+                       ParallaxWeight(light[k].sharpness, parallax.min_sharpness), p);
+  return out;
+}
+
+SgMixture EnvironmentSeenFrom(const SgMixture& environment, const std::vector<double>& distance_m, const Vec3& p,
+                              std::vector<double>* distance_from_p) {
+  SgMixture out = environment;
+  const bool placed = distance_m.size() == environment.size();
+  if (distance_from_p) distance_from_p->assign(environment.size(), std::numeric_limits<double>::infinity());
+  for (size_t k = 0; placed && k < environment.size(); ++k) {
+    out[k] = ReaimLobe(environment[k], Vec3{}, distance_m[k], 1.0, p);
+    if (distance_from_p && distance_m[k] > 0) (*distance_from_p)[k] = Length(environment[k].axis * distance_m[k] - p);
   }
   return out;
 }
@@ -446,7 +469,8 @@ const std::vector<float>* IncidentLight::Starts(const Vec3& center, const Incide
 }
 
 IncidentLight::Update IncidentLight::Refresh(const SceneField& scene, const SgMixture& environment, const Vec3& center,
-                                             const IncidentLightOptions& options, const LightObjectVolume* volume) {
+                                             const IncidentLightOptions& options, const LightObjectVolume* volume,
+                                             const std::vector<double>* environment_distance) {
   Update update;
   // Whether the rays would start elsewhere than last time (the object turned
   // into a different shape along some ray).
@@ -465,7 +489,9 @@ IncidentLight::Update IncidentLight::Refresh(const SceneField& scene, const SgMi
   // the fit gets the lobes they leave of the budget (at least half of it).
   SgMixture broad = environment;
   compact_.clear();
-  if (analytic) SplitCompactLobes(environment, options.directions, options.fit.lobes / 2, &broad, &compact_);
+  std::vector<size_t> compact_index;
+  if (analytic)
+    SplitCompactLobes(environment, options.directions, options.fit.lobes / 2, &broad, &compact_, &compact_index);
   auto t0 = std::chrono::steady_clock::now();
   if (!compact_.empty() && options.source == LightSource::kFull) {
     const std::vector<double> seen =
@@ -504,10 +530,16 @@ IncidentLight::Update IncidentLight::Refresh(const SceneField& scene, const SgMi
                                               ? Vec3{}
                                               : Evaluate(broad, dirs_[i]) * (1.0 - opacity_[i]));
     // The fitted lobes' distances from the scene; the environment's own
-    // lobes (the environment-only light, the compact ones) stay distant.
+    // lobes (the environment-only light, the compact ones) stay distant
+    // unless their light stands at a distance (`environment_distance`).
     const SgMixture& fitted = options.source == LightSource::kEnvironmentOnly ? light_ : fitted_;
     distances_ = LobeDistances(fitted, dirs_, opacity_, depth_, near);
     distances_.resize(light_.size(), std::numeric_limits<double>::infinity());
+    if (environment_distance != nullptr && environment_distance->size() == environment.size()) {
+      const bool whole = options.source == LightSource::kEnvironmentOnly;
+      for (size_t j = 0; j < (whole ? environment.size() : compact_index.size()); ++j)
+        distances_[whole ? j : fitted_.size() + j] = (*environment_distance)[whole ? j : compact_index[j]];
+    }
   }
   valid_ = true;
   fitted_starts_ = starts != nullptr ? *starts : std::vector<float>{};

@@ -116,8 +116,9 @@ struct LightObjectVolume {
 // the compact ones (sharper than CompactSharpness(directions)) passed on
 // analytically; at most `max_compact` of those, the most energetic (by
 // luminance integral): the rest stay broad. Order kept within each part.
+// `compact_index` (optional) receives each compact lobe's index in `environment`.
 void SplitCompactLobes(const SgMixture& environment, int directions, int max_compact, SgMixture* broad,
-                       SgMixture* compact);
+                       SgMixture* compact, std::vector<size_t>* compact_index = nullptr);
 
 // The scene's transmittance (1 − Ô, mean over `rays` directions spread as
 // the lobe, SgQuadrature) from
@@ -175,6 +176,18 @@ std::vector<double> NearInverseDistances(const SgMixture& light, const std::vect
 // or broader than the minimum sharpness, are returned unchanged.
 SgMixture ReaimLight(const SgMixture& light, const LightParallax& parallax, const Vec3& p);
 
+// The environment as seen from p: a lobe whose light `nerfar env` placed
+// `distance_m[k]` > 0 metres from the origin along its axis (EnvLight's
+// distance_m) turns towards that point and sharpens or widens with the
+// distance as ReaimLight re-aims a near lobe (at any sharpness: the fit
+// placed it as a source); distant lobes, or all with `distance_m` not one
+// per lobe, are returned unchanged.
+// `distance_from_p` (optional) receives, per lobe, how far its light is
+// from p (+infinity for distant light): the distances IncidentLight::Refresh
+// takes for the environment's lobes.
+SgMixture EnvironmentSeenFrom(const SgMixture& environment, const std::vector<double>& distance_m, const Vec3& p,
+                              std::vector<double>* distance_from_p = nullptr);
+
 // One object's incident light, refreshed per frame.
 class IncidentLight {
  public:
@@ -191,8 +204,13 @@ class IncidentLight {
   // `volume` (optional): the object itself, whose inside the rays skip
   // (IncidentLightOptions::start_outside_object); a new pose refits when it
   // moves a ray's start by more than start_tolerance_m.
+  // `environment_distance` (optional, one per environment lobe): how far
+  // from `center` each lobe's light stands (EnvironmentSeenFrom; +infinity:
+  // distant); the environment's lobes that reach the light as they are (the
+  // compact ones, the environment-only light) take it as their distance.
   Update Refresh(const SceneField& scene, const SgMixture& environment, const Vec3& center,
-                 const IncidentLightOptions& options, const LightObjectVolume* volume = nullptr);
+                 const IncidentLightOptions& options, const LightObjectVolume* volume = nullptr,
+                 const std::vector<double>* environment_distance = nullptr);
   // Forget the cache (the next Refresh fits from scratch).
   void Reset();
 

@@ -209,6 +209,42 @@ TEST(CompactLobes, TransmittanceOfAHalfHiddenSun) {
   }
 }
 
+// A compact light `nerfar env` placed at a distance (a lamp 1.2 m from the
+// origin) reaches the object's light as seen from its centre, and shadows
+// re-aim it from each receiver with its distance from there; the broad
+// lobe stays distant. Both for ours and for the environment-only light.
+TEST(CompactLobes, ALampAtADistanceKeepsItForTheShadows) {
+  const SunnyTable table(3000);
+  const std::vector<double> placed = {1.2, 0.0};
+  std::vector<double> from_center;
+  const SgMixture seen = EnvironmentSeenFrom(table.environment, placed, table.center, &from_center);
+  const double lamp_distance = Length(table.sun().axis * 1.2 - table.center);  // by hand
+  ASSERT_EQ(from_center.size(), 2u);
+  EXPECT_NEAR(from_center[0], lamp_distance, 1e-12);
+  EXPECT_TRUE(std::isinf(from_center[1]));
+  for (const LightSource source : {LightSource::kFull, LightSource::kEnvironmentOnly}) {
+    IncidentLightOptions options;
+    options.source = source;
+    IncidentLight light;
+    light.Refresh(table.scene, seen, table.center, options, nullptr, &from_center);
+    const SgMixture& lobes = light.light();
+    ASSERT_EQ(light.lobe_distances().size(), lobes.size());
+    int lamps = 0;
+    for (size_t k = 0; k < lobes.size(); ++k) {
+      if (lobes[k].sharpness != seen[0].sharpness || lobes[k].axis != seen[0].axis) continue;
+      ++lamps;
+      EXPECT_NEAR(light.lobe_distances()[k], lamp_distance, 1e-12) << LightSourceName(source);
+    }
+    EXPECT_EQ(lamps, 1) << LightSourceName(source);
+    // Without the distances the same light keeps the lamp distant (as before).
+    IncidentLight distant;
+    distant.Refresh(table.scene, seen, table.center, options);
+    for (size_t k = 0; k < distant.light().size(); ++k)
+      if (distant.light()[k].sharpness == seen[0].sharpness)
+        EXPECT_TRUE(std::isinf(distant.lobe_distances()[k])) << LightSourceName(source);
+  }
+}
+
 // DESIGN.md's extremes through the analytic path: a λ = 1e4 sun of μ = 1e6
 // (integral 628), a second one below the table (hidden: transmittance 0),
 // and a lobe just sharper than the threshold; the light, its prefiltered

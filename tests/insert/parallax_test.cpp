@@ -1,5 +1,5 @@
 // render/insert/incident_light: parallax of near light (LightParallax,
-// LobeDistances, ReaimLight) against closed forms and brute-force integrals
+// LobeDistances, ReaimLight, EnvironmentSeenFrom) against closed forms and brute-force integrals
 // that do not use the code under test: a small spherical lamp represented at
 // a centre by one SG, re-aimed from another point, must point at the lamp and
 // deliver the irradiance of the lamp seen from there (π L sin²θ for a uniform
@@ -84,6 +84,40 @@ TEST(Parallax, ReaimedLampPointsAtItAndKeepsItsIrradiance) {
     EXPECT_LT(Dot(light[0].axis, truth_axis), std::cos(10.0 * kPi / 180.0));
     EXPECT_GT(std::abs(IrradianceAlongAxis(light[0]) / truth - 1.0), 0.05);
   }
+}
+
+// An environment light `nerfar env` placed at a distance (a ceiling lamp
+// outside the volume) is stored as seen from the origin; an object elsewhere
+// must see it towards the lamp and at the lamp's irradiance from there.
+TEST(Parallax, EnvironmentSourceAtADistanceIsSeenFromTheObject) {
+  Lamp lamp;
+  lamp.position = {-0.27, -0.13, 1.7};
+  lamp.radius = 0.05;
+  const Vec3 origin{0, 0, 0};
+  Sg sky;  // a distant lobe beside it: stays as it is
+  sky.axis = Normalized(Vec3{1, 0, 1});
+  sky.sharpness = 3.0;
+  sky.amplitude = {0.1, 0.1, 0.1};
+  const SgMixture environment = {LampLobe(lamp, origin), sky};
+  const std::vector<double> distance = {Length(lamp.position), 0.0};
+  for (const Vec3& p : {Vec3{0.38, -0.225, 0.05}, Vec3{0.215, 0.105, 0.036}, Vec3{-0.5, 0.3, 0.2}}) {
+    const SgMixture seen = EnvironmentSeenFrom(environment, distance, p);
+    ASSERT_EQ(seen.size(), 2u);
+    EXPECT_NEAR(Dot(seen[0].axis, Normalized(lamp.position - p)), 1.0, 1e-12);
+    // Within 0.3 %, as for a near lamp (the SG model of the disc).
+    EXPECT_NEAR(IrradianceAlongAxis(seen[0]) / lamp.IrradianceFrom(p), 1.0, 3e-3);
+    EXPECT_EQ(seen[1].axis, sky.axis);
+    EXPECT_EQ(seen[1].sharpness, sky.sharpness);
+    // The lobe as stored is > 5° off from there (the test can fail).
+    EXPECT_LT(Dot(environment[0].axis, Normalized(lamp.position - p)), std::cos(5.0 * kPi / 180.0));
+  }
+  // A broad lobe placed at a distance moves too (the fit placed it as a
+  // source); without one distance per lobe nothing moves.
+  Sg broad = environment[0];
+  broad.sharpness = 5.0;
+  const Vec3 p{0.5, 0.0, 0.0};
+  EXPECT_NEAR(Dot(EnvironmentSeenFrom({broad}, {1.0}, p)[0].axis, Normalized(broad.axis - p)), 1.0, 1e-12);
+  EXPECT_EQ(EnvironmentSeenFrom(environment, {1.0}, p)[0].axis, environment[0].axis);
 }
 
 TEST(Parallax, BroadAndDistantLobesStay) {

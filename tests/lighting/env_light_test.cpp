@@ -13,6 +13,10 @@
 namespace nerfar {
 namespace {
 
+const char* kGood =
+    R"({"format":"nerfar-env","version":1,"lobes":[{"axis":[0,0,1],"sharpness":2,"amplitude":[1,1,1]}],)"
+    R"("negligible":false,"energy":{"env_to_near_surface":0.5,"env_to_near_center":0.4,"threshold":0.05}})";
+
 EnvLight SampleLight() {
   EnvLight env;
   for (int k = 0; k < 32; ++k) {
@@ -62,6 +66,40 @@ TEST(EnvLightFile, RoundTripIsExact) {
   EXPECT_EQ(back.fit.near_only_loss, env.fit.near_only_loss);
 }
 
+// A source placed at a distance keeps it through the file; distant lobes
+// write no distance, and a file whose lobes all lack one reads as all
+// distant (an empty list, as before the format had them).
+TEST(EnvLightFile, DistancesRoundTripAndAreOptional) {
+  EnvLight env = SampleLight();
+  env.distance_m.assign(env.lobes.size(), 0.0);
+  env.distance_m[3] = 1.72;
+  env.distance_m[31] = 0.535;
+  const std::string text = SerializeEnvLight(env);
+  size_t count = 0;
+  for (size_t at = text.find("distance_m"); at != std::string::npos; at = text.find("distance_m", at + 1)) ++count;
+  EXPECT_EQ(count, 2u) << text;
+  const EnvLight back = ParseEnvLight(text, "mem");
+  EXPECT_EQ(back.distance_m, env.distance_m);
+  env.distance_m.assign(env.lobes.size(), 0.0);
+  EXPECT_TRUE(ParseEnvLight(SerializeEnvLight(env), "mem").distance_m.empty());
+  EXPECT_TRUE(ParseEnvLight(kGood, "old.json").distance_m.empty());
+  env.distance_m = {1.0};  // not one per lobe
+  EXPECT_FALSE(ValidateEnvLight(env).empty());
+}
+
+// Insertion drops a negligible estimate's lobes and their distances alike.
+TEST(EnvLightFile, NegligibleDropsLobesAndDistances) {
+  EnvLight env = SampleLight();
+  env.distance_m.assign(env.lobes.size(), 2.0);
+  env.negligible = false;
+  EXPECT_FALSE(DropIfNegligible(env));
+  EXPECT_EQ(env.lobes.size(), 32u);
+  env.negligible = true;
+  EXPECT_TRUE(DropIfNegligible(env));
+  EXPECT_TRUE(env.lobes.empty());
+  EXPECT_TRUE(env.distance_m.empty());
+}
+
 // The fit's residual is documentation added to the format later: files
 // without it (or without its near-field-only part) still read.
 TEST(EnvLightFile, FitResidualIsOptional) {
@@ -96,10 +134,6 @@ void ExpectError(const std::string& text, const std::string& needle) {
   }
 }
 
-const char* kGood =
-    R"({"format":"nerfar-env","version":1,"lobes":[{"axis":[0,0,1],"sharpness":2,"amplitude":[1,1,1]}],)"
-    R"("negligible":false,"energy":{"env_to_near_surface":0.5,"env_to_near_center":0.4,"threshold":0.05}})";
-
 std::string Replace(std::string text, const std::string& from, const std::string& to) {
   const size_t at = text.find(from);
   EXPECT_NE(at, std::string::npos) << from;
@@ -118,6 +152,7 @@ TEST(EnvLightFile, BadFilesNameEveryProblem) {
   ExpectError(Replace(kGood, "[1,1,1]", "[1,-1,1]"), "/lobes/0/amplitude/1");
   ExpectError(Replace(kGood, "[1,1,1]", "[1,\"x\",1]"), "/lobes/0/amplitude/1");
   ExpectError(Replace(kGood, "\"sharpness\":2", "\"sharpness\":2,\"sharpnes\":3"), "sharpnes");
+  ExpectError(Replace(kGood, "\"sharpness\":2", "\"sharpness\":2,\"distance_m\":-1"), "/lobes/0/distance_m");
   ExpectError(Replace(kGood, "\"negligible\":false", "\"negligible\":0"), "/negligible");
   ExpectError(Replace(kGood, "\"negligible\":false,", ""), "negligible");
   ExpectError(Replace(kGood, "\"threshold\":0.05", "\"threshold\":2"), "/energy/threshold");
