@@ -252,8 +252,9 @@ std::vector<std::string> FitLines(const EnvLight& env, const EnvEstimateReport& 
   return lines;
 }
 
-// The lobes carrying the most energy, as numbered on the panoramas.
-std::vector<std::string> LobeLines(const SgMixture& lobes) {
+// The lobes carrying the most energy, as numbered on the panoramas, with
+// the distance of a light placed at one (EnvLight::distance_m).
+std::vector<std::string> LobeLines(const SgMixture& lobes, const std::vector<double>& distance_m) {
   double total = 0;
   for (const Sg& g : lobes) total += LobeEnergy(g);
   std::vector<std::string> lines = {std::to_string(lobes.size()) +
@@ -266,7 +267,10 @@ std::vector<std::string> LobeLines(const SgMixture& lobes) {
                            AzimuthDeg(g.axis), ElevationDeg(g.axis), g.sharpness,
                            LobeHalfMaxAngle(g.sharpness) * 180 / kPi) +
                     Format("%.0f %% of the energy; RGB %.3g %.3g %.3g", total > 0 ? 100 * LobeEnergy(g) / total : 0.0,
-                           g.amplitude.x, g.amplitude.y, g.amplitude.z));
+                           g.amplitude.x, g.amplitude.y, g.amplitude.z) +
+                    (order[k] < distance_m.size() && distance_m[order[k]] > 0
+                         ? Format("; %.2f m from the origin", distance_m[order[k]])
+                         : std::string()));
   }
   return lines;
 }
@@ -293,7 +297,7 @@ std::vector<std::string> TruthLines(const EnvReportLayout& layout) {
 std::vector<std::string> ReportLines(const EnvLight& env, const EnvEstimateReport& estimate,
                                      const EnvReportLayout& layout, bool with_truth) {
   std::vector<std::string> lines = FitLines(env, estimate);
-  for (const std::string& line : LobeLines(env.lobes)) lines.push_back(line);
+  for (const std::string& line : LobeLines(env.lobes, env.distance_m)) lines.push_back(line);
   if (with_truth)
     for (const std::string& line : TruthLines(layout)) lines.push_back(line);
   lines.push_back(Format("panoramas: exposure %.4g (1 / the mean luminance over the sphere of the ", layout.exposure) +

@@ -268,6 +268,26 @@ TEST(EnvReport, WithoutTruthTheEstimateStandsAlone) {
   EXPECT_NEAR(layout.exposure, 6.0 / (1.0 - std::exp(-6.0)), 1e-3);
 }
 
+// A light placed at a distance says how far it is; a distant one does not.
+TEST(EnvReport, ALightAtADistanceSaysHowFar) {
+  const NerfField field = Slab();
+  EnvLight env;
+  env.lobes = {Sg{{0, 0, 1}, 30, {9, 9, 9}}, Sg{{1, 0, 0}, 3, {1, 1, 1}}};
+  env.distance_m = {1.72, 0};
+  EnvReportOptions options;
+  options.views = 1;
+  EnvReportLayout layout;
+  RenderEnvReport(field, env, Estimate(), nullptr, options, &layout);
+  int placed = 0, far = 0;
+  for (const std::string& line : layout.lines) {
+    if (line.find("sharpness 30 ") != std::string::npos)
+      placed += line.find("; 1.72 m from the origin") != std::string::npos;
+    if (line.find("sharpness 3 ") != std::string::npos) far += line.find("m from the origin") == std::string::npos;
+  }
+  EXPECT_EQ(placed, 1);
+  EXPECT_EQ(far, 1);
+}
+
 TEST(EnvReport, BadTruthFilesNameTheFileAndTheProblem) {
   testing::TempDir dir;
   const auto expect_error = [](const std::string& path, const std::string& needle) {
