@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -13,6 +14,8 @@
 
 #include "calib/core/exr.h"
 #include "calib/core/json.h"
+#include "render/lighting/env_light.h"
+#include "render/sg/sphere.h"
 #include "tests/support/slab_scene.h"
 #include "tests/support/support.h"
 
@@ -171,6 +174,57 @@ TEST(InsertRun, WritesEveryOutputNamedLikeTheDatasetAndMultipliesTheBackgroundBy
                           " -o " + dir.File("alongside") + " --background nerf --threads 2 --quiet");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_TRUE(fs::is_regular_file(dir.File("alongside") + "/probe.exr"));
+}
+
+// The brightest direction of a probe panorama (luminance per pixel).
+Vec3 BrightestDirection(const ImageF& probe) {
+  int best_x = 0, best_y = 0;
+  float best = -1;
+  for (int y = 0; y < probe.height; ++y)
+    for (int x = 0; x < probe.width; ++x) {
+      const float l = 0.2126f * probe.at(x, y, 0) + 0.7152f * probe.at(x, y, 1) + 0.0722f * probe.at(x, y, 2);
+      if (l > best) best = l, best_x = x, best_y = y;
+    }
+  return EquirectDirection((best_x + 0.5) / probe.width, (best_y + 0.5) / probe.height);
+}
+
+// env.json's distance of a light reaches `nerfar insert`: a lamp 0.5 m
+// straight above the origin lights the object from where the lamp stands,
+// not from the zenith the lobe holds as seen from the origin.
+TEST(InsertRun, AnEnvironmentLightAtADistanceIsSeenFromTheObject) {
+  testing::TempDir dir;
+  const std::string scene = dir.File("scene"), nerfar = std::string(NERFAR_BINARY);
+  Result r = testing::RunCommand(nerfar + " synth --scene lamps -o " + scene +
+                                 " --res 48x36 --views 2 --test-views 1 --spp 1 --insert-spp 1 --probe-spp 1 --quiet");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  r = testing::RunCommand(nerfar + " bake " + scene + "/objects/torus_diffuse.json -o " + dir.File("torus.ssdf") +
+                          " --preset fast --quiet");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  testing::WriteSlabNerf(dir.File("slab.nerf"), Aabb{{-0.6, -0.4, -0.04}, {0.6, 0.4, 0.0}});
+  const Vec3 lamp{0, 0, 0.5};
+  EnvLight env;
+  env.lobes.push_back(Sg{{0, 0, 1}, 400.0, {50.0, 50.0, 50.0}});
+  env.distance_m = {Length(lamp)};
+  WriteEnvLight(dir.File("env.json"), env);
+  const std::string truth = scene + "/insert/torus_diffuse";
+  const Json pose = ReadJsonFile(truth + "/pose.json");
+  const Vec3 center{pose.at("center_world")[0].get<double>(), pose.at("center_world")[1].get<double>(),
+                    pose.at("center_world")[2].get<double>()};
+  r = testing::RunCommand(nerfar + " insert --nerf " + dir.File("slab.nerf") + " --env " + dir.File("env.json") +
+                          " --object " + dir.File("torus.ssdf") + " --pose " + truth + "/pose.json --dataset " + scene +
+                          " -o " + dir.File("out") + " --threads 2 --quiet");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const Vec3 brightest = BrightestDirection(ReadExrRgb(dir.File("out") + "/probe.exr"));
+  const Vec3 to_lamp = Normalized(lamp - center);
+  const double off_lamp = std::acos(std::min(1.0, Dot(brightest, to_lamp))) * 180 / kPi;
+  const double off_zenith = std::acos(std::min(1.0, brightest.z)) * 180 / kPi;
+  std::printf("object centre %.3f %.3f %.3f: brightest %.1f° from the lamp, %.1f° from the zenith\n", center.x,
+              center.y, center.z, off_lamp, off_zenith);
+  // The probe's pixels are 1.4° wide and the light's SG fit moves a peak by
+  // about as much: 4°. The object stands far enough from the lamp's foot that
+  // the zenith is more than twice that from the lamp (the test can fail).
+  ASSERT_GT(std::acos(to_lamp.z) * 180 / kPi, 8.0);
+  EXPECT_LT(off_lamp, 4.0);
 }
 
 }  // namespace
