@@ -181,10 +181,8 @@ std::vector<LightParallax> Inserter::UpdateLights(const std::vector<InsertObject
         parallax[i].distance = lights_[i].DistancesFor(scene_, used_lights_[i], at, options_.light, &volume);
       continue;
     }
-    std::vector<double> environment_distance;
-    const SgMixture environment = EnvironmentSeenFrom(environment_, environment_distance_m_, at, &environment_distance);
     const IncidentLight::Update u =
-        lights_[i].Refresh(scene_, environment, at, options_.light, &volume, &environment_distance);
+        lights_[i].Refresh(scene_, environment_, at, options_.light, &volume, environment_distance_m_);
     times.light_ms += u.sample_ms;
     times.fit_ms += u.fit_ms;
     times.lights_recomputed += u.recomputed ? 1 : 0;

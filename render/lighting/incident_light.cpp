@@ -468,9 +468,10 @@ const std::vector<float>* IncidentLight::Starts(const Vec3& center, const Incide
   return &starts_;
 }
 
-IncidentLight::Update IncidentLight::Refresh(const SceneField& scene, const SgMixture& environment, const Vec3& center,
-                                             const IncidentLightOptions& options, const LightObjectVolume* volume,
-                                             const std::vector<double>* environment_distance) {
+IncidentLight::Update IncidentLight::Refresh(const SceneField& scene, const SgMixture& environment_at_origin,
+                                             const Vec3& center, const IncidentLightOptions& options,
+                                             const LightObjectVolume* volume,
+                                             const std::vector<double>& environment_distance_m) {
   Update update;
   // Whether the rays would start elsewhere than last time (the object turned
   // into a different shape along some ray).
@@ -485,6 +486,11 @@ IncidentLight::Update IncidentLight::Refresh(const SceneField& scene, const SgMi
   if (same_setup && same_parallax && Length(center - center_) <= options.move_threshold_m) return update;
   update.recomputed = true;
   if (static_cast<int>(dirs_.size()) != options.directions) dirs_ = FibonacciSphere(options.directions);
+  // The environment as the centre sees it (its lights at a distance turned
+  // towards where they stand), with each lobe's distance from the centre.
+  std::vector<double> distance_from_center;
+  const SgMixture environment =
+      EnvironmentSeenFrom(environment_at_origin, environment_distance_m, center, &distance_from_center);
   // The compact lobes pass analytically; the directions carry the rest, and
   // the fit gets the lobes they leave of the budget (at least half of it).
   SgMixture broad = environment;
@@ -522,23 +528,21 @@ IncidentLight::Update IncidentLight::Refresh(const SceneField& scene, const SgMi
   }
   distances_.clear();
   if (options.parallax && !light_.empty()) {
-    // The near-field part of each sample: Ĉ (the scene's own radiance).
-    std::vector<Vec3> near(samples_.radiance.size());
-    if (options.source != LightSource::kEnvironmentOnly)
+    if (options.source == LightSource::kEnvironmentOnly) {
+      // The environment's own lobes: distant unless placed at a distance.
+      distances_ = distance_from_center;
+    } else {
+      // The fitted lobes' distances from the scene, with Ĉ (the scene's own
+      // radiance) the near-field part of each sample; then the compact
+      // environment lobes', as the environment's own.
+      std::vector<Vec3> near(samples_.radiance.size());
       for (size_t i = 0; i < near.size(); ++i)
         near[i] = samples_.radiance[i] - (broad.empty() || options.source == LightSource::kNearFieldOnly
                                               ? Vec3{}
                                               : Evaluate(broad, dirs_[i]) * (1.0 - opacity_[i]));
-    // The fitted lobes' distances from the scene; the environment's own
-    // lobes (the environment-only light, the compact ones) stay distant
-    // unless their light stands at a distance (`environment_distance`).
-    const SgMixture& fitted = options.source == LightSource::kEnvironmentOnly ? light_ : fitted_;
-    distances_ = LobeDistances(fitted, dirs_, opacity_, depth_, near);
-    distances_.resize(light_.size(), std::numeric_limits<double>::infinity());
-    if (environment_distance != nullptr && environment_distance->size() == environment.size()) {
-      const bool whole = options.source == LightSource::kEnvironmentOnly;
-      for (size_t j = 0; j < (whole ? environment.size() : compact_index.size()); ++j)
-        distances_[whole ? j : fitted_.size() + j] = (*environment_distance)[whole ? j : compact_index[j]];
+      distances_ = LobeDistances(fitted_, dirs_, opacity_, depth_, near);
+      distances_.resize(fitted_.size(), std::numeric_limits<double>::infinity());
+      for (const size_t k : compact_index) distances_.push_back(distance_from_center[k]);
     }
   }
   valid_ = true;

@@ -183,8 +183,7 @@ SgMixture ReaimLight(const SgMixture& light, const LightParallax& parallax, cons
 // placed it as a source); distant lobes, or all with `distance_m` not one
 // per lobe, are returned unchanged.
 // `distance_from_p` (optional) receives, per lobe, how far its light is
-// from p (+infinity for distant light): the distances IncidentLight::Refresh
-// takes for the environment's lobes.
+// from p (+infinity for distant light).
 SgMixture EnvironmentSeenFrom(const SgMixture& environment, const std::vector<double>& distance_m, const Vec3& p,
                               std::vector<double>* distance_from_p = nullptr);
 
@@ -204,13 +203,15 @@ class IncidentLight {
   // `volume` (optional): the object itself, whose inside the rays skip
   // (IncidentLightOptions::start_outside_object); a new pose refits when it
   // moves a ray's start by more than start_tolerance_m.
-  // `environment_distance` (optional, one per environment lobe): how far
-  // from `center` each lobe's light stands (EnvironmentSeenFrom; +infinity:
-  // distant); the environment's lobes that reach the light as they are (the
-  // compact ones, the environment-only light) take it as their distance.
-  Update Refresh(const SceneField& scene, const SgMixture& environment, const Vec3& center,
+  // `environment_at_origin`: the environment's lobes, with `environment_distance_m`
+  // (EnvLight::distance_m: one per lobe, or empty) for its lights at a
+  // distance: the centre sees them turned and fallen off
+  // (EnvironmentSeenFrom), and the environment's lobes that reach the light
+  // as they are (the compact ones, the environment-only light) keep their
+  // distance from the centre for the shadows' parallax.
+  Update Refresh(const SceneField& scene, const SgMixture& environment_at_origin, const Vec3& center,
                  const IncidentLightOptions& options, const LightObjectVolume* volume = nullptr,
-                 const std::vector<double>* environment_distance = nullptr);
+                 const std::vector<double>& environment_distance_m = {});
   // Forget the cache (the next Refresh fits from scratch).
   void Reset();
 

@@ -210,9 +210,10 @@ TEST(CompactLobes, TransmittanceOfAHalfHiddenSun) {
 }
 
 // A compact light `nerfar env` placed at a distance (a lamp 1.2 m from the
-// origin) reaches the object's light as seen from its centre, and shadows
-// re-aim it from each receiver with its distance from there; the broad
-// lobe stays distant. Both for ours and for the environment-only light.
+// origin) reaches the object's light as seen from its centre (the lobe
+// EnvironmentSeenFrom gives), and shadows re-aim it from each receiver with
+// its distance from there (by hand); the broad lobe stays distant. Both for
+// ours and for the environment-only light.
 TEST(CompactLobes, ALampAtADistanceKeepsItForTheShadows) {
   const SunnyTable table(3000);
   const std::vector<double> placed = {1.2, 0.0};
@@ -226,7 +227,7 @@ TEST(CompactLobes, ALampAtADistanceKeepsItForTheShadows) {
     IncidentLightOptions options;
     options.source = source;
     IncidentLight light;
-    light.Refresh(table.scene, seen, table.center, options, nullptr, &from_center);
+    light.Refresh(table.scene, table.environment, table.center, options, nullptr, placed);
     const SgMixture& lobes = light.light();
     ASSERT_EQ(light.lobe_distances().size(), lobes.size());
     int lamps = 0;
@@ -238,10 +239,11 @@ TEST(CompactLobes, ALampAtADistanceKeepsItForTheShadows) {
     EXPECT_EQ(lamps, 1) << LightSourceName(source);
     // Without the distances the same light keeps the lamp distant (as before).
     IncidentLight distant;
-    distant.Refresh(table.scene, seen, table.center, options);
-    for (size_t k = 0; k < distant.light().size(); ++k)
-      if (distant.light()[k].sharpness == seen[0].sharpness)
-        EXPECT_TRUE(std::isinf(distant.lobe_distances()[k])) << LightSourceName(source);
+    distant.Refresh(table.scene, table.environment, table.center, options);
+    for (size_t k = 0; k < distant.light().size(); ++k) {
+      if (distant.light()[k].sharpness != table.sun().sharpness) continue;
+      EXPECT_TRUE(std::isinf(distant.lobe_distances()[k])) << LightSourceName(source);
+    }
   }
 }
 

@@ -103,25 +103,32 @@ TEST_F(InsertCli, CorruptInputsBesideAValidDatasetExitWithTwoAndNameThePath) {
   EXPECT_NE(r.output.find("garbage.ssdf"), std::string::npos) << r.output;
 }
 
-// A 96 × 72 synthetic lamps scene with its insert/ truth, the torus baked
-// fast, an opaque slab NeRF whose top is the table plane z = 0 and a
-// one-lobe light from above as the environment: a shadow falls on the slab.
-TEST(InsertRun, WritesEveryOutputNamedLikeTheDatasetAndMultipliesTheBackgroundByKappa) {
-  testing::TempDir dir;
-  const std::string scene = dir.File("scene"), out = dir.File("out");
-  const std::string nerfar = std::string(NERFAR_BINARY);
-  Result r = testing::RunCommand(nerfar + " synth --scene lamps -o " + scene +
-                                 " --res 96x72 --views 4 --test-views 2 --spp 2 --insert-spp 2 --probe-spp 2 --quiet");
+// In `dir`: a synthetic lamps scene (`synth_options`: size, views, samples)
+// with its insert/ truth in scene/, the torus baked fast as torus.ssdf and an
+// opaque slab NeRF whose top is the table plane z = 0 as slab.nerf.
+void MakeSlabScene(const testing::TempDir& dir, const std::string& synth_options) {
+  const std::string nerfar = std::string(NERFAR_BINARY), scene = dir.File("scene");
+  Result r = testing::RunCommand(nerfar + " synth --scene lamps -o " + scene + " " + synth_options + " --quiet");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   r = testing::RunCommand(nerfar + " bake " + scene + "/objects/torus_diffuse.json -o " + dir.File("torus.ssdf") +
                           " --preset fast --quiet");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   testing::WriteSlabNerf(dir.File("slab.nerf"), Aabb{{-0.6, -0.4, -0.04}, {0.6, 0.4, 0.0}});
+}
+
+// A 96 × 72 slab scene (MakeSlabScene) and a one-lobe light from above as
+// the environment: a shadow falls on the slab.
+TEST(InsertRun, WritesEveryOutputNamedLikeTheDatasetAndMultipliesTheBackgroundByKappa) {
+  testing::TempDir dir;
+  const std::string scene = dir.File("scene"), out = dir.File("out");
+  const std::string nerfar = std::string(NERFAR_BINARY);
+  ASSERT_NO_FATAL_FAILURE(
+      MakeSlabScene(dir, "--res 96x72 --views 4 --test-views 2 --spp 2 --insert-spp 2 --probe-spp 2"));
   testing::WriteOverheadEnv(dir.File("env.json"));
   const std::string truth = scene + "/insert/torus_diffuse";
-  r = testing::RunCommand(nerfar + " insert --nerf " + dir.File("slab.nerf") + " --env " + dir.File("env.json") +
-                          " --object " + dir.File("torus.ssdf") + " --pose " + truth + "/pose.json --dataset " + scene +
-                          " -o " + out + " --truth " + truth + " --threads 2 --quiet");
+  Result r = testing::RunCommand(nerfar + " insert --nerf " + dir.File("slab.nerf") + " --env " + dir.File("env.json") +
+                                 " --object " + dir.File("torus.ssdf") + " --pose " + truth + "/pose.json --dataset " +
+                                 scene + " -o " + out + " --truth " + truth + " --threads 2 --quiet");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   for (const char* name : {"probe.exr", "timings.json", "options.json", "report.json"})
     EXPECT_TRUE(fs::is_regular_file(out + "/" + name)) << name;
@@ -194,13 +201,8 @@ Vec3 BrightestDirection(const ImageF& probe) {
 TEST(InsertRun, AnEnvironmentLightAtADistanceIsSeenFromTheObject) {
   testing::TempDir dir;
   const std::string scene = dir.File("scene"), nerfar = std::string(NERFAR_BINARY);
-  Result r = testing::RunCommand(nerfar + " synth --scene lamps -o " + scene +
-                                 " --res 48x36 --views 2 --test-views 1 --spp 1 --insert-spp 1 --probe-spp 1 --quiet");
-  ASSERT_EQ(r.exit_code, 0) << r.output;
-  r = testing::RunCommand(nerfar + " bake " + scene + "/objects/torus_diffuse.json -o " + dir.File("torus.ssdf") +
-                          " --preset fast --quiet");
-  ASSERT_EQ(r.exit_code, 0) << r.output;
-  testing::WriteSlabNerf(dir.File("slab.nerf"), Aabb{{-0.6, -0.4, -0.04}, {0.6, 0.4, 0.0}});
+  ASSERT_NO_FATAL_FAILURE(
+      MakeSlabScene(dir, "--res 48x36 --views 2 --test-views 1 --spp 1 --insert-spp 1 --probe-spp 1"));
   const Vec3 lamp{0, 0, 0.5};
   EnvLight env;
   env.lobes.push_back(Sg{{0, 0, 1}, 400.0, {50.0, 50.0, 50.0}});
@@ -210,7 +212,8 @@ TEST(InsertRun, AnEnvironmentLightAtADistanceIsSeenFromTheObject) {
   const Json pose = ReadJsonFile(truth + "/pose.json");
   const Vec3 center{pose.at("center_world")[0].get<double>(), pose.at("center_world")[1].get<double>(),
                     pose.at("center_world")[2].get<double>()};
-  r = testing::RunCommand(nerfar + " insert --nerf " + dir.File("slab.nerf") + " --env " + dir.File("env.json") +
+  const Result r =
+      testing::RunCommand(nerfar + " insert --nerf " + dir.File("slab.nerf") + " --env " + dir.File("env.json") +
                           " --object " + dir.File("torus.ssdf") + " --pose " + truth + "/pose.json --dataset " + scene +
                           " -o " + dir.File("out") + " --threads 2 --quiet");
   ASSERT_EQ(r.exit_code, 0) << r.output;
