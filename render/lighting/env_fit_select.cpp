@@ -117,21 +117,24 @@ int CountSources(const FitState& st) {
 
 // Tries one light of the search as a sharp source (AddSources): appends it,
 // re-solves, and tells whether the data supports it; if so `st` takes it.
-// `rank`: the candidates of this round tried before it.
-bool TrySource(FitState& st, const SourceCandidate& found, size_t rank, const EnvShadowRays& shadow,
-               const EnvEstimateOptions& o) {
+// `without`: st re-solved alike without it (one per round: every candidate
+// is compared with the same); `rank`: the candidates of this round tried before it.
+bool TrySource(FitState& st, const FitState& without, const SourceCandidate& found, size_t rank,
+               const EnvShadowRays& shadow, const EnvEstimateOptions& o) {
   const double one_parameter = BicPenalty(st, o, 1);
   const double penalty = BicPenalty(st, o, kSgLobeParameters) + (found.distance > 0 ? one_parameter : 0) +
                          std::log(static_cast<double>(rank + 1));
-  FitState trial = st, without = st;  // st stays as it is unless the source is kept
+  FitState trial = st;  // st stays as it is unless the source is kept
   AppendLobe(trial, found.axis, found.sharpness, found.distance, true, shadow, o);
-  const double gain = GainAfterSteps(without, trial, o.source_steps);
+  int steps = 0;
+  Iterate(trial, o.source_steps, &steps, 0, nullptr);
+  const double gain = ReflectingGain(without, trial);
   const double broad_sharpness = DictionarySharpnessMax(o);
   double sharpness_gain = 0;
   if (found.sharpness > broad_sharpness) {
     FitState broad = st;
     AppendLobe(broad, found.axis, broad_sharpness, found.distance, false, shadow, o);
-    int steps = 0;
+    steps = 0;
     Iterate(broad, o.source_steps, &steps, 0, nullptr);
     sharpness_gain = ReflectingGain(broad, trial);
   }
@@ -179,12 +182,15 @@ int AddSources(FitState& st, const EnvShadowRays& shadow, const EnvEstimateOptio
     if (progress) progress("sources", static_cast<size_t>(kept), static_cast<size_t>(o.sources_max));
     const std::vector<SourceCandidate> found = FindSources(st, shadow, o);
     if (found.empty()) break;
+    FitState without = st;
+    int steps = 0;
+    Iterate(without, o.source_steps, &steps, 0, nullptr);
     bool added = false;
-    for (size_t rank = 0; rank < found.size() && !added; ++rank) added = TrySource(st, found[rank], rank, shadow, o);
+    for (size_t rank = 0; rank < found.size() && !added; ++rank)
+      added = TrySource(st, without, found[rank], rank, shadow, o);
     if (added) continue;
     // Nothing kept: the fit goes on as the tests' baseline did (source_steps more).
-    int steps = 0;
-    Iterate(st, o.source_steps, &steps, 0, nullptr);
+    st = std::move(without);
     break;
   }
   if (progress) progress("sources", static_cast<size_t>(o.sources_max), static_cast<size_t>(o.sources_max));
