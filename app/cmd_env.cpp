@@ -109,6 +109,7 @@ void LogEstimate(const EnvLight& env, const EnvEstimateReport& report) {
                  ? "below " + std::to_string(env.threshold) + " of the near field"
                  : "the near field alone explains the observations as well, up to the environment's parameters") +
             "): all light is inside the NeRF; env.json says so and insertion drops the environment term");
+  for (const std::string& source : SourceSupportLines(env.lobes, report.fit.lobe_support)) LogInfo("env: " + source);
   LogFitResidual(env);
 }
 

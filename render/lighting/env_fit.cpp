@@ -23,6 +23,7 @@ using env_internal::KeepSupportedSources;
 using env_internal::LobeIrradianceMatrix;
 using env_internal::Loss;
 using env_internal::MakeDictionary;
+using env_internal::ScaledSquaredLogResidual;
 using env_internal::Shading;
 using env_internal::SolveAlbedo;
 using env_internal::SolveGain;
@@ -90,6 +91,21 @@ std::vector<int> AlbedoCells(const EnvSurfaceSamples& s, const Aabb& aabb, doubl
   }
   *count = ids.size();
   return cell;
+}
+
+// SupportOfGains for lobe k of the fit: each reflecting sample's loss
+// without the lobe (S less its column) minus with it.
+SourceSupport SupportOfLobe(const FitState& st, const Eigen::MatrixXd& S, Eigen::Index k) {
+  const Eigen::MatrixXd without = S - st.A.col(k) * st.mu.row(k);
+  std::vector<Vec3f> positions;
+  std::vector<double> gain;
+  for (size_t i = 0; i < st.s->size(); ++i) {
+    if (st.emitter[i]) continue;
+    positions.push_back(st.s->positions[i]);
+    gain.push_back(std::log1p(ScaledSquaredLogResidual(st, without, i)) -
+                   std::log1p(ScaledSquaredLogResidual(st, S, i)));
+  }
+  return SupportOfGains(positions, gain);
 }
 
 // The fit's state before any light: albedo cells at the prior, the data
@@ -203,6 +219,32 @@ void KeepStrongest(FitState& st, int count) {
 
 }  // namespace
 
+SourceSupport SupportOfGains(const std::vector<Vec3f>& positions, const std::vector<double>& gain) {
+  NERFAR_CHECK_EQ(positions.size(), gain.size());
+  std::vector<size_t> order;
+  double positive = 0;
+  for (size_t i = 0; i < gain.size(); ++i)
+    if (gain[i] > 0) {
+      order.push_back(i);
+      positive += gain[i];
+    }
+  SourceSupport support;
+  if (!(positive > 0)) return support;
+  std::sort(order.begin(), order.end(), [&](size_t a, size_t b) { return gain[a] > gain[b]; });
+  double held = 0, weight = 0;
+  size_t count = 0;
+  while (count < order.size() && held < 0.5 * positive) held += gain[order[count++]];
+  for (size_t k = 0; k < count; ++k) {
+    support.centre += ToD(positions[order[k]]) * gain[order[k]];
+    weight += gain[order[k]];
+  }
+  support.centre = support.centre * (1.0 / weight);
+  for (size_t k = 0; k < count; ++k)
+    support.radius_m = std::max(support.radius_m, Length(ToD(positions[order[k]]) - support.centre));
+  support.half_share = static_cast<double>(count) / static_cast<double>(gain.size());
+  return support;
+}
+
 SgMixture FitEnvironment(const EnvSurfaceSamples& samples, const Aabb& aabb, const EnvEstimateOptions& options,
                          EnvFitReport* report, const EnvProgress& progress, const EnvShadowRays& shadow) {
   const std::vector<std::string> problems = options.Validate();
@@ -242,15 +284,16 @@ SgMixture FitEnvironment(const EnvSurfaceSamples& samples, const Aabb& aabb, con
 
   SgMixture result;
   int parameters = 0;
+  const Eigen::MatrixXd S = Shading(st);
   for (Eigen::Index k = 0; k < st.mu.rows(); ++k) {
     const Vec3 mu{st.mu(k, 0), st.mu(k, 1), st.mu(k, 2)};
     if (!(mu.x > 0 || mu.y > 0 || mu.z > 0)) continue;
     result.push_back({st.lobes.axes[k], st.lobes.sharpness[k], mu});
     const bool near = st.lobes.distance[k] > 0;
     local.lobe_distance_m.push_back(st.lobes.distance[k]);
+    local.lobe_support.push_back(st.lobes.source[k] ? SupportOfLobe(st, S, k) : SourceSupport{});
     parameters += kSgLobeParameters + (st.lobes.coloured[k] ? kChromaParameters : 0) + (near ? 1 : 0);
   }
-  const Eigen::MatrixXd S = Shading(st);
   local.final_loss = Loss(st, S, false, nullptr);
   local.active_lobes = static_cast<int>(result.size());
   double albedo_sum = 0;

@@ -22,6 +22,21 @@
 
 namespace nerfar {
 
+// Where a sharp source's evidence lies: from its log-likelihood gain per
+// reflecting sample (the robust loss without the lobe minus with it, the
+// rest of the fit held), the fewest samples that hold half the positive
+// gain, and where they lie. A light explains samples wherever it shines; a
+// gain held by a few samples in one patch points to that patch's own
+// brightness (a printed tag, a material finer than the albedo cells) rather
+// than to a light.
+struct SourceSupport {
+  double half_share = 0;  // those samples' fraction of all the given samples (0: no positive gain)
+  double radius_m = 0;    // the largest distance of one of them from `centre`
+  Vec3 centre;            // their mean position, weighted by their gains
+};
+// SourceSupport from per-sample gains at the given positions (same length).
+SourceSupport SupportOfGains(const std::vector<Vec3f>& positions, const std::vector<double>& gain);
+
 struct EnvFitReport {
   double initial_loss = 0, final_loss = 0;  // robust loss per sample
   int dictionary_size = 0;
@@ -31,6 +46,9 @@ struct EnvFitReport {
   // axis in metres (0: distant, as every lobe but a source placed at a
   // distance); the lobe holds that light as seen from the origin.
   std::vector<double> lobe_distance_m;
+  // Per returned lobe, where its evidence lies when it is a sharp source
+  // (SourceSupport; all 0 for the dictionary's lobes).
+  std::vector<SourceSupport> lobe_support;
   int coloured_lobes = 0;      // active lobes whose chroma the data supports (the others are grey)
   double mean_albedo = 0;      // luminance of the fitted albedo, mean over samples
   double relative_rms = 0;     // RMS of (model − L_o)/L_o over samples (luminance)

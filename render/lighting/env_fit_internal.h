@@ -96,6 +96,8 @@ Linearised LineariseAtModel(const FitState& st, const Eigen::MatrixXd& S);
 // still let them pull light onto the emitter from wherever its normals face.)
 double Loss(const FitState& st, const Eigen::MatrixXd& S, bool update_robust, FitState* mutable_st,
             const std::vector<bool>* skip = nullptr);
+// Sample i's squared log residual over the robust scale², q (its loss is ln(1 + q)).
+double ScaledSquaredLogResidual(const FitState& st, const Eigen::MatrixXd& S, size_t i);
 // The log-likelihood gain of `with` over `without` (the robust loss as a
 // Cauchy likelihood) on the reflecting samples: emitter-like ones glow with
 // light no reflection explains, and a lobe that lights them is no evidence of

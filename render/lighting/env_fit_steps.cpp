@@ -83,21 +83,25 @@ Linearised LineariseAtModel(const FitState& st, const Eigen::MatrixXd& S) {
   return lin;
 }
 
+double ScaledSquaredLogResidual(const FitState& st, const Eigen::MatrixXd& S, size_t i) {
+  double r2 = 0;
+  for (int c = 0; c < 3; ++c) {
+    // Log residual for the robust weight: an emitter (L far above any
+    // a/π·E) is as far out as it is, while a relative residual would saturate at −1.
+    const double eps = st.eps[c];
+    const double model = st.albedo[st.cell[i]][c] / kPi * S(static_cast<Eigen::Index>(i), c);
+    const double r = std::log((std::max(0.0, model) + eps) / (std::max(0.0, Channel(st.s->radiance[i], c)) + eps));
+    r2 += r * r / 3;
+  }
+  return r2 / (st.robust_scale * st.robust_scale);
+}
+
 double Loss(const FitState& st, const Eigen::MatrixXd& S, bool update_robust, FitState* mutable_st,
             const std::vector<bool>* skip) {
   double total = 0;
   const size_t n = st.s->size();
   for (size_t i = 0; i < n; ++i) {
-    double r2 = 0;
-    for (int c = 0; c < 3; ++c) {
-      // Log residual for the robust weight: an emitter (L far above any
-      // a/π·E) is as far out as it is, while a relative residual would saturate at −1.
-      const double eps = st.eps[c];
-      const double model = st.albedo[st.cell[i]][c] / kPi * S(i, c);
-      const double r = std::log((std::max(0.0, model) + eps) / (std::max(0.0, Channel(st.s->radiance[i], c)) + eps));
-      r2 += r * r / 3;
-    }
-    const double q = r2 / (st.robust_scale * st.robust_scale);
+    const double q = ScaledSquaredLogResidual(st, S, i);
     if (skip == nullptr || !(*skip)[i]) total += std::log1p(q);  // Cauchy
     if (update_robust) mutable_st->robust[i] = st.emitter[i] ? 0.0 : st.balance[i] / (1.0 + q);
   }

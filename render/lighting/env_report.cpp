@@ -298,6 +298,7 @@ std::vector<std::string> ReportLines(const EnvLight& env, const EnvEstimateRepor
                                      const EnvReportLayout& layout, bool with_truth) {
   std::vector<std::string> lines = FitLines(env, estimate);
   for (const std::string& line : LobeLines(env.lobes, env.distance_m)) lines.push_back(line);
+  for (const std::string& line : SourceSupportLines(env.lobes, estimate.fit.lobe_support)) lines.push_back(line);
   if (with_truth)
     for (const std::string& line : TruthLines(layout)) lines.push_back(line);
   lines.push_back(Format("panoramas: exposure %.4g (1 / the mean luminance over the sphere of the ", layout.exposure) +
@@ -450,6 +451,19 @@ int PlaceViews(const NerfField& field, const EnvEstimateReport& estimate, const 
 }
 
 }  // namespace
+
+std::vector<std::string> SourceSupportLines(const SgMixture& lobes, const std::vector<SourceSupport>& support) {
+  std::vector<std::string> lines;
+  for (size_t k = 0; k < lobes.size() && k < support.size(); ++k) {
+    if (!(support[k].half_share > 0)) continue;
+    const SourceSupport& s = support[k];
+    lines.push_back(
+        Format("sharp source at azimuth %.0f, elevation %.0f deg: half its gain from %.1f %% of the samples",
+               AzimuthDeg(lobes[k].axis), ElevationDeg(lobes[k].axis), 100 * s.half_share) +
+        Format(", within %.2f m of (%.2f, %.2f", s.radius_m, s.centre.x, s.centre.y) + Format(", %.2f)", s.centre.z));
+  }
+  return lines;
+}
 
 Image8 RenderEnvReport(const NerfField& field, const EnvLight& env, const EnvEstimateReport& estimate,
                        const ImageF* truth, const EnvReportOptions& options, EnvReportLayout* layout_out,

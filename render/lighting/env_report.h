@@ -100,6 +100,12 @@ Image8 RenderEnvReport(const NerfField& field, const EnvLight& env, const EnvEst
                        const ImageF* truth, const EnvReportOptions& options, EnvReportLayout* layout = nullptr,
                        const EnvProgress& progress = nullptr);
 
+// One line per sharp source of `lobes` (EnvFitReport::lobe_support, per
+// lobe): where its evidence lies, "sharp source at azimuth A, elevation E
+// deg: half its gain from P % of the samples, within R m of (x, y, z)". The
+// report picture shows them and `nerfar env` logs them.
+std::vector<std::string> SourceSupportLines(const SgMixture& lobes, const std::vector<SourceSupport>& support);
+
 // A true panorama for the report: 3 channels, width = 2 × height, finite and
 // non-negative; InputError "path: what is wrong (expected ...)" otherwise.
 ImageF ReadTruePanorama(const std::string& path);

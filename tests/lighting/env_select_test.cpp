@@ -131,5 +131,45 @@ TEST(EnvSelect, EnvJsonCarriesTheEvidence) {
   EXPECT_EQ(old.evidence_needed, 0);
 }
 
+// SupportOfGains against counts made by hand. A patch of 10 samples within
+// 2 cm holding gain 10 each beside 990 samples spread over a 1 m square
+// with 0.01 each: half of the positive total (109.9 / 2 = 54.95) is reached
+// with the sixth patch sample, so 6 of the 1000 samples (0.6 %) hold it, all
+// within the patch's 1.8 cm. Equal gains on a 33 × 30 grid over a 1 m
+// square: half of the samples (495) hold half, and a disc of radius 0.3 m
+// holds only about 280 of the grid's points, so they reach farther than
+// that from their mean. Samples without a positive gain count among all
+// the samples but hold none of it.
+TEST(EnvSelect, SourceSupportCountsTheSamplesThatHoldHalfTheGain) {
+  std::vector<Vec3f> positions;
+  std::vector<double> gain;
+  for (int k = 0; k < 10; ++k) {
+    positions.push_back(Vec3f{0.3f + 0.002f * k, -0.2f, 0});
+    gain.push_back(10);
+  }
+  for (int k = 0; k < 990; ++k) {
+    positions.push_back(Vec3f{static_cast<float>(k % 33) / 33 - 0.5f, static_cast<float>(k / 33) / 30 - 0.5f, 0});
+    gain.push_back(0.01);
+  }
+  const SourceSupport patch = SupportOfGains(positions, gain);
+  EXPECT_DOUBLE_EQ(patch.half_share, 0.006);
+  EXPECT_LE(patch.radius_m, 0.02);
+  EXPECT_GE(patch.centre.x, 0.3 - 1e-6);  // the mean of six of the patch's samples (equal gains: any six)
+  EXPECT_LE(patch.centre.x, 0.318 + 1e-6);
+  EXPECT_NEAR(patch.centre.y, -0.2, 1e-6);
+
+  std::vector<double> equal(990, 1.0);
+  const SourceSupport spread = SupportOfGains(std::vector<Vec3f>(positions.begin() + 10, positions.end()), equal);
+  EXPECT_DOUBLE_EQ(spread.half_share, 0.5);
+  EXPECT_GT(spread.radius_m, 0.3);
+
+  std::vector<double> mixed(1000, -1.0);
+  mixed[3] = 2.0;
+  const SourceSupport one = SupportOfGains(positions, mixed);
+  EXPECT_DOUBLE_EQ(one.half_share, 0.001);
+  EXPECT_DOUBLE_EQ(one.radius_m, 0.0);
+  EXPECT_DOUBLE_EQ(SupportOfGains(positions, std::vector<double>(1000, 0.0)).half_share, 0.0);
+}
+
 }  // namespace
 }  // namespace nerfar

@@ -510,7 +510,8 @@ Tabletop SunnyTable(double sun_radius_deg) {
 // is neutral, so every lobe must be neutral too (chroma within 5 %: the
 // scene's albedos are grey and nothing in it is coloured).
 void ExpectSunFound(const Tabletop& s, const std::string& name) {
-  const EnvLight est = EstimateEnvironment(TabletopField(s), SourcesOptions());
+  EnvEstimateReport report;
+  const EnvLight est = EstimateEnvironment(TabletopField(s), SourcesOptions(), &report);
   const SourceResult sun = JudgeSource(s, s.discs[0], est);
   const double lobe_chroma = LobeChromaDeviation(est.lobes);
   LogInfo(name + ": direction error " + std::to_string(sun.error_deg) + "°, energy ratio " +
@@ -521,6 +522,20 @@ void ExpectSunFound(const Tabletop& s, const std::string& name) {
   EXPECT_NEAR(sun.energy_ratio, 1.0, 0.15) << name;
   EXPECT_LT(ChromaDeviation(Integral(est.lobes)), 0.05) << name;
   EXPECT_LT(lobe_chroma, 0.05) << name;
+  // Where the sun's evidence lies (SourceSupport): it lights the whole 70 cm
+  // table but for the box's shadow (a twentieth of it), and every sunlit
+  // sample gains alike from it, so about half of them hold half its gain.
+  // A fifth (half that, for gains uneven over the albedo cells and the box's
+  // faces) is far above a patch's share; and half the samples cannot lie
+  // within 0.2 m of one point, a disc that covers a quarter of the table.
+  int sources = 0;
+  for (const SourceSupport& support : report.fit.lobe_support) {
+    if (!(support.half_share > 0)) continue;
+    ++sources;
+    EXPECT_GT(support.half_share, 0.2) << name;
+    EXPECT_GT(support.radius_m, 0.2) << name;
+  }
+  EXPECT_GE(sources, 1) << name;
 }
 
 // The scene's light itself against closed forms, so that the tests below
