@@ -94,16 +94,17 @@ std::vector<int> AlbedoCells(const EnvSurfaceSamples& s, const Aabb& aabb, doubl
 }
 
 // SupportOfGains for lobe k of the fit: each reflecting sample's loss
-// without the lobe (S less its column) minus with it.
-SourceSupport SupportOfLobe(const FitState& st, const Eigen::MatrixXd& S, Eigen::Index k) {
+// without the lobe (S less its column) minus with it (`loss`: per sample,
+// ln(1 + q) of the whole model S, shared by every lobe's call).
+SourceSupport SupportOfLobe(const FitState& st, const Eigen::MatrixXd& S, const std::vector<double>& loss,
+                            Eigen::Index k) {
   const Eigen::MatrixXd without = S - st.A.col(k) * st.mu.row(k);
   std::vector<Vec3f> positions;
   std::vector<double> gain;
   for (size_t i = 0; i < st.s->size(); ++i) {
     if (st.emitter[i]) continue;
     positions.push_back(st.s->positions[i]);
-    gain.push_back(std::log1p(ScaledSquaredLogResidual(st, without, i)) -
-                   std::log1p(ScaledSquaredLogResidual(st, S, i)));
+    gain.push_back(std::log1p(ScaledSquaredLogResidual(st, without, i)) - loss[i]);
   }
   return SupportOfGains(positions, gain);
 }
@@ -285,13 +286,16 @@ SgMixture FitEnvironment(const EnvSurfaceSamples& samples, const Aabb& aabb, con
   SgMixture result;
   int parameters = 0;
   const Eigen::MatrixXd S = Shading(st);
+  std::vector<double> sample_loss;  // ln(1 + q) per sample, for the sources' support
+  if (std::count(st.lobes.source.begin(), st.lobes.source.end(), true) > 0)
+    for (size_t i = 0; i < samples.size(); ++i) sample_loss.push_back(std::log1p(ScaledSquaredLogResidual(st, S, i)));
   for (Eigen::Index k = 0; k < st.mu.rows(); ++k) {
     const Vec3 mu{st.mu(k, 0), st.mu(k, 1), st.mu(k, 2)};
     if (!(mu.x > 0 || mu.y > 0 || mu.z > 0)) continue;
     result.push_back({st.lobes.axes[k], st.lobes.sharpness[k], mu});
     const bool near = st.lobes.distance[k] > 0;
     local.lobe_distance_m.push_back(st.lobes.distance[k]);
-    local.lobe_support.push_back(st.lobes.source[k] ? SupportOfLobe(st, S, k) : SourceSupport{});
+    local.lobe_support.push_back(st.lobes.source[k] ? SupportOfLobe(st, S, sample_loss, k) : SourceSupport{});
     parameters += kSgLobeParameters + (st.lobes.coloured[k] ? kChromaParameters : 0) + (near ? 1 : 0);
   }
   local.final_loss = Loss(st, S, false, nullptr);

@@ -343,12 +343,16 @@ double ParallaxWeight(double sharpness, double min_sharpness) {
 // `lobe` taken at `from` with its source `distance` away along its axis, as
 // seen from p, re-aimed by `weight` in [0, 1] (ReaimLight). The ratio of new
 // to old distance is clamped to [1/4, 4]; a lobe without a finite positive
-// distance, or of weight 0, is returned unchanged.
-Sg ReaimLobe(const Sg& lobe, const Vec3& from, double distance, double weight, const Vec3& p) {
-  if (!std::isfinite(distance) || !(distance > 0.0) || !(weight > 0.0)) return lobe;
+// distance, or of weight 0, is returned unchanged. `distance_from_p`
+// (optional): how far the source is from p (+infinity without a distance).
+Sg ReaimLobe(const Sg& lobe, const Vec3& from, double distance, double weight, const Vec3& p,
+             double* distance_from_p = nullptr) {
+  if (distance_from_p) *distance_from_p = std::numeric_limits<double>::infinity();
+  if (!std::isfinite(distance) || !(distance > 0.0)) return lobe;
   const Vec3 to_source = from + lobe.axis * distance - p;
   const double d_new = Length(to_source);
-  if (!(d_new > 0.0) || !std::isfinite(d_new)) return lobe;
+  if (distance_from_p) *distance_from_p = d_new;
+  if (!(weight > 0.0) || !(d_new > 0.0) || !std::isfinite(d_new)) return lobe;
   const double ratio = std::clamp(d_new / distance, 0.25, 4.0);
   const Vec3 axis = Normalized(lobe.axis * (1.0 - weight) + (to_source / d_new) * weight);
   if (!(Length(axis) > 0.5)) return lobe;  // opposite directions blended to nothing: keep the lobe
@@ -431,10 +435,9 @@ SgMixture EnvironmentSeenFrom(const SgMixture& environment, const std::vector<do
   SgMixture out = environment;
   const bool placed = distance_m.size() == environment.size();
   if (distance_from_p) distance_from_p->assign(environment.size(), std::numeric_limits<double>::infinity());
-  for (size_t k = 0; placed && k < environment.size(); ++k) {
-    out[k] = ReaimLobe(environment[k], Vec3{}, distance_m[k], 1.0, p);
-    if (distance_from_p && distance_m[k] > 0) (*distance_from_p)[k] = Length(environment[k].axis * distance_m[k] - p);
-  }
+  for (size_t k = 0; placed && k < environment.size(); ++k)
+    out[k] =
+        ReaimLobe(environment[k], Vec3{}, distance_m[k], 1.0, p, distance_from_p ? &(*distance_from_p)[k] : nullptr);
   return out;
 }
 
