@@ -16,6 +16,7 @@ namespace nerfar {
 
 using env_internal::AddSources;
 using env_internal::Channel;
+using env_internal::CountSources;
 using env_internal::FitState;
 using env_internal::FreeChroma;
 using env_internal::Iterate;
@@ -287,7 +288,7 @@ SgMixture FitEnvironment(const EnvSurfaceSamples& samples, const Aabb& aabb, con
   int parameters = 0;
   const Eigen::MatrixXd S = Shading(st);
   std::vector<double> sample_loss;  // ln(1 + q) per sample, for the sources' support
-  if (std::count(st.lobes.source.begin(), st.lobes.source.end(), true) > 0)
+  if (CountSources(st) > 0)
     for (size_t i = 0; i < samples.size(); ++i) sample_loss.push_back(std::log1p(ScaledSquaredLogResidual(st, S, i)));
   for (Eigen::Index k = 0; k < st.mu.rows(); ++k) {
     const Vec3 mu{st.mu(k, 0), st.mu(k, 1), st.mu(k, 2)};

@@ -178,6 +178,9 @@ struct SourceCandidate {
 // (empty: none helps).
 std::vector<SourceCandidate> FindSources(const FitState& st, const EnvShadowRays& shadow, const EnvEstimateOptions& o);
 
+// The sharp sources among the fit's lobes (env_fit_select.cpp).
+int CountSources(const FitState& st);
+
 // Model selection (env_fit_select.cpp). Sharp sources, one at a time: the
 // search's lights, best first, each added as a lobe and the model re-solved
 // for source_steps; the first whose log-likelihood gain beats BIC's penalty

@@ -110,11 +110,6 @@ double HeldOutChromaGain(const FitState& st, const std::array<FitState, 2>& grey
   return gain;
 }
 
-// The sharp sources among the fit's lobes.
-int CountSources(const FitState& st) {
-  return static_cast<int>(std::count(st.lobes.source.begin(), st.lobes.source.end(), true));
-}
-
 // Tries one light of the search as a sharp source (AddSources): appends it,
 // re-solves, and tells whether the data supports it; if so `st` takes it.
 // `without`: st re-solved alike without it (one per round: every candidate
@@ -154,6 +149,10 @@ bool TrySource(FitState& st, const FitState& without, const SourceCandidate& fou
 }
 
 }  // namespace
+
+int CountSources(const FitState& st) {
+  return static_cast<int>(std::count(st.lobes.source.begin(), st.lobes.source.end(), true));
+}
 
 // Sharp sources, one at a time: the search's best few lights (env_sources.cpp:
 // distant or at a distance, each at its best size), best first, are each
