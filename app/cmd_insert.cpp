@@ -926,6 +926,35 @@ void WriteVideo(const InsertArgs& a, const Dataset& views, double path_fps) {
           Shown(fps) + " fps)");
 }
 
+// The centres of the cameras the NeRF was trained from (the dataset's train
+// split), for the seen radiance's views (SeenRadianceOptions::
+// capture_centres). None, and the capture band instead, where the dataset
+// has no train split or it cannot be read (said once).
+std::vector<Vec3f> CaptureCentres(const std::string& dataset_dir) {
+  const std::string path = DatasetSplitPath(dataset_dir, "train");
+  std::error_code error;
+  if (!fs::is_regular_file(path, error)) {
+    LogInfo("insert: no " + path + ": the seen radiance's views come from the capture band");
+    return {};
+  }
+  try {
+    std::vector<Vec3f> centres;
+    for (const DatasetFrame& frame : ReadDataset(path, false).frames)
+      centres.push_back(Vec3f(frame.T_world_camera.translation));
+    return centres;
+  } catch (const InputError& e) {
+    LogWarning(std::string("insert: ") + e.what() + ": the seen radiance's views come from the capture band");
+    return {};
+  }
+}
+
+// How the light's seen radiance is taken, for the log.
+std::string SeenRadianceNote(const NerfSceneOptions& o) {
+  if (!o.light_seen_radiance) return "off";
+  if (o.seen.capture_centres.empty()) return "on (views from the capture band)";
+  return "on (views from the capture's " + std::to_string(o.seen.capture_centres.size()) + " cameras)";
+}
+
 }  // namespace
 
 int RunInsert(const CommandArgs& args) {
@@ -933,8 +962,9 @@ int RunInsert(const CommandArgs& args) {
   if (!ParseInsertArgs(args, a)) return 0;
   const InsertKnobs knobs = KnobsFrom(a);
   const InsertOptions& options = knobs.options.insert;
-  const NerfSceneOptions& nerf_options = knobs.options.nerf;
   ValidateOptions(knobs.options);
+  NerfSceneOptions nerf_options = knobs.options.nerf;
+  nerf_options.seen.capture_centres = CaptureCentres(a.dataset_dir);
 
   // Inputs.
   const Dataset capture = ReadDataset(DatasetSplitPath(a.dataset_dir, a.split));
@@ -972,8 +1002,8 @@ int RunInsert(const CommandArgs& args) {
   LogInfo("insert: options " + options_json + ", threads " + std::to_string(ThreadCount()) +
           (a.without_nerf ? std::string()
                           : std::string(", nerf depth ") + (nerf_options.surface_depth ? "surface" : "expected") +
-                                ", light seen radiance " + (nerf_options.light_seen_radiance ? "on" : "off") +
-                                ", normal probe " + std::to_string(nerf_options.normal_probe_voxels) + " voxels"));
+                                ", light seen radiance " + SeenRadianceNote(nerf_options) + ", normal probe " +
+                                std::to_string(nerf_options.normal_probe_voxels) + " voxels"));
   WriteFileAtomic((fs::path(a.output) / "options.json").string(), options_json + "\n");
   const std::vector<InsertObject> objects = InsertObjects(loaded, a.light_probe.empty() ? nullptr : &probe, distances);
 

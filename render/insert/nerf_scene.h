@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <mutex>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "calib/core/option_fields.h"
@@ -89,7 +90,8 @@ struct NerfSceneOptions {
 class NerfScene final : public SceneField {
  public:
   // `field` is a loan that must outlive this object.
-  explicit NerfScene(const NerfField& field, NerfSceneOptions options = {}) : field_(field), options_(options) {}
+  explicit NerfScene(const NerfField& field, NerfSceneOptions options = {})
+      : field_(field), options_(std::move(options)) {}
   Aabb Box() const override { return field_.aabb; }
   void RenderRays(const SceneRays& rays, SceneSamples& out) const override;
   // Light rays: marched in parallel here (callers pass the whole batch), and

@@ -16,6 +16,9 @@ constexpr float kFar = 4.0f;  // metres from the point to the start of a view's 
 // the band (a face that sees a tenth of the band still gets ~1.6 per view).
 constexpr int kFaceCandidatesPerView = 16;
 
+// The i-th of `count` picks spread evenly over `size` items: the middle of its share.
+size_t SpreadIndex(size_t i, size_t count, size_t size) { return (2 * i + 1) * size / (2 * count); }
+
 // `count` directions (from a point towards a camera) on a spiral over the
 // band's elevations [lo, hi] (radians): evenly in elevation, golden-angle
 // steps in azimuth.
@@ -222,25 +225,47 @@ class PointViews {
     found.clear();
   }
 
+  // Unit directions from point p towards the capture's cameras.
+  std::vector<Vec3f> TowardsCameras(size_t p) const {
+    std::vector<Vec3f> towards;
+    towards.reserve(options_.capture_centres.size());
+    for (const Vec3f& c : options_.capture_centres) {
+      const Vec3f d = c - cells_.points[p];
+      if (Dot(d, d) > 0.0f) towards.push_back(Normalized(d));
+    }
+    return towards;
+  }
+
   void FaceViews(size_t p, std::vector<Vec3f>& found) const {
     Vec3f n = AveragedGradientNormal(field_, cells_.points[p]);
     if (Dot(n, cells_.dirs[p]) > 0.0f) n = -n;  // the face the ray meets
+    const std::vector<Vec3f> cameras = TowardsCameras(p);
     std::vector<const Vec3f*> facing;
     if (Dot(n, n) > 0.5f)
-      for (const Vec3f& u : face_candidates_)
+      for (const Vec3f& u : cameras.empty() ? face_candidates_ : cameras)
         if (Dot(u, n) >= options_.face_min_cosine) facing.push_back(&u);
     const size_t count = std::min(facing.size(), static_cast<size_t>(options_.views));
     for (size_t i = 0; i < count; ++i) {
-      // Evenly over the facing candidates (they run up the band's elevations).
+      // Evenly over the facing candidates (up the band's elevations, or over the capture's order).
       NerfRayResult res;
-      if (!Look(p, *facing[(2 * i + 1) * facing.size() / (2 * count)], res)) continue;
+      if (!Look(p, *facing[SpreadIndex(i, count, facing.size())], res)) continue;
       if (res.opacity > options_.min_opacity && std::fabs(res.surface_depth - kFar) <= options_.face_reach_m)
         Keep(res, found);
     }
   }
 
   void BandViews(size_t p, bool face_seen, std::vector<Vec3f>& found) const {
-    for (const Vec3f& u : view_dirs_) {
+    std::vector<Vec3f> views = TowardsCameras(p);
+    if (views.empty()) {
+      views = view_dirs_;
+    } else {
+      // `views` cameras spread over the list (a capture's order walks round the table).
+      const size_t count = std::min(views.size(), static_cast<size_t>(options_.views));
+      std::vector<Vec3f> picked;
+      for (size_t i = 0; i < count; ++i) picked.push_back(views[SpreadIndex(i, count, views.size())]);
+      views = std::move(picked);
+    }
+    for (const Vec3f& u : views) {
       NerfRayResult res;
       if (!Look(p, u, res)) continue;
       // The point lies kFar along the view. The vote (see-through): a view

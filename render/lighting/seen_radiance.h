@@ -110,6 +110,16 @@ struct SeenRadianceOptions {
   // it (a lamp's dark frame or backing, a pole), and would drag the mean of
   // an emitter down. 0: the plain mean of every view that sees the point.
   double agree_fraction = 0.5;
+  // The capture's camera centres (world, metres), when known: the views are
+  // aimed from them, along the directions the NeRF was trained on, instead
+  // of from the band's spiral (whose directions fall between the cameras).
+  // A trained emitter's radiance is right only towards its cameras: its
+  // view-dependent colour is fitted along them alone, and between them it
+  // swings (a small bulb's core by a factor of two either way). Face views
+  // are the cameras in front of the face (n·u ≥ face_min_cosine), the band's
+  // views `views` cameras spread over the list; the elevation limits do not
+  // apply. Empty: the band.
+  std::vector<Vec3f> capture_centres;
   bool operator==(const SeenRadianceOptions&) const = default;
 };
 
