@@ -195,13 +195,14 @@ class PointViews {
   void Answer(size_t p) const {
     if (answers_.cached[p]) return;
     std::vector<Vec3f> found;
+    const std::vector<Vec3f> cameras = TowardsCameras(p);
     if (options_.face_views && cells_.surface[p]) {
-      FaceViews(p, found);
+      FaceViews(p, cameras, found);
       Settle(p, found);
     }
     const bool face_seen = answers_.reached[p] != 0;
     if (face_seen && !options_.see_through) return;
-    BandViews(p, face_seen, found);
+    BandViews(p, cameras, face_seen, found);
     if (!face_seen) Settle(p, found);
   }
 
@@ -236,10 +237,10 @@ class PointViews {
     return towards;
   }
 
-  void FaceViews(size_t p, std::vector<Vec3f>& found) const {
+  // `cameras`: TowardsCameras(p).
+  void FaceViews(size_t p, const std::vector<Vec3f>& cameras, std::vector<Vec3f>& found) const {
     Vec3f n = AveragedGradientNormal(field_, cells_.points[p]);
     if (Dot(n, cells_.dirs[p]) > 0.0f) n = -n;  // the face the ray meets
-    const std::vector<Vec3f> cameras = TowardsCameras(p);
     std::vector<const Vec3f*> facing;
     if (Dot(n, n) > 0.5f)
       for (const Vec3f& u : cameras.empty() ? face_candidates_ : cameras)
@@ -254,18 +255,13 @@ class PointViews {
     }
   }
 
-  void BandViews(size_t p, bool face_seen, std::vector<Vec3f>& found) const {
-    std::vector<Vec3f> views = TowardsCameras(p);
-    if (views.empty()) {
-      views = view_dirs_;
-    } else {
-      // `views` cameras spread over the list (a capture's order walks round the table).
-      const size_t count = std::min(views.size(), static_cast<size_t>(options_.views));
-      std::vector<Vec3f> picked;
-      for (size_t i = 0; i < count; ++i) picked.push_back(views[SpreadIndex(i, count, views.size())]);
-      views = std::move(picked);
-    }
-    for (const Vec3f& u : views) {
+  // `cameras`: TowardsCameras(p).
+  void BandViews(size_t p, const std::vector<Vec3f>& cameras, bool face_seen, std::vector<Vec3f>& found) const {
+    // With the cameras: `views` of them spread over the list (a capture's order walks round the table).
+    std::vector<Vec3f> picked;
+    const size_t count = std::min(cameras.size(), static_cast<size_t>(options_.views));
+    for (size_t i = 0; i < count; ++i) picked.push_back(cameras[SpreadIndex(i, count, cameras.size())]);
+    for (const Vec3f& u : cameras.empty() ? view_dirs_ : picked) {
       NerfRayResult res;
       if (!Look(p, u, res)) continue;
       // The point lies kFar along the view. The vote (see-through): a view
