@@ -176,9 +176,10 @@ void AnswerFromCache(const PointCells& cells, SeenRadianceCache& cache, PointAns
   if (fresh > 0 && cache.cells.size() + fresh > cache.max_cells) cache.cells.clear();  // answers copied above
 }
 
-// The views that answer one point: the face views (the band's directions in
-// front of the point's face) first, then the whole band for the see-through
-// votes and the seen radiance of a point no face view saw.
+// The views that answer one point: the face views (the band's directions, or
+// the capture's cameras, in front of the point's face) first, then the whole
+// band (or cameras spread over the capture) for the see-through votes and the
+// seen radiance of a point no face view saw.
 class PointViews {
  public:
   PointViews(const NerfField& field, const SeenRadianceOptions& options, const NerfRenderOptions& render,
