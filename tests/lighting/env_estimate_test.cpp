@@ -631,7 +631,6 @@ TEST(SeenRadiance, FaceViewsRestoreAPanelFacingAwayFromTheBand) {
   std::vector<NerfRayResult> raw(rays.size());
   field.RenderRays(rays.data(), rays.size(), raw.data());
   const double truth = PanelReceiversTruth();
-  const auto mean_e = PanelReceiversIrradiance;
   SeenRadianceOptions ring;
   ring.min_elevation_deg = kRingDeg;
   ring.max_elevation_deg = kRingDeg;
@@ -645,7 +644,8 @@ TEST(SeenRadiance, FaceViewsRestoreAPanelFacingAwayFromTheBand) {
   const NerfField uniform = TiltedPanel(0);
   std::vector<NerfRayResult> best(rays.size());
   uniform.RenderRays(rays.data(), rays.size(), best.data());
-  const double e_raw = mean_e(raw), e_face = mean_e(face), e_band = mean_e(band), e_best = mean_e(best);
+  const double e_raw = PanelReceiversIrradiance(raw), e_face = PanelReceiversIrradiance(face),
+               e_band = PanelReceiversIrradiance(band), e_best = PanelReceiversIrradiance(best);
   LogInfo("panel irradiance: truth " + std::to_string(truth) + ", NeRF " + std::to_string(e_raw) + ", face views " +
           std::to_string(e_face) + ", whole band " + std::to_string(e_band) + ", grid seen uniform " +
           std::to_string(e_best));
