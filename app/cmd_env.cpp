@@ -21,6 +21,7 @@
 #include "render/lighting/env_estimate.h"
 #include "render/lighting/env_light.h"
 #include "render/lighting/env_report.h"
+#include "render/lighting/seen_radiance.h"
 #include "render/nerf/nerf_file.h"
 #include "render/sg/sphere.h"
 
@@ -159,7 +160,8 @@ int RunEnv(const CommandArgs& args) {
   // The truth is read before the estimate, so that a bad file fails at once.
   const ImageF truth = truth_path.empty() ? ImageF() : ReadTruePanorama(truth_path);
   const NerfField field = LoadNerf(nerf_path);
-  LogInfo("env: " + nerf_path + "; preset " + preset + "; options " + options.ToJson());
+  LogInfo("env: " + nerf_path + "; preset " + preset + "; options " + options.ToJson() + "; seen radiance " +
+          SeenViewsNote(field));
 
   // One progress bar (with ETA) per stage.
   std::unique_ptr<Progress> bar;

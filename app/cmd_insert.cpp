@@ -42,6 +42,7 @@
 #include "render/insert/quality.h"
 #include "render/insert/ssdf_visibility.h"
 #include "render/lighting/env_light.h"
+#include "render/lighting/seen_radiance.h"
 #include "render/nerf/nerf_file.h"
 #include "render/sg/compact_sources.h"
 #include "render/sg/fit.h"
@@ -926,33 +927,9 @@ void WriteVideo(const InsertArgs& a, const Dataset& views, double path_fps) {
           Shown(fps) + " fps)");
 }
 
-// The centres of the cameras the NeRF was trained from (the dataset's train
-// split), for the seen radiance's views (SeenRadianceOptions::
-// capture_centres). None, and the capture band instead, where the dataset
-// has no train split or it cannot be read (said once).
-std::vector<Vec3f> CaptureCentres(const std::string& dataset_dir) {
-  const std::string path = DatasetSplitPath(dataset_dir, "train");
-  std::error_code error;
-  if (!fs::is_regular_file(path, error)) {
-    LogInfo("insert: no " + path + ": the seen radiance's views come from the capture band");
-    return {};
-  }
-  try {
-    std::vector<Vec3f> centres;
-    for (const DatasetFrame& frame : ReadDataset(path, false).frames)
-      centres.push_back(Vec3f(frame.T_world_camera.translation));
-    return centres;
-  } catch (const InputError& e) {
-    LogWarning(std::string("insert: ") + e.what() + ": the seen radiance's views come from the capture band");
-    return {};
-  }
-}
-
 // How the light's seen radiance is taken, for the log.
-std::string SeenRadianceNote(const NerfSceneOptions& o) {
-  if (!o.light_seen_radiance) return "off";
-  if (o.seen.capture_centres.empty()) return "on (views from the capture band)";
-  return "on (views from the capture's " + std::to_string(o.seen.capture_centres.size()) + " cameras)";
+std::string SeenRadianceNote(const NerfSceneOptions& o, const NerfField& field) {
+  return o.light_seen_radiance ? "on (" + SeenViewsNote(field) + ")" : "off";
 }
 
 }  // namespace
@@ -963,8 +940,7 @@ int RunInsert(const CommandArgs& args) {
   const InsertKnobs knobs = KnobsFrom(a);
   const InsertOptions& options = knobs.options.insert;
   ValidateOptions(knobs.options);
-  NerfSceneOptions nerf_options = knobs.options.nerf;
-  nerf_options.seen.capture_centres = CaptureCentres(a.dataset_dir);
+  const NerfSceneOptions& nerf_options = knobs.options.nerf;
 
   // Inputs.
   const Dataset capture = ReadDataset(DatasetSplitPath(a.dataset_dir, a.split));
@@ -1002,7 +978,7 @@ int RunInsert(const CommandArgs& args) {
   LogInfo("insert: options " + options_json + ", threads " + std::to_string(ThreadCount()) +
           (a.without_nerf ? std::string()
                           : std::string(", nerf depth ") + (nerf_options.surface_depth ? "surface" : "expected") +
-                                ", light seen radiance " + SeenRadianceNote(nerf_options) + ", normal probe " +
+                                ", light seen radiance " + SeenRadianceNote(nerf_options, nerf) + ", normal probe " +
                                 std::to_string(nerf_options.normal_probe_voxels) + " voxels"));
   WriteFileAtomic((fs::path(a.output) / "options.json").string(), options_json + "\n");
   const std::vector<InsertObject> objects = InsertObjects(loaded, a.light_probe.empty() ? nullptr : &probe, distances);

@@ -35,6 +35,7 @@
 #include "calib/core/media.h"
 #include "calib/core/parallel.h"
 #include "render/insert/nerf_insert_options.h"
+#include "render/lighting/seen_radiance.h"
 #include "render/synth/camera_stream.h"
 #include "tracking/frame_sources.h"
 #include "tracking/reconnecting_source.h"
@@ -378,7 +379,8 @@ int RunLive(const CommandArgs& args) {
   pipeline.set_views(requested_views);
   LogInfo("live: " + source->Describe() + ", scene " + paths.nerf + ", " + std::to_string(objects.size()) +
           " object(s), preset " + a.preset + ", response " + options.response + ", threads " +
-          std::to_string(ThreadCount()) + ", session " + session_dir);
+          std::to_string(ThreadCount()) + ", session " + session_dir + ", light's seen radiance " +
+          SeenViewsNote(scene.nerf));
 
   // Places object 0 under the image centre once a frame has a pose.
   std::int64_t auto_placed_frame = -1;

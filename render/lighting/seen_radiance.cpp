@@ -34,6 +34,12 @@ std::vector<Vec3f> BandSpiral(double lo, double hi, int count) {
 
 }  // namespace
 
+std::string SeenViewsNote(const NerfField& field) {
+  if (field.capture_centres.empty())
+    return "views from the capture band: the model does not store its cameras (retrain it to store them)";
+  return "views from the capture's " + std::to_string(field.capture_centres.size()) + " cameras";
+}
+
 bool AgreeingRadiance(const std::vector<Vec3f>& radiances, double agree_fraction, Vec3f& out) {
   if (radiances.empty()) return false;
   double brightest = -1;
@@ -230,8 +236,8 @@ class PointViews {
   // Unit directions from point p towards the capture's cameras.
   std::vector<Vec3f> TowardsCameras(size_t p) const {
     std::vector<Vec3f> towards;
-    towards.reserve(options_.capture_centres.size());
-    for (const Vec3f& c : options_.capture_centres) {
+    towards.reserve(field_.capture_centres.size());
+    for (const Vec3f& c : field_.capture_centres) {
       const Vec3f d = c - cells_.points[p];
       if (Dot(d, d) > 0.0f) towards.push_back(Normalized(d));
     }

@@ -45,9 +45,20 @@
 // spread over the whole band mostly meet its dark backing, and a wide reach
 // lets the views from above that meet a bulb lend its radiance to the pole
 // and stand under it. Measured: docs/BENCHMARKS.md "face views".
+//
+// The capture's cameras (NerfField::capture_centres, when the model has
+// them): the views are aimed from them, along the directions the NeRF was
+// trained on, instead of from the band's spiral (whose directions fall
+// between the cameras). A trained emitter's radiance is right only towards
+// its cameras: its view-dependent colour is fitted along them alone, and
+// between them it swings (a small bulb's core by a factor of two either
+// way). Face views are the cameras in front of the face (n·u >=
+// face_min_cosine), the band's views `views` cameras spread over the list;
+// the elevation limits do not apply. A field without them: the band.
 #pragma once
 
 #include <cstdint>
+#include <string>
 #include <unordered_map>
 #include <vector>
 
@@ -110,18 +121,12 @@ struct SeenRadianceOptions {
   // it (a lamp's dark frame or backing, a pole), and would drag the mean of
   // an emitter down. 0: the plain mean of every view that sees the point.
   double agree_fraction = 0.5;
-  // The capture's camera centres (world, metres), when known: the views are
-  // aimed from them, along the directions the NeRF was trained on, instead
-  // of from the band's spiral (whose directions fall between the cameras).
-  // A trained emitter's radiance is right only towards its cameras: its
-  // view-dependent colour is fitted along them alone, and between them it
-  // swings (a small bulb's core by a factor of two either way). Face views
-  // are the cameras in front of the face (n·u ≥ face_min_cosine), the band's
-  // views `views` cameras spread over the list; the elevation limits do not
-  // apply. Empty: the band.
-  std::vector<Vec3f> capture_centres;
   bool operator==(const SeenRadianceOptions&) const = default;
 };
+
+// Where the views of the field's seen radiance come from, for logs: "views
+// from the capture's N cameras", or the band's note that the model has none.
+std::string SeenViewsNote(const NerfField& field);
 
 // The seen radiance of a point from the radiances (per unit opacity) of
 // the views that see it: the mean of those whose luminance is at least

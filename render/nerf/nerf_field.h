@@ -187,6 +187,14 @@ class NerfField {
   // again or ClearRenderCopy(), or the renderer reads the old values.
   NerfRenderCopy render_copy;
 
+  // --- the capture
+  // Where the cameras the field was learnt from stood (world, in the capture's
+  // order; NerfTrainer::FinalField fills it). The NeRF's radiance is right
+  // towards these, so the light's seen radiance looks from them
+  // (render/lighting/seen_radiance.h). Empty when unknown (a synthetic field,
+  // a model saved before they were stored).
+  std::vector<Vec3f> capture_centres;
+
   size_t BrickCount() const { return brick_coords.size() / 3; }
   size_t SlotCount() const { return density.size(); }
   bool empty() const { return density.empty(); }

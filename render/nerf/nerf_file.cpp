@@ -15,7 +15,7 @@ namespace nerfar {
 namespace {
 
 // Versions 1 and 2 are flat (read only); 3 has the sections HEAD (the header and the payload's
-// coding) and BRIK (the stored payload).
+// coding), BRIK (the stored payload) and, when known, CAMS (the capture's camera centres).
 constexpr BinaryFormat kFormat{"nerfar NeRF file", "NERFARF1", true, 1, kNerfFileVersion, 3, ""};
 constexpr uint32_t kColorModelLogLinear = 1;            // log L = a + b·d per channel
 constexpr int kValuesPerVertex = 1 + kNerfColorCoeffs;  // channels: density, colour 0..11
@@ -388,6 +388,25 @@ void CheckOccupiedCornersStored(const std::vector<uint64_t>& masks, const std::s
   }
 }
 
+// CAMS: u32 count, then count x f32 xyz (metres, world).
+void PutCaptureCentres(ByteWriter& w, const std::vector<Vec3f>& centres) {
+  w.Put(uint32_t(centres.size()));
+  for (const Vec3f& c : centres) w.Put(c.x), w.Put(c.y), w.Put(c.z);
+}
+
+std::vector<Vec3f> ReadCaptureCentres(ByteReader r) {
+  const uint32_t count = r.Get<uint32_t>("capture camera count");
+  const std::vector<float> xyz = r.GetArray<float>(uint64_t{3} * count, "capture camera centres");
+  r.ExpectEnd("the capture camera centres");
+  std::vector<Vec3f> centres;
+  for (size_t i = 0; i < xyz.size(); i += 3) {
+    if (!std::isfinite(xyz[i]) || !std::isfinite(xyz[i + 1]) || !std::isfinite(xyz[i + 2]))
+      r.Fail("capture camera " + std::to_string(i / 3) + "'s centre is not finite");
+    centres.emplace_back(xyz[i], xyz[i + 1], xyz[i + 2]);
+  }
+  return centres;
+}
+
 }  // namespace
 
 std::vector<std::string> NerfFileOptions::Validate() const {
@@ -452,6 +471,7 @@ std::string SerializeNerf(const NerfField& f, const NerfFileOptions& options) {
   PutHeader(head, f, uint32_t(order.size()), stored);
   PutCoding(head, options, payload_size);
   w.Section("BRIK").PutBytes(body);
+  if (!f.capture_centres.empty()) PutCaptureCentres(w.Section("CAMS"), f.capture_centres);
   return std::move(w).Seal();
 }
 
@@ -466,6 +486,7 @@ NerfField ParseNerf(const std::string& bytes, const std::string& source) {
     head.ExpectEnd("the header");
     ByteReader stored = file.Section("BRIK");
     masks = ReadPayload(stored.Take(stored.remaining(), "payload"), coding, h, source, f);
+    if (file.HasSection("CAMS")) f.capture_centres = ReadCaptureCentres(file.Section("CAMS"));
   } else {
     ByteReader r = file.fields;
     const Header h = ReadHeader(r, source, f);

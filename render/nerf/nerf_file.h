@@ -3,12 +3,13 @@
 // rest of an allocated brick reads as empty space).
 //
 // Version 3 (written): the sectioned container of calib/core/binary_file.h
-// ("NERFARF1" magic, version, section table, crc32) with two sections.
+// ("NERFARF1" magic, version, section table, crc32) with two or three sections.
 // HEAD: u32 colour model, f32 aabb[6], f32 origin[3], f32 voxel_m, f32
 // occupancy_sigma, i32 res[3], u32 brick_count, u64 stored_vertex_count, u8
 // bits[13] (bits per stored value: density, then the 12 colour coefficients),
 // u8 compression (0 none, 1 zlib), u16 0, u64 payload bytes. BRIK: the payload
-// (zlib deflated when compression is 1). Payload: per brick i32 coords[3] + u64 mask of
+// (zlib deflated when compression is 1). CAMS (only when the field has them):
+// u32 count, then count x f32 xyz, NerfField::capture_centres. Payload: per brick i32 coords[3] + u64 mask of
 // stored vertices + u64 cell occupancy; then per brick and per channel (density, colour 0..11) an i8 exponent e, an i32
 // base b and the brick's stored vertices' codes q (bits[channel] bits each, little-endian bit order, padded to a byte):
 // the value is (b + q)·2^e. The writer picks per brick and channel the smallest e whose 2^bits - 1 levels span the

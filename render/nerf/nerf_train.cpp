@@ -991,6 +991,7 @@ NerfField NerfTrainer::FinalField() const {
   NerfField f = state_->field;
   const double save_sigma = state_->options.save_occupancy_sigma;
   f.UpdateOccupancy(save_sigma > 0 ? float(save_sigma) : state_->OccupancySigma());
+  for (const NerfView& view : state_->data.train) f.capture_centres.push_back(Vec3f(view.T_world_camera.translation));
   return f;
 }
 

@@ -230,7 +230,7 @@ class NerfTrainer {
 
   // psnr_tm (mean over views) of the held-out views (first `max_views`, 0: all) rendered from the current field.
   double HeldOutPsnr(int max_views) const;
-  // The field in its final form (occupancy refreshed) for saving.
+  // The field in its final form (occupancy refreshed, the training cameras as its capture_centres) for saving.
   NerfField FinalField() const;
 
   // Checkpoints: the whole training state (field, Adam moments, step, time),

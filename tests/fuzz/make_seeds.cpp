@@ -85,6 +85,9 @@ void NerfSeeds() {
   raw.density_bits = 16;
   raw.color_base_bits = 4;
   Write("nerf/small_raw_bits.bin", WithoutChecksum(SerializeNerf(field, raw)));
+  NerfField with_cameras = field;
+  with_cameras.capture_centres = {Vec3f(0.5f, -1.0f, 0.8f), Vec3f(-0.7f, 0.2f, 0.6f)};
+  Write("nerf/small_cams.bin", WithoutChecksum(SerializeNerf(with_cameras)));
 }
 
 void SsdfSeeds() {

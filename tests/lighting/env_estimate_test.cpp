@@ -669,21 +669,20 @@ TEST(SeenRadiance, CaptureCamerasGiveTheRadianceTheNeRFWasTrainedOn) {
   // the ring and see it too bright; the views aimed from the cameras see it
   // as trained.
   constexpr double kCaptureDeg = 12;
-  const NerfField field = TiltedPanel(3, kCaptureDeg);
-  const std::vector<NerfRay> rays = PanelReceiverRays(field);
-  std::vector<NerfRayResult> raw(rays.size());
-  field.RenderRays(rays.data(), rays.size(), raw.data());
-  SeenRadianceOptions band;
-  SeenRadianceOptions cameras;
+  const NerfField band_field = TiltedPanel(3, kCaptureDeg);  // a model that does not store its cameras
+  NerfField field = band_field;
   const double el = kCaptureDeg * kPi / 180;
   for (int k = 0; k < 24; ++k) {
     const double az = 2 * kPi * k / 24;
-    cameras.capture_centres.push_back(
+    field.capture_centres.push_back(
         Vec3f(kPanelCentre + Vec3{std::cos(el) * std::cos(az), std::cos(el) * std::sin(az), std::sin(el)} * 2.0));
   }
+  const std::vector<NerfRay> rays = PanelReceiverRays(field);
+  std::vector<NerfRayResult> raw(rays.size());
+  field.RenderRays(rays.data(), rays.size(), raw.data());
   std::vector<NerfRayResult> seen_band = raw, seen_cameras = raw;
-  ApplySeenRadiance(field, rays, seen_band, band);
-  ApplySeenRadiance(field, rays, seen_cameras, cameras);
+  ApplySeenRadiance(band_field, rays, seen_band, SeenRadianceOptions{});
+  ApplySeenRadiance(field, rays, seen_cameras, SeenRadianceOptions{});
   const NerfField uniform = TiltedPanel(0);  // the front's le towards every direction: the grid at best
   std::vector<NerfRayResult> best(rays.size());
   uniform.RenderRays(rays.data(), rays.size(), best.data());

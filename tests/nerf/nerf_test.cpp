@@ -10,6 +10,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <random>
 
 #include "calib/core/binary_file.h"
@@ -277,6 +278,20 @@ TEST(NerfFile, RoundTripIsExactFromTheSecondSaveAndRendersTheSame) {
     EXPECT_NEAR_WHY(g.RenderRay(ray, options).opacity, f.RenderRay(ray, options).opacity, 3e-3,
                     "12-bit quantised log density");
   }
+}
+
+TEST(NerfFile, CaptureCentresRoundTripExactlyAndAreOptional) {
+  NerfField f = BallField(1.0 / 16, 4.0f, 0.3f);
+  EXPECT_TRUE(ParseNerf(Bytes(f), "none.nerf").capture_centres.empty()) << "a field without cameras has none";
+  f.capture_centres = {Vec3f(0.1f, -2.5f, 1e-7f), Vec3f(3.25f, 0.0f, -1.0f / 3)};
+  // Stored as the floats they are: equal to the bit.
+  EXPECT_EQ(ParseNerf(Bytes(f), "cams.nerf").capture_centres, f.capture_centres);
+  // CAMS is the last section: its last float (camera 1's z) lies just before the crc.
+  std::string bad = Bytes(f);
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  std::memcpy(&bad[bad.size() - 8], &nan, sizeof nan);
+  const std::string message = InputErrorOf([&] { ParseNerf(testing::Resealed(bad), "nan.nerf"); });
+  EXPECT_NE(message.find("nan.nerf: capture camera 1's centre is not finite"), std::string::npos) << message;
 }
 
 TEST(NerfFile, OccupiedCellsBesideUnallocatedBricksRoundTrip) {
@@ -1012,6 +1027,18 @@ TEST(NerfTrain, FinestLevelTrainingThresholdSkipsFaintCellsAndKeepsQuality) {
   const double psnr = t.HeldOutPsnr(0);
   EXPECT_GT(psnr, 30.0);
   std::printf("tiny scene, occupancy_sigma_finest 5: held-out psnr_tm %.2f dB\n", psnr);
+}
+
+TEST(NerfTrain, TheModelKeepsItsTrainingCamerasInTheirOrder) {
+  NerfTrainOptions o = TinyOptions();
+  o.steps = 2;
+  const NerfTrainData& data = TinyScene();
+  NerfTrainer t(data, o);
+  while (!t.Done()) t.Step();
+  const NerfField saved = ParseNerf(SerializeNerf(t.FinalField()), "tiny.nerf");
+  ASSERT_EQ(saved.capture_centres.size(), data.train.size());
+  for (size_t i = 0; i < data.train.size(); ++i)
+    EXPECT_EQ(saved.capture_centres[i], Vec3f(data.train[i].T_world_camera.translation)) << "camera " << i;
 }
 
 TEST(NerfTrain, ThreadCountDoesNotChangeTheResult) {
