@@ -197,6 +197,12 @@ class PointViews {
     view_dirs_ = BandSpiral(lo, hi, options.views);
     // Candidates of the face views: a denser spiral, the same for every point.
     if (options.face_views) face_candidates_ = BandSpiral(lo, hi, kFaceCandidatesPerView * options.views);
+    // The capture's cameras, at most as many as the band's face candidates,
+    // spread over the capture's order: a long capture (a video's thousands of
+    // frames) costs each point no more candidates than the band does.
+    const std::vector<Vec3f>& all = field.capture_centres;
+    const size_t count = std::min(all.size(), static_cast<size_t>(kFaceCandidatesPerView * options.views));
+    for (size_t i = 0; i < count; ++i) cameras_.push_back(all[SpreadIndex(i, count, all.size())]);
   }
 
   void Answer(size_t p) const {
@@ -236,8 +242,8 @@ class PointViews {
   // Unit directions from point p towards the capture's cameras.
   std::vector<Vec3f> TowardsCameras(size_t p) const {
     std::vector<Vec3f> towards;
-    towards.reserve(field_.capture_centres.size());
-    for (const Vec3f& c : field_.capture_centres) {
+    towards.reserve(cameras_.size());
+    for (const Vec3f& c : cameras_) {
       const Vec3f d = c - cells_.points[p];
       if (Dot(d, d) > 0.0f) towards.push_back(Normalized(d));
     }
@@ -291,7 +297,7 @@ class PointViews {
   const NerfRenderOptions& render_;
   const PointCells& cells_;
   PointAnswers& answers_;
-  std::vector<Vec3f> view_dirs_, face_candidates_;
+  std::vector<Vec3f> view_dirs_, face_candidates_, cameras_;
 };
 
 // The answers applied to the rays: the seen radiance where brighter than

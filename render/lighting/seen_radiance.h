@@ -54,7 +54,10 @@
 // between them it swings (a small bulb's core by a factor of two either
 // way). Face views are the cameras in front of the face (n·u >=
 // face_min_cosine), the band's views `views` cameras spread over the list;
-// the elevation limits do not apply. A field without them: the band.
+// the elevation limits do not apply. Of a long capture, at most as many
+// cameras as the band has face candidates (16 per view), spread over the
+// capture's order, so that each point costs no more than with the band. A
+// field without them: the band.
 #pragma once
 
 #include <cstdint>
