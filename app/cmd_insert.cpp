@@ -939,8 +939,8 @@ int RunInsert(const CommandArgs& args) {
   if (!ParseInsertArgs(args, a)) return 0;
   const InsertKnobs knobs = KnobsFrom(a);
   const InsertOptions& options = knobs.options.insert;
-  ValidateOptions(knobs.options);
   const NerfSceneOptions& nerf_options = knobs.options.nerf;
+  ValidateOptions(knobs.options);
 
   // Inputs.
   const Dataset capture = ReadDataset(DatasetSplitPath(a.dataset_dir, a.split));

@@ -71,6 +71,12 @@ Vec3T<T> Normalized(const Vec3T<T>& v) {
   return n > T(0) ? v / n : v;
 }
 
+// Every component finite (no NaN, no infinity).
+template <typename T>
+bool Finite(const Vec3T<T>& v) {
+  return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
+}
+
 using Vec3 = Vec3T<double>;
 using Vec3f = Vec3T<float>;
 

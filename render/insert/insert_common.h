@@ -13,8 +13,6 @@ inline double MsSince(InsertClock::time_point t0) {
   return std::chrono::duration<double, std::milli>(InsertClock::now() - t0).count();
 }
 
-inline bool Finite(const Vec3f& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
-
 // An object's bounding sphere in the world.
 struct WorldSphere {
   Vec3f center;

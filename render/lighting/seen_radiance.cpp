@@ -191,18 +191,19 @@ class PointViews {
   PointViews(const NerfField& field, const SeenRadianceOptions& options, const NerfRenderOptions& render,
              const PointCells& cells, PointAnswers& answers)
       : field_(field), options_(options), render_(render), cells_(cells), answers_(answers) {
-    // The view directions (from the point towards the camera): a spiral
-    // over the capture band, the same for every point.
-    const double lo = options.min_elevation_deg * kPi / 180, hi = options.max_elevation_deg * kPi / 180;
-    view_dirs_ = BandSpiral(lo, hi, options.views);
-    // Candidates of the face views: a denser spiral, the same for every point.
-    if (options.face_views) face_candidates_ = BandSpiral(lo, hi, kFaceCandidatesPerView * options.views);
     // The capture's cameras, at most as many as the band's face candidates,
     // spread over the capture's order: a long capture (a video's thousands of
     // frames) costs each point no more candidates than the band does.
     const std::vector<Vec3f>& all = field.capture_centres;
     const size_t count = std::min(all.size(), static_cast<size_t>(kFaceCandidatesPerView * options.views));
     for (size_t i = 0; i < count; ++i) cameras_.push_back(all[SpreadIndex(i, count, all.size())]);
+    if (!cameras_.empty()) return;
+    // Without them, the view directions (from the point towards the camera):
+    // a spiral over the capture band, the same for every point.
+    const double lo = options.min_elevation_deg * kPi / 180, hi = options.max_elevation_deg * kPi / 180;
+    view_dirs_ = BandSpiral(lo, hi, options.views);
+    // Candidates of the face views: a denser spiral, the same for every point.
+    if (options.face_views) face_candidates_ = BandSpiral(lo, hi, kFaceCandidatesPerView * options.views);
   }
 
   void Answer(size_t p) const {

@@ -23,8 +23,6 @@ namespace nerfar {
 
 namespace {
 
-bool Finite(const Vec3f& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
-
 // Largest mesh file we open at all (assimp reads it whole).
 constexpr uintmax_t kMaxMeshFileBytes = uintmax_t{2} << 30;
 

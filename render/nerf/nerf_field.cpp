@@ -301,11 +301,8 @@ std::vector<std::string> NerfField::Validate() const {
     if (!std::isfinite(aabb.min[a]) || !std::isfinite(aabb.max[a]) || !(aabb.max[a] > aabb.min[a]))
       add("aabb is empty or not finite");
   }
-  for (const Vec3f& c : capture_centres)
-    if (!std::isfinite(c.x) || !std::isfinite(c.y) || !std::isfinite(c.z)) {
-      add("a capture camera's centre is not finite");
-      break;
-    }
+  if (!std::all_of(capture_centres.begin(), capture_centres.end(), Finite<float>))
+    add("a capture camera's centre is not finite");
   if (!problems.empty()) return problems;
   const size_t table = size_t(bricks[0]) * bricks[1] * bricks[2];
   const size_t n = BrickCount();

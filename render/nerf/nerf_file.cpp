@@ -400,9 +400,8 @@ std::vector<Vec3f> ReadCaptureCentres(ByteReader r) {
   r.ExpectEnd("the capture camera centres");
   std::vector<Vec3f> centres;
   for (size_t i = 0; i < xyz.size(); i += 3) {
-    if (!std::isfinite(xyz[i]) || !std::isfinite(xyz[i + 1]) || !std::isfinite(xyz[i + 2]))
-      r.Fail("capture camera " + std::to_string(i / 3) + "'s centre is not finite");
     centres.emplace_back(xyz[i], xyz[i + 1], xyz[i + 2]);
+    if (!Finite(centres.back())) r.Fail("capture camera " + std::to_string(i / 3) + "'s centre is not finite");
   }
   return centres;
 }

@@ -52,8 +52,6 @@ std::string GetString(ByteReader& r, const char* what) {
   return std::string(r.Take(size, what));
 }
 
-bool FiniteVec3(const Vec3& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
-
 void PutShape(ByteWriter& w, const SsdfField& field) {
   w.Put(static_cast<uint32_t>(field.grid()));
   w.Put(static_cast<uint32_t>(field.dirs()));
@@ -116,7 +114,7 @@ Material ReadMaterial(ByteReader& r, Problems& problems) {
   m.roughness_texture = GetString(r, "roughness texture");
   m.metallic_texture = GetString(r, "metallic texture");
   const auto unit = [](double v) { return v >= 0 && v <= 1; };
-  if (!FiniteVec3(m.albedo) || m.albedo.x < 0 || m.albedo.y < 0 || m.albedo.z < 0)
+  if (!Finite(m.albedo) || m.albedo.x < 0 || m.albedo.y < 0 || m.albedo.z < 0)
     problems.Add("material", "albedo not finite and non-negative");
   if (!unit(m.roughness) || !unit(m.metallic) || !unit(m.f0))
     problems.Add("material", "roughness, metallic or f0 outside [0, 1]");
@@ -198,7 +196,7 @@ SsdfField ParseSsdf(const std::string& bytes, const std::string& source) {
   field.mesh_bounds = shape.mesh_bounds;
   field.mean_ = std::move(arrays.mean), field.basis_ = std::move(arrays.basis);
   field.coefficients_ = std::move(arrays.coefficients);
-  if (!FiniteVec3(field.mesh_bounds.min) || !FiniteVec3(field.mesh_bounds.max))
+  if (!Finite(field.mesh_bounds.min) || !Finite(field.mesh_bounds.max))
     problems.Add("mesh bounds", "not finite (expected finite)");
   for (const std::string& problem : field.Validate()) problems.Add("", problem);
   problems.ThrowIfAny();

@@ -343,9 +343,10 @@ TEST(NerfFile, TruncatedCorruptAndNewerFilesAreRejectedAsSuch) {
               std::string::npos)
         << len << " bytes: " << message;
     // Once the section table (16 + 2 x 12 bytes) is whole, the message says how long the file was.
-    if (len >= 40)
+    if (len >= 40) {
       EXPECT_NE(message.find("where its section table needs " + std::to_string(good.size())), std::string::npos)
           << len << " bytes: " << message;
+    }
   }
   std::string flipped = good;
   flipped[good.size() / 2] ^= 0x20;
