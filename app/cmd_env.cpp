@@ -161,7 +161,7 @@ int RunEnv(const CommandArgs& args) {
   const ImageF truth = truth_path.empty() ? ImageF() : ReadTruePanorama(truth_path);
   const NerfField field = LoadNerf(nerf_path);
   LogInfo("env: " + nerf_path + "; preset " + preset + "; options " + options.ToJson() + "; seen radiance " +
-          SeenViewsNote(field));
+          SeenViewsNote(field, SeenOptions(options)));
 
   // One progress bar (with ETA) per stage.
   std::unique_ptr<Progress> bar;

@@ -929,7 +929,7 @@ void WriteVideo(const InsertArgs& a, const Dataset& views, double path_fps) {
 
 // How the light's seen radiance is taken, for the log.
 std::string SeenRadianceNote(const NerfSceneOptions& o, const NerfField& field) {
-  return o.light_seen_radiance ? "on (" + SeenViewsNote(field) + ")" : "off";
+  return o.light_seen_radiance ? "on (" + SeenViewsNote(field, o.seen) + ")" : "off";
 }
 
 }  // namespace

@@ -380,7 +380,7 @@ int RunLive(const CommandArgs& args) {
   LogInfo("live: " + source->Describe() + ", scene " + paths.nerf + ", " + std::to_string(objects.size()) +
           " object(s), preset " + a.preset + ", response " + options.response + ", threads " +
           std::to_string(ThreadCount()) + ", session " + session_dir + ", light's seen radiance " +
-          SeenViewsNote(scene.nerf));
+          SeenViewsNote(scene.nerf, NerfInsertOptions::Preset(options.preset, options.insert_sets).nerf.seen));
 
   // Places object 0 under the image centre once a frame has a pose.
   std::int64_t auto_placed_frame = -1;

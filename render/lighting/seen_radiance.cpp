@@ -32,12 +32,20 @@ std::vector<Vec3f> BandSpiral(double lo, double hi, int count) {
   return dirs;
 }
 
+// How many of the capture's cameras the views take: at most as many as the
+// band has face candidates, so that a long capture (a video's thousands of
+// frames) costs each point no more candidates than the band does.
+size_t CaptureCamerasUsed(const NerfField& field, const SeenRadianceOptions& options) {
+  return std::min(field.capture_centres.size(), static_cast<size_t>(kFaceCandidatesPerView * options.views));
+}
+
 }  // namespace
 
-std::string SeenViewsNote(const NerfField& field) {
-  if (field.capture_centres.empty())
-    return "views from the capture band: the model does not store its cameras (retrain it to store them)";
-  return "views from the capture's " + std::to_string(field.capture_centres.size()) + " cameras";
+std::string SeenViewsNote(const NerfField& field, const SeenRadianceOptions& options) {
+  const size_t all = field.capture_centres.size(), used = CaptureCamerasUsed(field, options);
+  if (all == 0) return "views from the capture band: the model does not store its cameras (retrain it to store them)";
+  return "views from " + (used < all ? std::to_string(used) + " of " : std::string()) + "the capture's " +
+         std::to_string(all) + " cameras";
 }
 
 bool AgreeingRadiance(const std::vector<Vec3f>& radiances, double agree_fraction, Vec3f& out) {
@@ -191,11 +199,9 @@ class PointViews {
   PointViews(const NerfField& field, const SeenRadianceOptions& options, const NerfRenderOptions& render,
              const PointCells& cells, PointAnswers& answers)
       : field_(field), options_(options), render_(render), cells_(cells), answers_(answers) {
-    // The capture's cameras, at most as many as the band's face candidates,
-    // spread over the capture's order: a long capture (a video's thousands of
-    // frames) costs each point no more candidates than the band does.
+    // The capture's cameras (CaptureCamerasUsed), spread over its order.
     const std::vector<Vec3f>& all = field.capture_centres;
-    const size_t count = std::min(all.size(), static_cast<size_t>(kFaceCandidatesPerView * options.views));
+    const size_t count = CaptureCamerasUsed(field, options);
     for (size_t i = 0; i < count; ++i) cameras_.push_back(all[SpreadIndex(i, count, all.size())]);
     if (!cameras_.empty()) return;
     // Without them, the view directions (from the point towards the camera):

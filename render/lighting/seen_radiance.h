@@ -128,8 +128,9 @@ struct SeenRadianceOptions {
 };
 
 // Where the views of the field's seen radiance come from, for logs: "views
-// from the capture's N cameras", or the band's note that the model has none.
-std::string SeenViewsNote(const NerfField& field);
+// from the capture's N cameras" ("from M of ..." where a long capture is
+// thinned), or the band's note that the model has none.
+std::string SeenViewsNote(const NerfField& field, const SeenRadianceOptions& options);
 
 // The seen radiance of a point from the radiances (per unit opacity) of
 // the views that see it: the mean of those whose luminance is at least

@@ -728,6 +728,10 @@ TEST(SeenRadiance, ALongCaptureIsThinnedOverItsWholeWalk) {
   // Within 5 % of the uniform grid, as the 24-camera capture above (192
   // cameras 1.9° apart on the ring see the face as those 15° apart do).
   EXPECT_NEAR(e_long, e_best, 0.05 * e_best);
+  // The logs say how many the views take.
+  EXPECT_EQ(SeenViewsNote(field, SeenRadianceOptions{}), "views from 192 of the capture's 960 cameras");
+  field.capture_centres.resize(24);
+  EXPECT_EQ(SeenViewsNote(field, SeenRadianceOptions{}), "views from the capture's 24 cameras");
 }
 
 // A bulb (radius 3 cm, radiance 100) on a dark pole (radius 1 cm). A light
