@@ -293,12 +293,14 @@ float KappaAt(const KappaContext& context, const Vec3f& x, const Vec3f& n, Kappa
   const size_t m = p.axes.size();
   if (m == 0) return 1.0f;
   // Near lobes re-aimed from x (LightParallax): their axes, and S along them,
-  // are this receiver's own.
+  // are this receiver's own; a source at or below x's tangent plane gives it
+  // no light (as a near source behind the receiver in KappaFromSources).
   const bool parallax = !p.parallax.distance.empty();
   SgMixture reaimed;
   std::vector<Vec3f> reaimed_axes;
   if (parallax) {
-    reaimed = ReaimLight((*context.lights)[owner], p.parallax, Vec3(x));
+    const Vec3 receiver_normal(n);
+    reaimed = ReaimLight((*context.lights)[owner], p.parallax, Vec3(x), &receiver_normal);
     reaimed_axes.reserve(m);
     for (const Sg& lobe : reaimed) reaimed_axes.push_back(Vec3f(lobe.axis));
   }

@@ -421,12 +421,26 @@ std::vector<double> LobeDistances(const SgMixture& light, const std::vector<Vec3
   return distance;
 }
 
-SgMixture ReaimLight(const SgMixture& light, const LightParallax& parallax, const Vec3& p) {
+SgMixture ReaimLight(const SgMixture& light, const LightParallax& parallax, const Vec3& p,
+                     const Vec3* receiver_normal) {
   SgMixture out = light;
   if (parallax.distance.size() != light.size()) return out;
-  for (size_t k = 0; k < light.size(); ++k)
-    out[k] = ReaimLobe(light[k], parallax.center, parallax.distance[k],
-                       ParallaxWeight(light[k].sharpness, parallax.min_sharpness), p);
+  for (size_t k = 0; k < light.size(); ++k) {
+    const double weight = ParallaxWeight(light[k].sharpness, parallax.min_sharpness);
+    const double distance = parallax.distance[k];
+    out[k] = ReaimLobe(light[k], parallax.center, distance, weight, p);
+    if (receiver_normal == nullptr || !(weight > 0.0) || !std::isfinite(distance) || !(distance > 0.0)) continue;
+    // The source's height above p's tangent plane, in units of its own
+    // extent (the lobe's width 1/√λ at its distance): none of it lights p
+    // at or below the plane, all of it from one extent above, and linearly
+    // in between, so that κ does not jump where a receiver's plane passes
+    // through the source (a patch of the table under a receiver on it).
+    const Vec3 source = parallax.center + light[k].axis * distance;
+    const double extent = distance / std::sqrt(light[k].sharpness);
+    const double height = Dot(source - p, *receiver_normal);
+    const double lit = std::clamp(height / extent, 0.0, 1.0);
+    if (lit < 1.0) out[k].amplitude = out[k].amplitude * lit;
+  }
   return out;
 }
 

@@ -174,7 +174,15 @@ std::vector<double> NearInverseDistances(const SgMixture& light, const std::vect
 // ratio of new to old distance is clamped to [1/4, 4] so that a point next
 // to a source does not turn it into a spike. Lobes without a finite distance,
 // or broader than the minimum sharpness, are returned unchanged.
-SgMixture ReaimLight(const SgMixture& light, const LightParallax& parallax, const Vec3& p);
+// With `receiver_normal` (unit; p a surface point facing that way), a
+// re-aimed lobe whose source lies at or below p's tangent plane is dark,
+// one whose source stands less than its own extent (d/√λ) above it dims
+// linearly: the source cannot light that side of the surface. An SG lobe
+// would still reach above the horizon with half its tail (a patch of the
+// table under a receiver on the table), light that the surface never
+// receives and that the object's shadow on it could not hide.
+SgMixture ReaimLight(const SgMixture& light, const LightParallax& parallax, const Vec3& p,
+                     const Vec3* receiver_normal = nullptr);
 
 // The environment as seen from p: a lobe whose light `nerfar env` placed
 // `distance_m[k]` > 0 metres from the origin along its axis (EnvLight's

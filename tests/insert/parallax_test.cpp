@@ -5,7 +5,8 @@
 // deliver the irradiance of the lamp seen from there (π L sin²θ for a uniform
 // sphere of angular radius θ on a plane facing it); a lobe's distance is the
 // depth of the surface its directions meet, infinite through thin fog or for
-// light the surface's own radiance does not explain.
+// light the surface's own radiance does not explain; a source below a
+// receiver's plane gives it no light.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -154,6 +155,70 @@ TEST(Parallax, DistanceRatioIsClamped) {
   const SgMixture seen = ReaimLight({lobe}, parallax, {0, 0.001, 0.3});
   EXPECT_NEAR(seen[0].sharpness, 400.0 / 16.0, 1e-9);
   EXPECT_TRUE(std::isfinite(seen[0].axis.x) && std::isfinite(seen[0].axis.y) && std::isfinite(seen[0].axis.z));
+}
+
+// The share of an SG's energy above the plane through the origin with normal
+// n, by brute-force quadrature over a Fibonacci sphere (200000 directions:
+// the lobes here are at most λ = 100, ~6° wide, covered by ~150 directions).
+double ShareAbovePlane(const Sg& sg, const Vec3& n) {
+  double above = 0.0, all = 0.0;
+  for (const Vec3& d : FibonacciSphere(200000)) {
+    const double g = std::exp(sg.sharpness * (Dot(sg.axis, d) - 1.0));
+    all += g;
+    if (Dot(d, n) > 0.0) above += g;
+  }
+  return above / all;
+}
+
+TEST(Parallax, ASourceBelowTheReceiversPlaneGivesItNoLight) {
+  // The light at an object's centre 5 cm above a table holds a lobe for a
+  // patch of the table 8 cm away and one for a lamp above it.
+  const Vec3 center{0, 0, 0.05}, table_patch{0.08, 0, 0}, lamp{0.1, -0.05, 0.3};
+  Sg patch;
+  patch.axis = Normalized(table_patch - center);
+  patch.sharpness = 40.0;  // re-aimed in full (twice parallax_min_sharpness)
+  patch.amplitude = {0.5, 0.4, 0.3};
+  Sg bulb = patch;
+  bulb.axis = Normalized(lamp - center);
+  bulb.sharpness = 100.0;
+  bulb.amplitude = {50, 50, 50};
+  const SgMixture light = {patch, bulb};
+  LightParallax parallax;
+  parallax.center = center;
+  parallax.distance = {Length(table_patch - center), Length(lamp - center)};
+
+  // A receiver on the table 4 cm from the patch. Re-aimed without its
+  // normal, the patch's lobe lies along the table and keeps 40-60 % of its
+  // energy above the table's plane: light the table never sends itself.
+  const Vec3 on_table{0.05, 0.03, 0}, up{0, 0, 1};
+  const SgMixture blind = ReaimLight(light, parallax, on_table);
+  const double share = ShareAbovePlane(blind[0], up);
+  EXPECT_GT(share, 0.4);
+  EXPECT_LT(share, 0.6);
+  const SgMixture seen = ReaimLight(light, parallax, on_table, &up);
+  EXPECT_EQ(seen[0].amplitude, Vec3{});
+  // The lamp above it is re-aimed as without the normal, bit for bit.
+  EXPECT_EQ(seen[1].axis, blind[1].axis);
+  EXPECT_EQ(seen[1].sharpness, blind[1].sharpness);
+  EXPECT_EQ(seen[1].amplitude, blind[1].amplitude);
+
+  // A face of another object beyond the patch, turned towards it, is lit by
+  // the patch as before (it stands 2.7 extents in front of it).
+  const Vec3 facing_point{0.12, 0, 0.03}, facing{-1, 0, 0};
+  const SgMixture front = ReaimLight(light, parallax, facing_point, &facing);
+  const SgMixture front_blind = ReaimLight(light, parallax, facing_point);
+  EXPECT_EQ(front[0].amplitude, patch.amplitude);
+  EXPECT_EQ(front[0].axis, front_blind[0].axis);
+
+  // Between, the patch fades with its height over the receiver's plane in
+  // units of its extent d/√λ (1.5 cm here): a quarter and three quarters of
+  // it (to rounding) at 0.25 and 0.75 extents.
+  const double extent = parallax.distance[0] / std::sqrt(patch.sharpness);
+  for (const double fraction : {0.25, 0.75}) {
+    const Vec3 below_patch = table_patch - up * (fraction * extent);
+    const SgMixture dimmed = ReaimLight(light, parallax, below_patch + Vec3{0.02, 0, 0}, &up);
+    EXPECT_NEAR(dimmed[0].amplitude.x / patch.amplitude.x, fraction, 1e-12);
+  }
 }
 
 // Samples of a scene seen from a centre: directions within 30° of `axis`
