@@ -229,9 +229,8 @@ void KeepStrongest(FitState& st, int count) {
 // least sure of, T its lobe-weighted mean transmittance towards it (the
 // source's column over the same bundle's open irradiance): 1 where the ray
 // is plainly open or shut, 0 at T = ½, one minus the variance of a ray open
-// with probability T over its largest. From the sources the fit holds now:
-// one it drops no longer makes its samples' visibility uncertain.
-void WeighByVisibilityCertainty(FitState& st, const std::vector<double>& normal_balance, const EnvEstimateOptions& o) {
+// with probability T over its largest.
+void WeighByVisibilityCertainty(FitState& st, const EnvEstimateOptions& o) {
   const EnvShadowRays open = [](const std::vector<EnvSurfaceRay>& rays, std::vector<float>* transmittance) {
     transmittance->assign(rays.size(), 1.0f);
   };
@@ -248,8 +247,10 @@ void WeighByVisibilityCertainty(FitState& st, const std::vector<double>& normal_
       certainty[i] = std::min(certainty[i], (2.0 * t - 1.0) * (2.0 * t - 1.0));
     }
   }
-  for (size_t i = 0; i < certainty.size(); ++i) st.balance[i] = normal_balance[i] * certainty[i];
-  Loss(st, Shading(st), true, &st);  // the IRLS weights with the new balance
+  for (size_t i = 0; i < certainty.size(); ++i) {
+    st.balance[i] *= certainty[i];
+    st.robust[i] *= certainty[i];
+  }
 }
 
 }  // namespace
@@ -309,15 +310,11 @@ SgMixture FitEnvironment(const EnvSurfaceSamples& samples, const Aabb& aabb, con
   const size_t broad = std::min(dict.size(), static_cast<size_t>(options.dictionary_base));
   AppendColumns(st, dict, A_dict, 0, broad);
   Iterate(st, broad_steps, &step, total_steps, progress);
-  const std::vector<double> normal_balance = st.balance;
   if (shadow != nullptr) local.sources = AddSources(st, shadow, options, progress);
-  if (local.sources > 0) WeighByVisibilityCertainty(st, normal_balance, options);
+  if (local.sources > 0) WeighByVisibilityCertainty(st, options);
   AppendColumns(st, dict, A_dict, broad, dict.size());
   Iterate(st, options.iterations, &step, total_steps, progress);
-  if (local.sources > 0) {
-    local.sources = KeepSupportedSources(st, options);
-    WeighByVisibilityCertainty(st, normal_balance, options);
-  }
+  if (local.sources > 0) local.sources = KeepSupportedSources(st, options);
   KeepStrongest(st, options.lobes);
   Iterate(st, final_steps, &step, total_steps, progress);
   local.coloured_lobes = FreeChroma(st, options);
