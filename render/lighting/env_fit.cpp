@@ -219,40 +219,6 @@ void KeepStrongest(FitState& st, int count) {
   st = std::move(kept);
 }
 
-// The NeRF's transmittance towards a source is a soft estimate of a binary
-// fact: in the scene each ray to it is open or shut. Where the estimate is
-// partial (a haze in the surface's own layer, an occluder a centimetre too
-// wide, a penumbra) the sample's light is least certain, and such samples,
-// many where a table's layer or a wide source makes them so, would pull the
-// fit towards light that reaches them unshadowed. Each sample's weight in the
-// data term is multiplied by 1 − 4T(1 − T) = (2T − 1)² for the source it is
-// least sure of, T its lobe-weighted mean transmittance towards it (the
-// source's column over the same bundle's open irradiance): 1 where the ray
-// is plainly open or shut, 0 at T = ½, one minus the variance of a ray open
-// with probability T over its largest.
-void WeighByVisibilityCertainty(FitState& st, const EnvEstimateOptions& o) {
-  const EnvShadowRays open = [](const std::vector<EnvSurfaceRay>& rays, std::vector<float>* transmittance) {
-    transmittance->assign(rays.size(), 1.0f);
-  };
-  std::vector<double> certainty(st.s->size(), 1.0);
-  for (size_t k = 0; k < st.lobes.size(); ++k) {
-    if (!st.lobes.source[k]) continue;
-    const Eigen::MatrixXd unshadowed = LobeIrradianceMatrix(*st.s, {st.lobes.axes[k]}, {st.lobes.sharpness[k]}, open,
-                                                            o.source_bundle_rays, o.seed, {st.lobes.distance[k]});
-    for (size_t i = 0; i < certainty.size(); ++i) {
-      const auto row = static_cast<Eigen::Index>(i);
-      const double u = unshadowed(row, 0);
-      if (!(u > 0.0)) continue;
-      const double t = std::clamp(st.A(row, static_cast<Eigen::Index>(k)) / u, 0.0, 1.0);
-      certainty[i] = std::min(certainty[i], (2.0 * t - 1.0) * (2.0 * t - 1.0));
-    }
-  }
-  for (size_t i = 0; i < certainty.size(); ++i) {
-    st.balance[i] *= certainty[i];
-    st.robust[i] *= certainty[i];
-  }
-}
-
 }  // namespace
 
 SourceSupport SupportOfGains(const std::vector<Vec3f>& positions, const std::vector<double>& gain) {
@@ -311,7 +277,6 @@ SgMixture FitEnvironment(const EnvSurfaceSamples& samples, const Aabb& aabb, con
   AppendColumns(st, dict, A_dict, 0, broad);
   Iterate(st, broad_steps, &step, total_steps, progress);
   if (shadow != nullptr) local.sources = AddSources(st, shadow, options, progress);
-  if (local.sources > 0) WeighByVisibilityCertainty(st, options);
   AppendColumns(st, dict, A_dict, broad, dict.size());
   Iterate(st, options.iterations, &step, total_steps, progress);
   if (local.sources > 0) local.sources = KeepSupportedSources(st, options);

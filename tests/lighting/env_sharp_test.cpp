@@ -9,7 +9,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstdio>
 #include <optional>
 #include <vector>
 
@@ -298,51 +297,6 @@ TEST(EnvSharp, BlueSkyBesideAWhiteSunKeepsItsColour) {
   ASSERT_GT(LuminanceOf(sky), 0);
   EXPECT_NEAR(Chroma(sun, 0), Chroma(sun, 2), 0.05 * Chroma(sun, 0));
   EXPECT_GT(sky.z / sky.x, 2 * sun.z / sun.x);
-}
-
-// A NeRF's shadow rays are hazier than the scene's: a surface's own layer a
-// little denser than the fog it passes, occluders a centimetre too wide. Here
-// every shadow ray from a sample within 30 cm of a ball loses half its light
-// (most of the table), while the observations are the haze-free scene's. A
-// fit that trusted those rays would raise the sun by up to the haze's factor
-// 2 over the samples it covers (+64 % here), and the broad light with it
-// (+16 %). Weighed by the certainty of their visibility (T = ½: none), the
-// hazy samples leave the sun to the rest: within 25 % of its energy (the
-// bundles' partial rays near the balls keep some weight), and the broad light
-// on an up-facing surface within 10 % of the sky's.
-TEST(EnvSharp, HazeInTheShadowRaysDoesNotTurnIntoBroadLight) {
-  const Scene scene;
-  const EnvSurfaceSamples s = MakeSamples(scene);
-  const EnvShadowRays analytic = AnalyticShadows();
-  const EnvShadowRays hazy = [&analytic](const std::vector<EnvSurfaceRay>& rays, std::vector<float>* transmittance) {
-    analytic(rays, transmittance);
-    for (size_t k = 0; k < rays.size(); ++k)
-      for (const Ball& b : kBalls) {
-        const Vec3 o(rays[k].origin);
-        if (std::hypot(o.x - b.centre.x, o.y - b.centre.y) < 0.3) {
-          (*transmittance)[k] *= 0.5f;
-          break;
-        }
-      }
-  };
-  EnvFitReport report;
-  const SgMixture light = FitEnvironment(s, kBox, Options(), &report, nullptr, hazy);
-  ASSERT_GE(report.sources, 1);
-  double sun_energy = 0, broad_up = 0;
-  const std::vector<Vec3> dirs = FibonacciSphere(20000);
-  for (const Sg& g : light) {
-    if (g.sharpness >= 300) {
-      sun_energy = std::max(sun_energy, LuminanceOf(Integral(g)));
-      continue;
-    }
-    for (const Vec3& d : dirs)
-      if (d.z > 0) broad_up += LuminanceOf(Evaluate(g, d)) * d.z * 4 * kPi / dirs.size();
-  }
-  const double sun_truth = kSunAmplitude * SgUnitIntegral(scene.sun_sharpness), sky_truth = kPi * kSkyRadiance;
-  std::printf("sun energy %.3f (truth %.3f), broad light on an up-facing surface %.3f (the sky's %.3f)\n", sun_energy,
-              sun_truth, broad_up, sky_truth);
-  EXPECT_NEAR(sun_energy, sun_truth, 0.25 * sun_truth);
-  EXPECT_NEAR(broad_up, sky_truth, 0.1 * sky_truth);
 }
 
 // Shadow rays through a NeRF pass the surface's own translucent layer
