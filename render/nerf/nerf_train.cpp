@@ -128,10 +128,6 @@ NerfTrainOptions NerfTrainOptions::Preset(const std::string& name) {
     // Once the 5 mm level has settled, training skips the cells the saved
     // model will drop anyway: about half the CPU time, the same quality.
     o.occupancy_sigma_finest = 5.0;
-    // The slope decay returns view-dependence the captures do not constrain
-    // to the view-independent colour: in a short schedule that colour would
-    // otherwise be explained by fog (more samples per ray) and psnr is lower.
-    o.color_slope_decay = 1.0;
     // The foreground penalty at full weight: surfaces seen only at grazing
     // angles (the far part of a table) otherwise stay translucent and their
     // T = 0.5 point falls behind them (NerfTrainOptions::foreground_weight).

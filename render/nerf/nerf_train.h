@@ -89,7 +89,11 @@ struct NerfTrainOptions {
   // below) and the extrapolation falls below every seen value. The decay lets
   // the data keep the slopes they need (Adam's step is up to lr per update,
   // the decay lr · decay · |b|) and returns unconstrained slopes to 0, i.e.
-  // unseen directions to the view-independent colour a. 0 switches it off.
+  // unseen directions to the view-independent colour a. 0 switches it off, in
+  // every preset: a face seen only at grazing angles (a lamp's panel) shares its
+  // voxels with the dark back behind it, and only its slopes tell the two apart;
+  // the decay averages them, and the light that face sends the object is lost
+  // (docs/history/nerf.md, "The colour-slope decay and the near field").
   double color_slope_decay = 0.0;
   // The learning rates decay exponentially to this factor of their start by the last step.
   double lr_final_factor = 0.05;
