@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <optional>
 #include <tuple>
 
 #include "calib/core/error.h"
@@ -340,6 +341,12 @@ constexpr float kSurfaceOpacity = 0.5f;
 double ParallaxWeight(double sharpness, double min_sharpness) {
   return std::clamp((sharpness - min_sharpness) / min_sharpness, 0.0, 1.0);
 }
+// Where the source of `lobe`, taken at `from`, lies: `distance` along its
+// axis; none without a finite positive distance (a distant lobe).
+std::optional<Vec3> SourceOf(const Sg& lobe, const Vec3& from, double distance) {
+  if (!std::isfinite(distance) || !(distance > 0.0)) return std::nullopt;
+  return from + lobe.axis * distance;
+}
 // `lobe` taken at `from` with its source `distance` away along its axis, as
 // seen from p, re-aimed by `weight` in [0, 1] (ReaimLight). The ratio of new
 // to old distance is clamped to [1/4, 4]; a lobe without a finite positive
@@ -348,8 +355,9 @@ double ParallaxWeight(double sharpness, double min_sharpness) {
 Sg ReaimLobe(const Sg& lobe, const Vec3& from, double distance, double weight, const Vec3& p,
              double* distance_from_p = nullptr) {
   if (distance_from_p) *distance_from_p = std::numeric_limits<double>::infinity();
-  if (!std::isfinite(distance) || !(distance > 0.0)) return lobe;
-  const Vec3 to_source = from + lobe.axis * distance - p;
+  const std::optional<Vec3> source = SourceOf(lobe, from, distance);
+  if (!source) return lobe;
+  const Vec3 to_source = *source - p;
   const double d_new = Length(to_source);
   if (distance_from_p) *distance_from_p = d_new;
   if (!(weight > 0.0) || !(d_new > 0.0) || !std::isfinite(d_new)) return lobe;
@@ -429,15 +437,15 @@ SgMixture ReaimLight(const SgMixture& light, const LightParallax& parallax, cons
     const double weight = ParallaxWeight(light[k].sharpness, parallax.min_sharpness);
     const double distance = parallax.distance[k];
     out[k] = ReaimLobe(light[k], parallax.center, distance, weight, p);
-    if (receiver_normal == nullptr || !(weight > 0.0) || !std::isfinite(distance) || !(distance > 0.0)) continue;
+    const std::optional<Vec3> source = SourceOf(light[k], parallax.center, distance);
+    if (receiver_normal == nullptr || !(weight > 0.0) || !source) continue;
     // The source's height above p's tangent plane, in units of its own
     // extent (the lobe's width 1/√λ at its distance): none of it lights p
     // at or below the plane, all of it from one extent above, and linearly
     // in between, so that κ does not jump where a receiver's plane passes
     // through the source (a patch of the table under a receiver on it).
-    const Vec3 source = parallax.center + light[k].axis * distance;
     const double extent = distance / std::sqrt(light[k].sharpness);
-    const double height = Dot(source - p, *receiver_normal);
+    const double height = Dot(*source - p, *receiver_normal);
     const double lit = std::clamp(height / extent, 0.0, 1.0);
     if (lit < 1.0) out[k].amplitude = out[k].amplitude * lit;
   }
