@@ -89,8 +89,8 @@ EnvEstimateOptions EnvEstimateOptions::Preset(const std::string& name) {
   if (name == "balanced") return o;
   if (name == "fast") {
     // Balanced's samples: a sharp source is found from the shadowed samples it
-    // explains, and with fewer (2400) the estimate of one fast model swung
-    // between trainings (docs/history/env.md, "The fast preset's samples").
+    // explains, and with fewer (2400) the estimate swung between two trainings
+    // of one scene (docs/history/env.md, "The fast preset's samples").
     o.rays_per_point = 128;
     o.iterations = 8;
     o.max_view_attempts = 200;
