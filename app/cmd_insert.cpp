@@ -308,10 +308,11 @@ void AddShadingFlags(ArgParser& parser, InsertArgs& a) {
               "specular from the SG light (paper eq. 5) instead of the prefiltered incident-light samples");
   parser.Flag("--specular-parallax", &a.specular_parallax,
               "prefiltered reflections looked up from each pixel's point towards where its reflected ray meets the "
-              "scene's distance seen from the light centre (default in accurate only)");
+              "scene's distance seen from the light centre (the default where the specular is prefiltered: balanced, "
+              "accurate)");
   parser.Flag("--no-specular-parallax", &a.no_specular_parallax,
               "prefiltered reflections looked up along the reflected direction, as if all they reflect were distant "
-              "(the default in fast and balanced)");
+              "(fast's SG specular has no parallax either way)");
   parser.Flag("--paper-gamma", &a.paper_gamma,
               "self-shadow γ = f_h(S)/f_h(π/2) as in the paper (default: horizon-relative)");
 }

@@ -35,7 +35,7 @@ InsertOptions InsertOptions::Preset(const std::string& name) {
   } else if (name == "balanced") {
   } else if (name == "accurate") {
     o.light.directions = 2048;
-    o.specular_parallax = true;
+    o.specular_parallax_iterations = 3;
     o.shade_step = 1;
     o.shadow_reach_radii = 20.0;
     o.shadow_epsilon = 5e-4;

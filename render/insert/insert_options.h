@@ -43,12 +43,14 @@ struct InsertOptions {
   // surface point meets the scene's distance seen from the light's centre
   // (PrefilteredRadiance::SetParallax; near walls, the table, neighbouring
   // objects), in this many fixed-point steps; false: along the reflected
-  // direction, as if everything reflected were distant. On in accurate
-  // only: each step is a distance look-up per pixel, which more than doubles
-  // the specular look-up's cost, beyond the shading budget of the faster
-  // presets.
-  bool specular_parallax = false;
-  int specular_parallax_iterations = 3;
+  // direction, as if everything reflected were distant. A glossy object
+  // beside the table sees the table and its neighbours from its own surface,
+  // not from its centre. One step (the distance met along the uncorrected
+  // direction) is one distance look-up per pixel; more steps each add one,
+  // for the fixed point of a surface whose distance changes across the
+  // shift (accurate takes 3). Fast keeps the SG specular and so has none.
+  bool specular_parallax = true;
+  int specular_parallax_iterations = 1;
   // With a prefiltered map: the smooth part of the shading (the diffuse
   // radiance and the specular's self-shadow ratio, both from the SG light
   // with γ) at every shade_step-th pixel of the objects' box, bilinear in
