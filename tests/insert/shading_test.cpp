@@ -423,17 +423,30 @@ RadianceSamples RoomSamples(const Room& room, int n, std::vector<float>* distanc
   return s;
 }
 
-// The room's samples prefiltered with their distances (3 steps), built
-// once for the tests that read it.
-const PrefilteredRadiance& RoomMap() {
-  static const PrefilteredRadiance map = [] {
-    const Room room;
-    std::vector<float> distance;
-    const RadianceSamples samples = RoomSamples(room, 16384, &distance);
-    PrefilteredRadiance m(samples, 9);
-    m.SetParallax(room.center, DistanceMap(samples.directions, distance), 3);
-    return m;
+// The room's samples, their distances and their prefiltered map, built
+// once for the tests that read them.
+struct RoomLight {
+  RadianceSamples samples;
+  std::vector<float> distance;
+  PrefilteredRadiance map;
+};
+const RoomLight& RoomLightOnce() {
+  static const RoomLight light = [] {
+    RoomLight l;
+    l.samples = RoomSamples(Room(), 16384, &l.distance);
+    l.map = PrefilteredRadiance(l.samples, 9);
+    return l;
   }();
+  return light;
+}
+
+// The room's map corrected for parallax in `steps` fixed-point steps (3:
+// accurate's; 1: balanced's, the distance met along the uncorrected
+// direction, which a box's walls change across the shift).
+PrefilteredRadiance RoomMap(int steps = 3) {
+  const RoomLight& light = RoomLightOnce();
+  PrefilteredRadiance map = light.map;
+  map.SetParallax(Room().center, DistanceMap(light.samples.directions, light.distance), steps);
   return map;
 }
 
@@ -455,25 +468,10 @@ std::vector<Reflection> BallReflections(const Vec3& center, double radius, int c
   return out;
 }
 
-// The room's map with one step of the correction (balanced's): the
-// distance met along the uncorrected direction, which a box's walls change
-// across the shift.
-const PrefilteredRadiance& RoomMapOneStep() {
-  static const PrefilteredRadiance map = [] {
-    PrefilteredRadiance m = RoomMap();
-    const Room room;
-    std::vector<float> distance;
-    const RadianceSamples samples = RoomSamples(room, 16384, &distance);
-    m.SetParallax(room.center, DistanceMap(samples.directions, distance), 1);
-    return m;
-  }();
-  return map;
-}
-
 // Mean relative error of the mirror-like look-up (r 0.02) through `map`
-// over the ball's reflections against the true hit point's radiance, and
-// (in `plain`) the uncorrected look-up's.
-double RoomLookupError(const PrefilteredRadiance& map, double* plain_error, double* worst_error = nullptr) {
+// over the ball's reflections against the true hit point's radiance; the
+// uncorrected look-up's mean in `plain_error`, the largest in `worst_error`.
+double RoomLookupError(const PrefilteredRadiance& map, double* plain_error, double* worst_error) {
   const Room room;
   double sum = 0, sum_plain = 0, worst = 0;
   int count = 0;
@@ -485,7 +483,7 @@ double RoomLookupError(const PrefilteredRadiance& map, double* plain_error, doub
     sum += e, sum_plain += e_plain, worst = std::max(worst, e), ++count;
   }
   *plain_error = sum_plain / count;
-  if (worst_error) *worst_error = worst;
+  *worst_error = worst;
   return sum / count;
 }
 
@@ -500,7 +498,7 @@ double RoomLookupError(const PrefilteredRadiance& map, double* plain_error, doub
 // corrected mean under a fifth of the uncorrected (a look-up that ignored
 // the distance field fails all three).
 TEST(ParallaxReflection, LookupReturnsTheRadianceAtTheTrueHitPoint) {
-  const PrefilteredRadiance& map = RoomMap();
+  const PrefilteredRadiance map = RoomMap();
   ASSERT_TRUE(map.has_parallax());
   double mean_plain = 0, worst = 0;
   const double mean = RoomLookupError(map, &mean_plain, &worst);
@@ -517,7 +515,7 @@ TEST(ParallaxReflection, LookupReturnsTheRadianceAtTheTrueHitPoint) {
 // uncorrected look-up fails the first two).
 TEST(ParallaxReflection, OneStepRemovesMostOfTheShift) {
   double mean_plain = 0, worst = 0;
-  const double mean = RoomLookupError(RoomMapOneStep(), &mean_plain, &worst);
+  const double mean = RoomLookupError(RoomMap(1), &mean_plain, &worst);
   EXPECT_LT(mean, 0.005);
   EXPECT_LT(mean, 0.25 * mean_plain) << "uncorrected " << mean_plain;
   EXPECT_LT(worst, 0.05);
@@ -530,7 +528,7 @@ TEST(ParallaxReflection, OneStepRemovesMostOfTheShift) {
 // relative error 0.0018, bound 0.005.
 TEST(ParallaxReflection, ShadeSpecularWithPointsReflectsTheTrueHitPoint) {
   const Room room;
-  const PrefilteredRadiance& map = RoomMap();
+  const PrefilteredRadiance map = RoomMap();
   SgMaterial m;
   m.base_color = {1, 1, 1};
   m.metallic = 1;
